@@ -1,0 +1,72 @@
+"""One exception tree for snakekit.
+
+Every error says what was wrong, what was expected and what to do. Errors that describe bad
+input also derive from the matching built-in (``ValueError``, ``OSError``...), so generic
+``except ValueError`` code keeps working.
+"""
+
+from __future__ import annotations
+
+
+class SnakekitError(Exception):
+    """Base class of every error snakekit raises on purpose."""
+
+
+class ShapeError(SnakekitError, ValueError):
+    """An array has the wrong shape, e.g. 4 joint angles for a 5-joint arm."""
+
+    def __init__(self, name: str, expected: str, actual: tuple, hint: str = ""):
+        self.name, self.expected, self.actual = name, expected, actual
+        msg = f"{name} must have shape {expected}, got shape {actual}"
+        super().__init__(msg + (f". {hint}" if hint else ""))
+
+
+class NotFiniteError(SnakekitError, ValueError):
+    """An array holds NaN or infinity."""
+
+
+class LimitError(SnakekitError, ValueError):
+    """A configuration or trajectory is outside the arm's joint limits.
+
+    Attributes:
+        violations: the offending entries (``Violation`` objects for trajectories, or
+            ``(joint, value, lower, upper)`` tuples for a single configuration).
+    """
+
+    def __init__(self, message: str, violations: list | tuple = ()):
+        self.violations = list(violations)
+        super().__init__(message)
+
+
+class UnreachableTargetError(SnakekitError, ValueError):
+    """No joint configuration inside the limits puts the tool on the target.
+
+    Attributes:
+        target: the requested ``(x, y)`` [m] (and heading [rad] when given).
+        closest: the closest tool point the solver found, ``(x, y)`` [m].
+        q_closest: the joint angles [rad] that reach ``closest``.
+    """
+
+    def __init__(self, message: str, target, closest, q_closest):
+        self.target, self.closest, self.q_closest = target, closest, q_closest
+        super().__init__(message)
+
+
+class TrajectoryError(SnakekitError, ValueError):
+    """A trajectory is malformed (times not increasing, too few points...)."""
+
+
+class FileFormatError(SnakekitError, ValueError):
+    """A file could not be read as what it claims to be (truncated, wrong columns...)."""
+
+
+class BackendError(SnakekitError):
+    """A robot backend could not be made or used (unknown name, closed robot...)."""
+
+
+class CommunicationError(BackendError):
+    """The servo bus stopped answering, or answered with corrupt packets, too often."""
+
+
+class HardwareError(BackendError):
+    """A servo reported a hardware alert (overload, overheating, voltage...)."""

@@ -1,0 +1,211 @@
+"""Forward kinematics, Jacobians and inverse kinematics, on Pinocchio.
+
+Pinocchio reads the URDF generated from :data:`snakekit.model.SPEC`. Poses are 4x4
+homogeneous transforms ``T_world_<frame>`` in metres; angles in radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import LimitError, NotFiniteError, ShapeError, UnreachableTargetError
+from .model import SPEC, SnakeSpec, urdf
+
+
+@dataclass(frozen=True)
+class _Kin:
+    spec: SnakeSpec
+    model: pin.Model
+    data: pin.Data
+    tool: int
+    joint_frames: tuple[int, ...]
+
+
+@lru_cache(maxsize=4)
+def _kin(spec: SnakeSpec = SPEC) -> _Kin:
+    model = pin.buildModelFromXML(urdf(spec))
+    tool = model.getFrameId("tool")
+    frames = tuple(model.getFrameId(f"link{i + 1}") for i in range(spec.n_joints))
+    return _Kin(spec, model, model.createData(), tool, frames)
+
+
+def pinocchio_model(spec: SnakeSpec = SPEC) -> tuple[pin.Model, pin.Data, int]:
+    """The Pinocchio model, its data and the tool frame id (for lessons and benchmarks)."""
+    k = _kin(spec)
+    return k.model, k.data, k.tool
+
+
+def as_configuration(q, spec: SnakeSpec = SPEC, name: str = "q") -> np.ndarray:
+    """``q`` as a float array of shape (n_joints,), checked for shape and finiteness.
+
+    Raises:
+        ShapeError: ``q`` does not hold one angle per joint.
+        NotFiniteError: ``q`` holds NaN or infinity.
+    """
+    q = np.asarray(q, dtype=float)
+    if q.shape != (spec.n_joints,):
+        raise ShapeError(name, f"({spec.n_joints},)", q.shape,
+                         f"give one angle [rad] per joint, base to tip")
+    if not np.isfinite(q).all():
+        raise NotFiniteError(f"{name} holds NaN or infinity: {q.tolist()}; give finite angles [rad]")
+    return q
+
+
+def check_limits(q, spec: SnakeSpec = SPEC, name: str = "q") -> np.ndarray:
+    """Return ``q`` if every joint is inside its limits, else raise :class:`LimitError`."""
+    q = as_configuration(q, spec, name)
+    bad = [(i + 1, float(v), spec.lower, spec.upper) for i, v in enumerate(q)
+           if not spec.lower <= v <= spec.upper]
+    if bad:
+        text = ", ".join(f"joint {j} = {v:.4f} rad" for j, v, _, _ in bad)
+        raise LimitError(f"{name} is outside the joint limits [{spec.lower}, {spec.upper}] rad: {text}. "
+                         "Choose angles inside the limits (see snakekit.SPEC).", bad)
+    return q
+
+
+def forward_kinematics(q, *, spec: SnakeSpec = SPEC) -> np.ndarray:
+    """Tool pose ``T_world_tool`` (4x4) for joint angles ``q`` [rad].
+
+    >>> import numpy as np, snakekit
+    >>> T = snakekit.forward_kinematics(np.zeros(5))
+    >>> np.round(T[:3, 3], 4).tolist()        # straight arm: 4 x 71 mm + 47.5 mm along x
+    [0.3315, 0.0, 0.0]
+    """
+    k = _kin(spec)
+    q = as_configuration(q, spec)
+    pin.framesForwardKinematics(k.model, k.data, q)
+    return k.data.oMf[k.tool].homogeneous
+
+
+def joint_frames(q, *, spec: SnakeSpec = SPEC) -> np.ndarray:
+    """Poses ``T_world_link<i>`` of every joint frame, then the tool: shape (n_joints+1, 4, 4)."""
+    k = _kin(spec)
+    q = as_configuration(q, spec)
+    pin.framesForwardKinematics(k.model, k.data, q)
+    return np.stack([k.data.oMf[f].homogeneous for f in (*k.joint_frames, k.tool)])
+
+
+def tool_pose_2d(q, *, spec: SnakeSpec = SPEC) -> np.ndarray:
+    """Planar tool pose ``(x [m], y [m], heading [rad])``.
+
+    >>> import numpy as np, snakekit
+    >>> np.round(snakekit.tool_pose_2d([np.pi / 2, 0, 0, 0, 0]), 4).tolist()
+    [0.0, 0.3315, 1.5708]
+    """
+    T = forward_kinematics(q, spec=spec)
+    return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
+
+
+def jacobian(q, *, spec: SnakeSpec = SPEC) -> np.ndarray:
+    """Tool Jacobian (6 x n_joints) in the world-aligned frame at the tool point.
+
+    Rows are (vx, vy, vz, wx, wy, wz): ``[v; w] = J(q) @ qdot``.
+    """
+    k = _kin(spec)
+    q = as_configuration(q, spec)
+    return pin.computeFrameJacobian(k.model, k.data, q, k.tool, pin.LOCAL_WORLD_ALIGNED)
+
+
+_PLANAR_ROWS = [0, 1, 5]
+
+
+def planar_jacobian(q, *, spec: SnakeSpec = SPEC) -> np.ndarray:
+    """Planar tool Jacobian (3 x n_joints): rows (x, y, heading) rates."""
+    return jacobian(q, spec=spec)[_PLANAR_ROWS]
+
+
+def _wrap(a: float) -> float:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _dls(k: _Kin, target: np.ndarray, use_heading: bool, q: np.ndarray, *, tol: float,
+         max_iter: int, damping: float) -> tuple[np.ndarray, np.ndarray]:
+    """Damped least squares from ``q``, projected onto the joint limits. Returns (q, error)."""
+    lo, hi = k.spec.lower, k.spec.upper
+    rows = _PLANAR_ROWS if use_heading else _PLANAR_ROWS[:2]
+    model, data, tool = k.model, k.data, k.tool
+    lam2 = damping * damping
+    eye = np.eye(len(rows))
+    err = np.zeros(len(rows))
+    for _ in range(max_iter):
+        J = pin.computeFrameJacobian(model, data, q, tool, pin.LOCAL_WORLD_ALIGNED)[rows]
+        # computeFrameJacobian ran forward kinematics; oMf needs only this frame update.
+        M = pin.updateFramePlacement(model, data, tool)
+        err[0] = target[0] - M.translation[0]
+        err[1] = target[1] - M.translation[1]
+        if use_heading:
+            err[2] = _wrap(target[2] - np.arctan2(M.rotation[1, 0], M.rotation[0, 0]))
+        if abs(err[0]) < tol and abs(err[1]) < tol and (not use_heading or abs(err[2]) < tol):
+            return q, err
+        q = np.clip(q + J.T @ np.linalg.solve(J @ J.T + lam2 * eye, err), lo, hi)
+    return q, err
+
+
+def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec: SnakeSpec = SPEC,
+                       tol: float = 1e-6, max_iter: int = 100, restarts: int = 20,
+                       seed: int = 0) -> np.ndarray:
+    """Joint angles [rad] that put the tool on ``target_xy`` [m] (and ``heading`` [rad]).
+
+    Damped least squares on the planar Jacobian, clamped to the joint limits, started from
+    ``q0`` (default: home) and then from up to ``restarts`` random configurations.
+
+    Raises:
+        UnreachableTargetError: no solution within ``tol``; the error carries the closest
+            tool point found and its joint angles.
+
+    >>> import numpy as np, snakekit
+    >>> q = snakekit.inverse_kinematics([0.25, 0.10])
+    >>> np.round(snakekit.tool_pose_2d(q)[:2], 6).tolist()
+    [0.25, 0.1]
+    """
+    k = _kin(spec)
+    target_xy = np.asarray(target_xy, dtype=float)
+    if target_xy.shape != (2,):
+        raise ShapeError("target_xy", "(2,)", target_xy.shape, "give the tool target as (x, y) in metres")
+    if not np.isfinite(target_xy).all() or (heading is not None and not np.isfinite(heading)):
+        raise NotFiniteError(f"IK target holds NaN or infinity: {target_xy.tolist()}, heading={heading}")
+    use_heading = heading is not None
+    target = np.array([*target_xy, heading if use_heading else 0.0])
+    if q0 is None:
+        q0 = spec.home
+    else:
+        q0 = np.clip(as_configuration(q0, spec, "q0"), spec.lower, spec.upper)
+
+    best_q, best_err = None, np.inf
+    rng = np.random.default_rng(seed)
+    starts = [q0] + [rng.uniform(spec.lower, spec.upper, spec.n_joints) for _ in range(restarts)]
+    dist = np.linalg.norm(target_xy)
+    if dist > spec.reach + tol:
+        starts = starts[:3]  # certainly out of reach: a few tries find the closest point
+    for start in starts:
+        q, err = _dls(k, target, use_heading, start.copy(), tol=tol, max_iter=max_iter, damping=1e-3)
+        n = float(np.abs(err).max())
+        if n < best_err:
+            best_q, best_err = q, n
+        if n < tol:
+            return q
+    closest = tool_pose_2d(best_q, spec=spec)
+    what = f"({target_xy[0]:.4f}, {target_xy[1]:.4f}) m" + (
+        f" with heading {heading:.4f} rad" if use_heading else "")
+    why = (f"it is {dist:.4f} m from joint 1 and the arm reaches {spec.reach:.4f} m"
+           if dist > spec.reach else "the joint limits keep the tool from it")
+    raise UnreachableTargetError(
+        f"target {what} is out of reach: {why}. The closest tool point found is "
+        f"({closest[0]:.4f}, {closest[1]:.4f}) m, heading {closest[2]:.4f} rad; "
+        f"pick a target inside the workspace (see snakekit.workspace_points).",
+        target=tuple(target[: 3 if use_heading else 2]), closest=tuple(closest[:2]), q_closest=best_q)
+
+
+def workspace_points(n: int = 5000, *, seed: int = 0, spec: SnakeSpec = SPEC) -> np.ndarray:
+    """Tool points (n, 2) [m] of uniformly random configurations inside the limits."""
+    k = _kin(spec)
+    rng = np.random.default_rng(seed)
+    out = np.empty((n, 2))
+    for i, q in enumerate(rng.uniform(spec.lower, spec.upper, (n, spec.n_joints))):
+        pin.framesForwardKinematics(k.model, k.data, q)
+        out[i] = k.data.oMf[k.tool].translation[:2]
+    return out

@@ -1,0 +1,304 @@
+"""The one robot interface, shared by the simulator, the emulated bus and the real arm.
+
+>>> import snakekit
+>>> with snakekit.make_robot("sim") as robot:          # doctest: +SKIP
+...     run = robot.run(snakekit.side_sweep())
+...     print(run.summary())
+
+Every backend refuses a command or trajectory outside the joint limits *before* anything
+moves, and turns torque off (or holds) when closed, even after an exception.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import BackendError, FileFormatError, LimitError
+from .kinematics import check_limits, forward_kinematics
+from .model import SPEC, SnakeSpec
+from .trajectory import Trajectory, _frozen, joint_trajectory
+
+
+@dataclass(frozen=True, eq=False)
+class JointState:
+    """One reading of the arm.
+
+    Attributes:
+        time: robot clock [s] (simulated time for the simulator).
+        positions: joint angles [rad].
+        velocities: joint rates [rad/s].
+        efforts: joint torques [N m] (from Present Load on hardware).
+    """
+
+    time: float
+    positions: np.ndarray
+    velocities: np.ndarray
+    efforts: np.ndarray
+
+    def __post_init__(self):
+        for name in ("positions", "velocities", "efforts"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+
+
+@dataclass(frozen=True, eq=False)
+class Run:
+    """What happened when a trajectory ran: the goals sent and the motion measured.
+
+    Attributes:
+        commanded: the goals as sent, at the robot time they were sent [s].
+        measured: the recorded joint positions and velocities (100 Hz or faster).
+        efforts: recorded joint torques [N m], one row per measured sample.
+        backend: which backend ran it ("sim", "emulator", "hardware").
+        wall_time: how long the run took on the wall clock [s].
+        realtime: whether the run was paced to the wall clock.
+    """
+
+    commanded: Trajectory
+    measured: Trajectory
+    efforts: np.ndarray
+    backend: str
+    wall_time: float
+    realtime: bool
+    spec: SnakeSpec = field(default=SPEC, repr=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "efforts", _frozen(self.efforts))
+
+    @property
+    def robot_time(self) -> float:
+        """Duration of the recording on the robot clock [s]."""
+        return self.measured.duration
+
+    def tracking_error(self) -> np.ndarray:
+        """Largest |measured - commanded| per joint [rad], over the commanded time span.
+
+        The commanded goals are interpolated linearly between the times they were sent.
+        """
+        t = self.measured.times
+        inside = (t >= self.commanded.times[0]) & (t <= self.commanded.times[-1])
+        ref = self.commanded.sample(t[inside])
+        return np.abs(self.measured.positions[inside] - ref).max(axis=0)
+
+    def limits_held(self) -> bool:
+        """True if every commanded goal and every measured position stayed inside the limits."""
+        s = self.spec
+        return bool(((self.commanded.positions >= s.lower) & (self.commanded.positions <= s.upper)).all()
+                    and ((self.measured.positions >= s.lower) & (self.measured.positions <= s.upper)).all())
+
+    def final_distance_from_home(self) -> float:
+        """Tool distance [m] between the last measured pose and the home pose."""
+        a = forward_kinematics(self.measured.positions[-1], spec=self.spec)[:2, 3]
+        b = forward_kinematics(self.spec.home, spec=self.spec)[:2, 3]
+        return float(np.linalg.norm(a - b))
+
+    def summary(self) -> str:
+        """A few lines for a person: times, tracking error per joint, limits, end pose."""
+        err = self.tracking_error()
+        lines = [
+            f"backend:            {self.backend}{' (real time)' if self.realtime else ' (as fast as possible)'}",
+            f"goals sent:         {len(self.commanded)} over {self.commanded.duration:.2f} s",
+            f"robot time:         {self.robot_time:.2f} s",
+            f"wall time:          {self.wall_time:.2f} s ({self.robot_time / max(self.wall_time, 1e-9):.1f}x real time)",
+            "max tracking error: " + "  ".join(f"j{j + 1} {np.degrees(e):.2f} deg" for j, e in enumerate(err)),
+            f"limits held:        {'yes' if self.limits_held() else 'NO'}",
+            f"final joint angles: " + " ".join(f"{q:+.4f}" for q in self.measured.positions[-1]) + " rad",
+            f"final distance from home (tool): {1000 * self.final_distance_from_home():.2f} mm",
+        ]
+        return "\n".join(lines)
+
+    def save(self, path) -> Path:
+        """Write the run to a ``.npz`` file."""
+        path = Path(path)
+        if path.suffix != ".npz":
+            raise FileFormatError(f"a run is saved as .npz, not '{path.suffix}' ({path})")
+        np.savez(path, commanded_times=self.commanded.times, commanded_positions=self.commanded.positions,
+                 measured_times=self.measured.times, measured_positions=self.measured.positions,
+                 measured_velocities=self.measured.velocities, efforts=self.efforts,
+                 backend=np.array(self.backend), wall_time=self.wall_time, realtime=self.realtime)
+        return path
+
+    @classmethod
+    def load(cls, path) -> "Run":
+        """Read a run written by :meth:`save`."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                return cls(Trajectory(z["commanded_times"], z["commanded_positions"]),
+                           Trajectory(z["measured_times"], z["measured_positions"], z["measured_velocities"]),
+                           z["efforts"], str(z["backend"]), float(z["wall_time"]), bool(z["realtime"]))
+        except FileNotFoundError as e:
+            raise FileFormatError(f"run file {path} does not exist") from e
+        except (KeyError, OSError, ValueError, EOFError) as e:
+            raise FileFormatError(f"{path} is not a snakekit run file ({e}); save runs with Run.save") from e
+
+
+class Robot(ABC):
+    """The interface every backend implements.
+
+    Subclasses provide the clock (:meth:`_now`), waiting (:meth:`_advance`), sending a
+    checked goal (:meth:`_send`) and reading (:meth:`read`); this class does the checking,
+    the timing of :meth:`run` and the recording.
+    """
+
+    backend = "robot"
+    #: How far [rad] a trajectory's first point may be from the present position.
+    start_tolerance = 0.05
+
+    def __init__(self, spec: SnakeSpec = SPEC):
+        self.spec = spec
+        self.closed = False
+
+    # --- what a backend provides -------------------------------------------------------
+
+    @abstractmethod
+    def read(self) -> JointState:
+        """The present joint state."""
+
+    @abstractmethod
+    def _send(self, q: np.ndarray) -> None:
+        """Send a goal that is already checked to be inside the limits."""
+
+    @abstractmethod
+    def _now(self) -> float:
+        """The robot clock [s]."""
+
+    @abstractmethod
+    def _advance(self, t: float) -> None:
+        """Return when the robot clock reaches ``t`` [s] (simulate, or wait)."""
+
+    def _record(self) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        s = self.read()
+        return s.time, s.positions, s.velocities, s.efforts
+
+    def _shutdown(self) -> None:
+        """Release the backend (torque off, close ports, free the simulator)."""
+
+    # --- the interface ------------------------------------------------------------------
+
+    def _check_open(self):
+        if self.closed:
+            raise BackendError(f"this {self.backend} robot is closed; make a new one with "
+                               f"snakekit.make_robot('{self.backend}')")
+
+    def command(self, q) -> None:
+        """Send a position goal ``q`` [rad]. Raises :class:`LimitError` outside the limits."""
+        self._check_open()
+        self._send(check_limits(q, self.spec, "commanded q"))
+
+    def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5) -> Run:
+        """Send each point of ``trajectory`` at its time and record the motion.
+
+        The whole trajectory is checked against the position and velocity limits first,
+        and must start within :attr:`start_tolerance` of the present position; if not,
+        nothing moves.
+
+        Args:
+            trajectory: the goals to send; time 0 of the run is ``trajectory.times[0]``.
+            record_rate: how often the state is recorded [Hz].
+            settle: how long to keep recording after the last goal [s].
+        """
+        self._check_open()
+        if not isinstance(trajectory, Trajectory):
+            raise TypeError(f"run() takes a snakekit.Trajectory, got {type(trajectory).__name__}; "
+                            "build one with snakekit.Trajectory(times, positions)")
+        trajectory.check_limits(self.spec)
+        present = self.read().positions
+        gap = np.abs(trajectory.positions[0] - present)
+        if gap.max() > self.start_tolerance:
+            j = int(gap.argmax())
+            raise LimitError(
+                f"the trajectory starts {gap[j]:.3f} rad away from the arm's present position "
+                f"(joint {j + 1}: {present[j]:+.3f} -> {trajectory.positions[0, j]:+.3f} rad); nothing was sent. "
+                "Move there first with robot.move_to(trajectory.positions[0]).")
+
+        times = trajectory.times - trajectory.times[0]
+        goals = trajectory.positions
+        n_goals = len(times)
+        dt_rec = 1.0 / record_rate
+        end = times[-1] + settle
+        n_rec = int(np.floor(end / dt_rec + 1e-9)) + 1
+        rec_t = np.empty(n_rec)
+        rec_p = np.empty((n_rec, self.spec.n_joints))
+        rec_v = np.empty_like(rec_p)
+        rec_e = np.empty_like(rec_p)
+        sent_t = np.empty(n_goals)
+
+        wall0 = time.perf_counter()
+        t0 = self._now()
+        k = r = 0
+        while k < n_goals or r < n_rec:
+            t_goal = times[k] if k < n_goals else np.inf
+            t_rec = r * dt_rec if r < n_rec else np.inf
+            self._advance(t0 + min(t_goal, t_rec))
+            if k < n_goals and t_goal <= t_rec:
+                self._send(goals[k])
+                sent_t[k] = self._now() - t0
+                k += 1
+            else:
+                t, rec_p[r], rec_v[r], rec_e[r] = self._record()
+                rec_t[r] = t - t0
+                r += 1
+        wall = time.perf_counter() - wall0
+        offset = trajectory.times[0]
+        return Run(Trajectory(sent_t + offset, goals, n_joints=self.spec.n_joints),
+                   Trajectory(rec_t + offset, rec_p, rec_v, n_joints=self.spec.n_joints),
+                   rec_e, self.backend, wall, bool(getattr(self, "realtime", True)), self.spec)
+
+    def move_to(self, q, duration: float | None = None, **run_options) -> Run:
+        """Move smoothly (quintic, within the velocity limit) from the present position to ``q``."""
+        self._check_open()
+        target = check_limits(q, self.spec, "target q")
+        start = np.clip(self.read().positions, self.spec.lower, self.spec.upper)
+        return self.run(joint_trajectory(start, target, duration, spec=self.spec), **run_options)
+
+    def home(self, duration: float | None = None, **run_options) -> Run:
+        """Move smoothly back to the home pose (every joint at 0 rad)."""
+        return self.move_to(self.spec.home, duration, **run_options)
+
+    def close(self) -> None:
+        """Stop and release the robot. Safe to call more than once."""
+        if not self.closed:
+            self.closed = True
+            self._shutdown()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+BACKENDS = {
+    "sim": ("snakekit.sim", "SimRobot"),
+    "emulator": ("snakekit.emulator", "make_emulated_robot"),
+    "hardware": ("snakekit.hardware", "DynamixelSnake"),
+}
+
+
+def make_robot(backend: str = "sim", **options) -> Robot:
+    """A robot on the named backend: ``"sim"`` (default), ``"emulator"`` or ``"hardware"``.
+
+    Options go to the backend, e.g. ``make_robot("sim", realtime=True)`` or
+    ``make_robot("hardware", port="/dev/ttyUSB0")``.
+    """
+    if backend not in BACKENDS:
+        raise BackendError(f"unknown backend '{backend}'; choose one of {', '.join(BACKENDS)}")
+    module, name = BACKENDS[backend]
+    try:
+        factory = getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as e:
+        raise BackendError(f"the '{backend}' backend is not available: {e}") from e
+    return factory(**options)

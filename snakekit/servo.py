@@ -1,0 +1,175 @@
+"""The MX-28(2.0) position-mode profile generator, in SI units.
+
+The firmware turns each Goal Position into a reference motion limited by Profile Velocity
+and Profile Acceleration (control table 112 and 108):
+
+* velocity 0: no profile, the reference jumps to the goal (a step);
+* acceleration 0: rectangular velocity profile (the speed jumps to the profile velocity);
+* both set: a trapezoid, or a triangle when the move is too short to reach the velocity;
+  the acceleration phase lasts ``t1 = 64 * velocity / acceleration`` ms;
+* a new goal while moving re-plans from the present reference position and velocity.
+
+Both the simulator and the bus emulator use :class:`ProfilePlanner`, so the two move alike.
+Register units: velocity 0.229 rev/min, acceleration 214.577 rev/min^2.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+VELOCITY_UNIT = 0.229 * 2 * math.pi / 60  # rad/s per Profile Velocity unit
+ACCELERATION_UNIT = 214.577 * 2 * math.pi / 3600  # rad/s^2 per Profile Acceleration unit
+
+# The kit's defaults: 62 units = 1.487 rad/s (just under the 1.5 rad/s limit), and 100 units
+# = 37.45 rad/s^2, so t1 = 64 * 62 / 100 = 39.7 ms.
+DEFAULT_PROFILE_VELOCITY = 62
+DEFAULT_PROFILE_ACCELERATION = 100
+
+
+def acceleration_time_ms(profile_velocity: int, profile_acceleration: int) -> float:
+    """The firmware's acceleration time t1 [ms] for the given register values."""
+    return 64.0 * profile_velocity / profile_acceleration
+
+
+class Segment(NamedTuple):
+    """Constant acceleration ``a`` [rad/s^2] from ``t0`` [s] at position ``p0``, velocity ``v0``."""
+
+    t0: float
+    p0: float
+    v0: float
+    a: float
+
+
+class JointProfile:
+    """The reference motion of one servo: piecewise constant acceleration, ending at rest."""
+
+    __slots__ = ("segments", "end_time", "goal")
+
+    def __init__(self, t: float, p: float, v: float, goal: float, vmax: float, amax: float):
+        self.goal = goal
+        self.segments: list[Segment] = []
+        if vmax <= 0 or math.isinf(vmax):  # no profile: a step to the goal
+            self.segments.append(Segment(t, goal, 0.0, 0.0))
+            self.end_time = t
+            return
+        if amax <= 0 or math.isinf(amax):  # rectangular: cruise, then stop dead
+            d = goal - p
+            dur = abs(d) / vmax
+            self.segments.append(Segment(t, p, math.copysign(vmax, d) if d else 0.0, 0.0))
+            self.segments.append(Segment(t + dur, goal, 0.0, 0.0))
+            self.end_time = t + dur
+            return
+        self._plan(t, p, v, goal, vmax, amax)
+
+    def _plan(self, t, p, v, goal, vmax, amax):
+        d = goal - p
+        stop = v * v / (2 * amax)
+        # Moving away from the goal, or too fast to stop before it: brake to rest first.
+        if (v != 0 and (d == 0 or v * d < 0)) or (v * d > 0 and stop > abs(d) + 1e-12):
+            dt = abs(v) / amax
+            a = -math.copysign(amax, v)
+            self.segments.append(Segment(t, p, v, a))
+            t, p, v = t + dt, p + v * dt + 0.5 * a * dt * dt, 0.0
+            d = goal - p
+        s = 1.0 if d >= 0 else -1.0
+        D, v0 = abs(d), abs(v)
+        peak = math.sqrt(amax * D + 0.5 * v0 * v0)
+        vc = min(peak, vmax)
+        t1 = abs(vc - v0) / amax
+        a1 = amax if vc >= v0 else -amax
+        d1 = (vc * vc - v0 * v0) / (2 * a1) if t1 > 0 else 0.0
+        d3 = vc * vc / (2 * amax)
+        t2 = max(D - d1 - d3, 0.0) / vc if vc > 0 else 0.0
+        t3 = vc / amax
+        for dur, acc, vel in ((t1, a1, v0), (t2, 0.0, vc), (t3, -amax, vc)):
+            if dur > 0:
+                self.segments.append(Segment(t, p, s * vel, s * acc))
+                p += s * (vel * dur + 0.5 * acc * dur * dur)
+                t += dur
+        self.segments.append(Segment(t, goal, 0.0, 0.0))
+        self.end_time = t
+
+    def at(self, t: float) -> tuple[float, float]:
+        """Reference ``(position [rad], velocity [rad/s])`` at time ``t`` [s]."""
+        segs = self.segments
+        seg = segs[0]
+        for s in segs[1:]:
+            if s.t0 > t:
+                break
+            seg = s
+        dt = max(t - seg.t0, 0.0)
+        return seg.p0 + seg.v0 * dt + 0.5 * seg.a * dt * dt, seg.v0 + seg.a * dt
+
+    def sample(self, times) -> tuple[np.ndarray, np.ndarray]:
+        """Reference positions and velocities at many ``times`` [s] at once."""
+        pos, vel = _sample_segments([self.segments], np.asarray(times, dtype=float))
+        return pos[:, 0], vel[:, 0]
+
+
+def _sample_segments(plans: list[list[Segment]], times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Evaluate several segment lists at ``times``: arrays of shape (len(times), len(plans))."""
+    width = max(len(p) for p in plans)
+    table = np.empty((4, len(plans), width))
+    table[0] = np.inf  # padding segments start never, so they are never selected
+    for j, plan in enumerate(plans):
+        table[:, j, : len(plan)] = np.array(plan).T
+    t0, p0, v0, a = table
+    idx = np.maximum((times[:, None, None] >= t0[None]).sum(-1) - 1, 0)  # (T, n)
+    cols = np.arange(len(plans))[None, :]
+    t0, p0, v0, a = t0[cols, idx], p0[cols, idx], v0[cols, idx], a[cols, idx]
+    dt = np.maximum(times[:, None] - t0, 0.0)
+    return p0 + v0 * dt + 0.5 * a * dt * dt, v0 + a * dt
+
+
+class ProfilePlanner:
+    """Profiles of several servos: feed goals with :meth:`set_goal`, read the reference.
+
+    Args:
+        positions: initial reference positions [rad] (the servos are at rest there).
+        profile_velocity: Profile Velocity register value(s) (0 = no profile).
+        profile_acceleration: Profile Acceleration register value(s) (0 = rectangular).
+    """
+
+    def __init__(self, positions, profile_velocity=DEFAULT_PROFILE_VELOCITY,
+                 profile_acceleration=DEFAULT_PROFILE_ACCELERATION, t: float = 0.0):
+        positions = np.asarray(positions, dtype=float)
+        n = positions.size
+        self.profile_velocity = np.broadcast_to(np.asarray(profile_velocity), (n,)).astype(int)
+        self.profile_acceleration = np.broadcast_to(np.asarray(profile_acceleration), (n,)).astype(int)
+        self.profiles = [JointProfile(t, float(p), 0.0, float(p), 0.0, 0.0) for p in positions]
+
+    @property
+    def goals(self) -> np.ndarray:
+        return np.array([p.goal for p in self.profiles])
+
+    def set_profile(self, joint: int, velocity: int | None = None, acceleration: int | None = None):
+        """Change the Profile Velocity / Acceleration registers of one joint (0-based)."""
+        if velocity is not None:
+            self.profile_velocity[joint] = velocity
+        if acceleration is not None:
+            self.profile_acceleration[joint] = acceleration
+
+    def set_goal(self, t: float, goals, joints=None):
+        """New goal position(s) [rad] at time ``t`` [s]; re-plans from the present reference."""
+        goals = np.atleast_1d(np.asarray(goals, dtype=float))
+        joints = range(len(self.profiles)) if joints is None else np.atleast_1d(joints)
+        for j, g in zip(joints, goals.tolist()):
+            p, v = self.profiles[j].at(t)
+            vmax = int(self.profile_velocity[j]) * VELOCITY_UNIT
+            amax = int(self.profile_acceleration[j]) * ACCELERATION_UNIT
+            self.profiles[j] = JointProfile(t, p, v, g, vmax, amax)
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Reference positions [rad] and velocities [rad/s] of every joint at ``t`` [s]."""
+        pv = [p.at(t) for p in self.profiles]
+        return np.array([x[0] for x in pv]), np.array([x[1] for x in pv])
+
+    def sample(self, times) -> tuple[np.ndarray, np.ndarray]:
+        """Reference positions and velocities, shape (len(times), n), at many times."""
+        return _sample_segments([p.segments for p in self.profiles], np.asarray(times, dtype=float))
+
+    def moving(self, t: float) -> bool:
+        return any(p.end_time > t for p in self.profiles)

@@ -1,0 +1,352 @@
+"""Joint trajectories: a validated value type, time scaling, files, and the study's sweep.
+
+A :class:`Trajectory` is a list of timed joint configurations: ``times`` [s] of shape (N,),
+``positions`` [rad] of shape (N, n_joints), and optionally ``velocities`` [rad/s].
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import FileFormatError, LimitError, NotFiniteError, ShapeError, TrajectoryError
+from .kinematics import check_limits
+from .model import SPEC, SnakeSpec
+
+
+def _frozen(a) -> np.ndarray:
+    a = np.array(a, dtype=float)  # a copy: the caller's array stays theirs
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One limit violation: ``joint`` (1-based) at ``time`` [s] has ``value`` beyond ``bound``.
+
+    ``kind`` is ``"position"`` [rad] or ``"velocity"`` [rad/s].
+    """
+
+    joint: int
+    time: float
+    kind: str
+    value: float
+    bound: float
+
+    def __str__(self) -> str:
+        unit = "rad" if self.kind == "position" else "rad/s"
+        return f"joint {self.joint} at t={self.time:.3f} s: {self.kind} {self.value:+.4f} {unit} (limit {self.bound:+.4f})"
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Timed joint positions, validated on construction. Arrays are read-only.
+
+    Args:
+        times: strictly increasing sample times [s], shape (N,), N >= 1.
+        positions: joint angles [rad], shape (N, n_joints).
+        velocities: optional joint rates [rad/s], shape (N, n_joints).
+    """
+
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+    n_joints: int = SPEC.n_joints
+
+    def __post_init__(self):
+        n = self.n_joints
+        t = np.asarray(self.times, dtype=float)
+        p = np.asarray(self.positions, dtype=float)
+        if t.ndim != 1 or t.size == 0:
+            raise ShapeError("times", "(N,) with N >= 1", t.shape, "give one time [s] per point")
+        if p.ndim == 1 and p.size == n and t.size == 1:
+            p = p[None, :]
+        if p.shape != (t.size, n):
+            raise ShapeError("positions", f"({t.size}, {n}) (one row per time, one column per joint)",
+                             p.shape, f"the arm has {n} joints; did you pass the transpose?"
+                             if p.shape == (n, t.size) else f"give {n} angles [rad] per time")
+        for name, a in (("times", t), ("positions", p)):
+            if not np.isfinite(a).all():
+                idx = np.argwhere(~np.isfinite(a))[0]
+                raise NotFiniteError(f"trajectory {name} hold NaN or infinity (first at index "
+                                     f"{tuple(int(i) for i in idx)}); every value must be finite")
+        if t.size > 1 and not (np.diff(t) > 0).all():
+            i = int(np.argmax(np.diff(t) <= 0))
+            raise TrajectoryError(f"trajectory times must increase strictly: times[{i}] = {t[i]:.6g} s "
+                                  f"and times[{i + 1}] = {t[i + 1]:.6g} s. Sort the points or drop duplicates.")
+        object.__setattr__(self, "times", _frozen(t))
+        object.__setattr__(self, "positions", _frozen(p))
+        if self.velocities is not None:
+            v = np.asarray(self.velocities, dtype=float)
+            if v.shape != p.shape:
+                raise ShapeError("velocities", f"{p.shape} (same as positions)", v.shape)
+            if not np.isfinite(v).all():
+                raise NotFiniteError("trajectory velocities hold NaN or infinity")
+            object.__setattr__(self, "velocities", _frozen(v))
+
+    # --- basic facts ----------------------------------------------------------------
+
+    def __len__(self) -> int:
+        return self.times.size
+
+    @property
+    def duration(self) -> float:
+        """Time from the first to the last point [s]."""
+        return float(self.times[-1] - self.times[0])
+
+    def __repr__(self) -> str:
+        return (f"Trajectory({len(self)} points, {self.times[0]:.3f}..{self.times[-1]:.3f} s, "
+                f"{self.n_joints} joints{', with velocities' if self.velocities is not None else ''})")
+
+    def finite_difference_velocities(self) -> np.ndarray:
+        """Joint rates [rad/s] between consecutive points, shape (N-1, n_joints)."""
+        return np.diff(self.positions, axis=0) / np.diff(self.times)[:, None]
+
+    def sample(self, t) -> np.ndarray:
+        """Positions at time(s) ``t`` [s], linearly interpolated and held beyond the ends."""
+        t = np.asarray(t, dtype=float)
+        out = np.stack([np.interp(t, self.times, self.positions[:, j]) for j in range(self.n_joints)], -1)
+        return out
+
+    def resample(self, rate: float | None = None, *, times=None) -> "Trajectory":
+        """A trajectory on a new time grid: every ``1/rate`` s, or at the given ``times``."""
+        if times is None:
+            if rate is None or not rate > 0:
+                raise TrajectoryError(f"resample needs a rate > 0 [Hz] or times, got rate={rate}")
+            count = int(np.floor(self.duration * rate + 1e-9)) + 1
+            times = self.times[0] + np.arange(count) / rate
+        times = np.asarray(times, dtype=float)
+        vel = None
+        if self.velocities is not None:
+            vel = np.stack([np.interp(times, self.times, self.velocities[:, j])
+                            for j in range(self.n_joints)], -1)
+        return Trajectory(times, self.sample(times), vel, n_joints=self.n_joints)
+
+    # --- limits -----------------------------------------------------------------------
+
+    def limit_violations(self, spec: SnakeSpec = SPEC, *, velocity: bool = True) -> list[Violation]:
+        """Every point beyond the position limits, and every step faster than the velocity limit.
+
+        Velocities are checked on the finite differences between points (what a servo that
+        receives these goals must do), and on ``velocities`` when given.
+        """
+        out = []
+        p = self.positions
+        for i, j in zip(*np.nonzero((p < spec.lower) | (p > spec.upper))):
+            bound = spec.lower if p[i, j] < spec.lower else spec.upper
+            out.append(Violation(int(j) + 1, float(self.times[i]), "position", float(p[i, j]), bound))
+        if velocity:
+            vmax = spec.velocity_limit * (1 + 1e-9)
+            rates = [(self.finite_difference_velocities(), self.times[1:])]
+            if self.velocities is not None:
+                rates.append((self.velocities, self.times))
+            for v, t in rates:
+                for i, j in zip(*np.nonzero(np.abs(v) > vmax)):
+                    out.append(Violation(int(j) + 1, float(t[i]), "velocity", float(v[i, j]),
+                                         float(np.copysign(spec.velocity_limit, v[i, j]))))
+        return sorted(set(out), key=lambda x: (x.time, x.joint, x.kind))
+
+    def check_limits(self, spec: SnakeSpec = SPEC, *, velocity: bool = True) -> "Trajectory":
+        """Return ``self`` if it respects the limits, else raise :class:`LimitError`."""
+        bad = self.limit_violations(spec, velocity=velocity)
+        if bad:
+            shown = "\n  ".join(str(v) for v in bad[:5])
+            more = f"\n  ... and {len(bad) - 5} more" if len(bad) > 5 else ""
+            raise LimitError(
+                f"trajectory breaks the arm's limits ({spec.lower}..{spec.upper} rad, "
+                f"{spec.velocity_limit} rad/s) at {len(bad)} point(s):\n  {shown}{more}\n"
+                "Nothing was sent to the robot. Slow the motion down (longer times) or keep the "
+                "angles inside the limits.", bad)
+        return self
+
+    # --- files ------------------------------------------------------------------------
+
+    def save(self, path) -> Path:
+        """Write to ``.npz`` or ``.csv`` (chosen by the suffix). Returns the path."""
+        path = Path(path)
+        if path.suffix == ".npz":
+            arrays = {"times": self.times, "positions": self.positions}
+            if self.velocities is not None:
+                arrays["velocities"] = self.velocities
+            np.savez(path, **arrays)
+        elif path.suffix == ".csv":
+            n = self.n_joints
+            header = ["time"] + [f"q{j + 1}" for j in range(n)]
+            cols = [self.times[:, None], self.positions]
+            if self.velocities is not None:
+                header += [f"qd{j + 1}" for j in range(n)]
+                cols.append(self.velocities)
+            with open(path, "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(header)
+                for row in np.hstack(cols):
+                    w.writerow([repr(float(x)) for x in row])
+        else:
+            raise FileFormatError(f"cannot save a trajectory as '{path.suffix}' ({path}); use .npz or .csv")
+        return path
+
+    @classmethod
+    def load(cls, path, *, n_joints: int = SPEC.n_joints) -> "Trajectory":
+        """Read a trajectory written by :meth:`save` (``.npz`` or ``.csv``).
+
+        Raises:
+            FileFormatError: missing, truncated or malformed file, with what was wrong.
+        """
+        path = Path(path)
+        if not path.exists():
+            raise FileFormatError(f"trajectory file {path} does not exist")
+        if path.suffix == ".npz":
+            try:
+                with np.load(path, allow_pickle=False) as z:
+                    missing = {"times", "positions"} - set(z.files)
+                    if missing:
+                        raise FileFormatError(f"{path} lacks the array(s) {sorted(missing)}; a trajectory "
+                                              f".npz holds 'times' and 'positions' (and may hold 'velocities')")
+                    arrays = {k: z[k] for k in ("times", "positions", "velocities") if k in z.files}
+            except FileFormatError:
+                raise
+            except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+                raise FileFormatError(f"{path} is not a readable .npz file ({e}); it may be truncated. "
+                                      "Save it again with Trajectory.save.") from e
+        elif path.suffix == ".csv":
+            arrays = _read_csv(path, n_joints)
+        else:
+            raise FileFormatError(f"cannot read a trajectory from '{path.suffix}' ({path}); use .npz or .csv")
+        try:
+            return cls(**arrays, n_joints=n_joints)
+        except (ShapeError, TrajectoryError, NotFiniteError) as e:
+            raise FileFormatError(f"{path} does not hold a valid trajectory: {e}") from e
+
+
+def _read_csv(path: Path, n: int) -> dict:
+    text = path.read_text()
+    rows = list(csv.reader(io.StringIO(text)))
+    if not rows:
+        raise FileFormatError(f"{path} is empty; a trajectory .csv starts with the header "
+                              f"time,q1..q{n}")
+    header = [h.strip() for h in rows[0]]
+    want = ["time"] + [f"q{j + 1}" for j in range(n)]
+    if header[: n + 1] != want:
+        raise FileFormatError(f"{path} has the header {','.join(header)}; expected {','.join(want)} "
+                              f"(optionally followed by qd1..qd{n})")
+    has_v = len(header) == 2 * n + 1
+    width = len(header)
+    data = []
+    for line, row in enumerate(rows[1:], start=2):
+        if not row:
+            continue
+        if len(row) != width:
+            raise FileFormatError(f"{path}, line {line}: {len(row)} values, expected {width}; "
+                                  "the file may be truncated")
+        try:
+            data.append([float(x) for x in row])
+        except ValueError as e:
+            raise FileFormatError(f"{path}, line {line}: not a number ({e})") from e
+    if not data:
+        raise FileFormatError(f"{path} has a header but no points")
+    a = np.array(data)
+    out = {"times": a[:, 0], "positions": a[:, 1: n + 1]}
+    if has_v:
+        out["velocities"] = a[:, n + 1:]
+    return out
+
+
+# --- time scaling (Modern Robotics, ch. 9) ----------------------------------------------
+
+
+def cubic_time_scaling(T: float, t):
+    """s(t) in [0, 1] with zero start and end velocity: 3(t/T)^2 - 2(t/T)^3.
+
+    >>> round(float(cubic_time_scaling(2.0, 1.0)), 6)
+    0.5
+    """
+    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)
+    return 3 * r**2 - 2 * r**3
+
+
+def quintic_time_scaling(T: float, t):
+    """s(t) in [0, 1] with zero start/end velocity and acceleration: 10r^3 - 15r^4 + 6r^5.
+
+    >>> round(float(quintic_time_scaling(2.0, 1.0)), 6)
+    0.5
+    """
+    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)
+    return 10 * r**3 - 15 * r**4 + 6 * r**5
+
+
+def trapezoidal_time_scaling(T: float, t, *, accel_fraction: float = 0.25):
+    """s(t) in [0, 1]: constant acceleration for ``accel_fraction*T``, cruise, then brake.
+
+    >>> round(float(trapezoidal_time_scaling(2.0, 1.0)), 6)
+    0.5
+    """
+    if not 0 < accel_fraction <= 0.5:
+        raise TrajectoryError(f"accel_fraction must be in (0, 0.5], got {accel_fraction}")
+    ta = accel_fraction * T
+    v = 1.0 / (T - ta)
+    a = v / ta
+    t = np.clip(np.asarray(t, dtype=float), 0, T)
+    return np.where(t < ta, 0.5 * a * t**2,
+                    np.where(t <= T - ta, v * (t - ta / 2), 1 - 0.5 * a * (T - t) ** 2))
+
+
+_SCALINGS = {"cubic": (cubic_time_scaling, 1.5), "quintic": (quintic_time_scaling, 1.875),
+             "trapezoidal": (trapezoidal_time_scaling, 4 / 3)}
+
+
+def joint_trajectory(q_start, q_end, duration: float | None = None, *, method: str = "quintic",
+                     rate: float = 100.0, spec: SnakeSpec = SPEC, speed_fraction: float = 0.8) -> Trajectory:
+    """A straight joint-space move from ``q_start`` to ``q_end`` [rad] sampled at ``rate`` [Hz].
+
+    With ``duration=None`` the move takes the shortest time that keeps every joint's peak
+    speed at ``speed_fraction`` of the velocity limit.
+
+    >>> import numpy as np
+    >>> tr = joint_trajectory(np.zeros(5), [0.5, 0, 0, 0, 0], 1.0, rate=10)
+    >>> len(tr), float(tr.positions[-1, 0])
+    (11, 0.5)
+    """
+    if method not in _SCALINGS:
+        raise TrajectoryError(f"unknown time scaling '{method}'; choose one of {sorted(_SCALINGS)}")
+    scaling, peak = _SCALINGS[method]
+    a = check_limits(q_start, spec, "q_start")
+    b = check_limits(q_end, spec, "q_end")
+    if duration is None:
+        duration = max(peak * float(np.abs(b - a).max()) / (speed_fraction * spec.velocity_limit), 1.0 / rate)
+    if not duration > 0:
+        raise TrajectoryError(f"duration must be > 0 s, got {duration}")
+    n = max(int(np.ceil(duration * rate - 1e-9)), 1)
+    t = np.linspace(0.0, duration, n + 1)
+    s = scaling(duration, t)
+    ds = np.gradient(s, t) if n > 1 else np.zeros_like(t)
+    return Trajectory(t, a + np.outer(s, b - a), np.outer(ds, b - a), n_joints=spec.n_joints)
+
+
+def side_sweep(*, points: int = 500, rate: float = 10.0, sweeps: int = 50,
+               amplitude: float = 0.2, spec: SnakeSpec = SPEC) -> Trajectory:
+    """The study's Task 2: ``points`` goals at ``rate`` Hz making ``sweeps`` side-to-side sweeps.
+
+    Every joint follows ``amplitude * sin(2 pi t / period)`` [rad], so the arm curls to one
+    side, then the other; the sweeps fill the run exactly, so it starts and ends at home.
+
+    >>> tr = side_sweep()
+    >>> len(tr), round(tr.duration, 1), abs(tr.positions[[0, -1]]).max() < 1e-12
+    (500, 49.9, True)
+    """
+    if points < 2 or rate <= 0 or sweeps < 1:
+        raise TrajectoryError(f"side_sweep needs points >= 2, rate > 0 and sweeps >= 1; "
+                              f"got points={points}, rate={rate}, sweeps={sweeps}")
+    t = np.arange(points) / rate
+    period = t[-1] / sweeps
+    w = 2 * np.pi / period
+    pos = amplitude * np.sin(w * t)
+    pos[-1] = 0.0  # exact home (sin(2 pi k) is ~1e-15, not 0)
+    vel = amplitude * w * np.cos(w * t)
+    n = spec.n_joints
+    tr = Trajectory(t, np.repeat(pos[:, None], n, 1), np.repeat(vel[:, None], n, 1), n_joints=n)
+    return tr.check_limits(spec)
