@@ -49,7 +49,7 @@ def as_configuration(q, spec: SnakeSpec = SPEC, name: str = "q") -> np.ndarray:
     q = np.asarray(q, dtype=float)
     if q.shape != (spec.n_joints,):
         raise ShapeError(name, f"({spec.n_joints},)", q.shape,
-                         f"give one angle [rad] per joint, base to tip")
+                         f"Give one angle [rad] per joint, base to tip")
     if not np.isfinite(q).all():
         raise NotFiniteError(f"{name} holds NaN or infinity: {q.tolist()}; give finite angles [rad]")
     return q
@@ -165,7 +165,7 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
     k = _kin(spec)
     target_xy = np.asarray(target_xy, dtype=float)
     if target_xy.shape != (2,):
-        raise ShapeError("target_xy", "(2,)", target_xy.shape, "give the tool target as (x, y) in metres")
+        raise ShapeError("target_xy", "(2,)", target_xy.shape, "Give the tool target as (x, y) in metres")
     if not np.isfinite(target_xy).all() or (heading is not None and not np.isfinite(heading)):
         raise NotFiniteError(f"IK target holds NaN or infinity: {target_xy.tolist()}, heading={heading}")
     use_heading = heading is not None

@@ -68,8 +68,8 @@ class Trajectory:
             p = p[None, :]
         if p.shape != (t.size, n):
             raise ShapeError("positions", f"({t.size}, {n}) (one row per time, one column per joint)",
-                             p.shape, f"the arm has {n} joints; did you pass the transpose?"
-                             if p.shape == (n, t.size) else f"give {n} angles [rad] per time")
+                             p.shape, f"The arm has {n} joints; did you pass the transpose?"
+                             if p.shape == (n, t.size) else f"The arm has {n} joints: give {n} angles [rad] per time")
         for name, a in (("times", t), ("positions", p)):
             if not np.isfinite(a).all():
                 idx = np.argwhere(~np.isfinite(a))[0]
@@ -335,7 +335,7 @@ def side_sweep(*, points: int = 500, rate: float = 10.0, sweeps: int = 50,
     side, then the other; the sweeps fill the run exactly, so it starts and ends at home.
 
     >>> tr = side_sweep()
-    >>> len(tr), round(tr.duration, 1), abs(tr.positions[[0, -1]]).max() < 1e-12
+    >>> len(tr), round(tr.duration, 1), bool(abs(tr.positions[[0, -1]]).max() < 1e-12)
     (500, 49.9, True)
     """
     if points < 2 or rate <= 0 or sweeps < 1:

@@ -1,0 +1,34 @@
+# snakekit: `make lab` opens the lessons, `make test` runs the whole suite.
+# Both set everything up first (tools/setup is fast when .venv is already current).
+
+VENV    ?= .venv
+PY      := $(VENV)/bin/python
+LAB_PORT ?= 8888
+LAB_IP  ?= 127.0.0.1
+export PATH := $(abspath $(VENV))/bin:$(PATH)
+export MUJOCO_GL ?= egl
+
+.PHONY: setup lab test bench lock generate check-generated clean
+
+setup:
+	@tools/setup
+
+lab: setup
+	@echo "snakekit: JupyterLab on the lessons (robot backend: $${SNAKEKIT_BACKEND:-sim})"
+	$(VENV)/bin/jupyter lab --no-browser --allow-root --ip=$(LAB_IP) --port=$(LAB_PORT) \
+	    --ServerApp.root_dir=notebooks
+
+test: setup
+	$(PY) -m pytest -q $(PYTEST_ARGS)
+
+bench: setup
+	@for b in bench/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+lock:
+	tools/lock
+
+generate: setup
+	$(VENV)/bin/snakekit generate
+
+clean:
+	rm -rf $(VENV) .pytest_cache artifacts

@@ -1,0 +1,124 @@
+"""The ``snakekit`` command.
+
+    snakekit sweep [--backend sim] [--realtime] [--out run.npz] [--plot sweep.png]
+    snakekit emulator [...]          (an emulated MX-28 bus on a pseudo-terminal)
+    snakekit generate [--check]      (the URDF and MJCF from the robot spec)
+
+Exit codes: 0 success, 1 the robot or a file failed, 2 bad arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from .errors import SnakekitError
+from .robot import BACKENDS
+
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _writable(path: Path, suffixes: tuple[str, ...], what: str) -> str | None:
+    """Why ``path`` can't be written as ``what``, or None if it can."""
+    if path.suffix.lower() not in suffixes:
+        return f"{what} {path} must end in {' or '.join(suffixes)}"
+    parent = path.resolve().parent
+    if not parent.is_dir():
+        return f"cannot write {what} {path}: folder {parent} does not exist"
+    if path.is_dir():
+        return f"cannot write {what} {path}: it is a folder"
+    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        return f"cannot write {what} {path}: permission denied"
+    return None
+
+
+def _sweep(args, out) -> int:
+    from .robot import make_robot
+    from .trajectory import side_sweep
+
+    problems = []
+    if args.out:
+        problems.append(_writable(Path(args.out), (".npz",), "run file"))
+    if args.plot:
+        problems.append(_writable(Path(args.plot), PLOT_SUFFIXES, "plot"))
+    problems = [p for p in problems if p]
+    if problems:
+        for p in problems:
+            print(f"snakekit sweep: {p}", file=sys.stderr)
+        return 2
+    options = {}
+    if args.backend == "sim":
+        options["realtime"] = args.realtime
+    if args.backend == "hardware":
+        if not args.port:
+            print("snakekit sweep: --backend hardware needs --port (e.g. --port /dev/ttyUSB0)", file=sys.stderr)
+            return 2
+        options["port"] = args.port
+    trajectory = side_sweep()
+    print(f"Task 2: {len(trajectory)} goals at 10 Hz, 50 side-to-side sweeps, on the {args.backend} backend"
+          + (" in real time" if args.realtime or args.backend != "sim" else ""), file=out, flush=True)
+    wall0 = time.perf_counter()
+    with make_robot(args.backend, **options) as robot:
+        run = robot.run(trajectory)
+    print(run.summary(), file=out)
+    if args.out:
+        run.save(args.out)
+        print(f"saved run:          {args.out}", file=out)
+    if args.plot:
+        from .plots import plot_run
+
+        plot_run(run).savefig(args.plot, dpi=110)
+        print(f"saved plot:         {args.plot}", file=out)
+    print(f"total wall time:    {time.perf_counter() - wall0:.2f} s", file=out)
+    return 0 if run.limits_held() else 1
+
+
+def _generate(args, out) -> int:
+    from . import model
+
+    return model.main(["--check"] if args.check else [])
+
+
+def _emulator(args, out) -> int:
+    from . import emulator
+
+    return emulator.cli(args.rest)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="snakekit", description="snakekit: the 5-joint MX-28 snake arm kit")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    p = sub.add_parser("sweep", help="run the coded sweep (Task 2) and report how it tracked")
+    p.add_argument("--backend", default="sim", choices=list(BACKENDS), help="robot backend (default: sim)")
+    p.add_argument("--realtime", action="store_true", help="pace the simulator to the wall clock")
+    p.add_argument("--port", help="serial port of the arm (hardware backend)")
+    p.add_argument("--out", metavar="RUN.npz", help="save the recorded run")
+    p.add_argument("--plot", metavar="PLOT.png", help="plot commanded vs measured angles per joint")
+    p.set_defaults(func=_sweep)
+    p = sub.add_parser("emulator", help="emulate the arm's MX-28 bus on a pseudo-terminal", add_help=False)
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=_emulator)
+    p = sub.add_parser("generate", help="write the URDF and MJCF from the robot spec")
+    p.add_argument("--check", action="store_true", help="only check that the committed files are current")
+    p.set_defaults(func=_generate)
+    return parser
+
+
+def main(argv: list[str] | None = None, out=None) -> int:
+    out = out or sys.stdout
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args, out)
+    except SnakekitError as e:
+        print(f"snakekit {args.command}: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"snakekit {args.command}: interrupted; the robot was closed", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,51 @@
+"""Plots of runs, with matplotlib (no display needed)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .robot import Run
+
+
+def plot_run(run: Run, *, title: str | None = None, zoom: float = 3.0):
+    """Commanded against measured angle for every joint.
+
+    One row per joint: the whole run on the left, the first ``zoom`` seconds on the right
+    (where a fast motion can be seen). Joint limits are drawn when the motion comes near them.
+    Returns the matplotlib Figure (save it with ``fig.savefig(path)``).
+    """
+    from matplotlib.figure import Figure  # no pyplot: no global state, no display
+
+    n = run.measured.n_joints
+    fig = Figure(figsize=(12, 1.8 * n + 0.9), layout="constrained")
+    axes = fig.subplots(n, 2, sharex="col", sharey="row", width_ratios=[3, 1], squeeze=False)
+    err = run.tracking_error()
+    cmd_t, cmd_q = run.commanded.times, np.degrees(run.commanded.positions)
+    meas_t, meas_q = run.measured.times, np.degrees(run.measured.positions)
+    t_start = run.measured.times[0]
+    zoomed = run.measured.duration > 2 * zoom
+    lim_deg = np.degrees([run.spec.lower, run.spec.upper])
+    for j in range(n):
+        lo, hi = min(cmd_q[:, j].min(), meas_q[:, j].min()), max(cmd_q[:, j].max(), meas_q[:, j].max())
+        span = max(hi - lo, 1.0)
+        for ax in axes[j]:
+            ax.step(cmd_t, cmd_q[:, j], where="post", color="tab:orange", lw=1.0, label="commanded goal")
+            ax.plot(meas_t, meas_q[:, j], color="tab:blue", lw=1.2, label="measured")
+            for bound in lim_deg:
+                if abs(bound - (lo + hi) / 2) < span:
+                    ax.axhline(bound, color="tab:red", lw=0.8, ls="--", label="joint limit")
+            ax.grid(alpha=0.3)
+        axes[j, 0].set_ylabel(f"joint {j + 1}\nangle [deg]")
+        axes[j, 0].text(0.995, 0.04, f"max tracking error {np.degrees(err[j]):.2f} deg",
+                        transform=axes[j, 0].transAxes, ha="right", va="bottom", fontsize=8,
+                        bbox=dict(facecolor="white", alpha=0.7, lw=0))
+        axes[j, 1].set_xlim(t_start, t_start + (zoom if zoomed else run.measured.duration))
+    axes[0, 0].legend(loc="upper left", fontsize=8, ncols=3)
+    axes[0, 0].set_title("whole run")
+    axes[0, 1].set_title(f"first {zoom:g} s" if zoomed else "whole run")
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 1].set_xlabel("time [s]")
+    fig.suptitle(title or f"{run.backend}: commanded vs measured joint angles "
+                 f"({len(run.commanded)} goals over {run.commanded.duration:.1f} s; "
+                 f"limits {lim_deg[0]:.0f}..{lim_deg[1]:.0f} deg)")
+    return fig

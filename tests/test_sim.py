@@ -1,0 +1,156 @@
+"""The MuJoCo simulator behaves like five MX-28s in position mode."""
+
+import time
+
+import numpy as np
+import pytest
+
+import snakekit
+from snakekit import SPEC, Trajectory
+from snakekit.servo import ACCELERATION_UNIT, VELOCITY_UNIT
+from snakekit.sim import SimRobot
+from snakekit.trajectory import joint_trajectory
+
+
+def test_make_robot_defaults_to_the_simulator():
+    with snakekit.make_robot() as robot:
+        assert isinstance(robot, SimRobot) and robot.backend == "sim" and not robot.realtime
+    with pytest.raises(snakekit.BackendError, match="unknown backend 'gazebo'; choose one of sim, emulator, hardware"):
+        snakekit.make_robot("gazebo")
+
+
+def test_a_held_goal_converges():
+    goal = np.array([0.5, -0.3, 0.2, 0.1, -0.4])
+    with SimRobot() as robot:
+        robot.command(goal)
+        robot.step(2.0)
+        s = robot.read()
+    assert s.time == pytest.approx(2.0)
+    np.testing.assert_allclose(s.positions, goal, atol=0.01)  # friction leaves a few mrad
+    np.testing.assert_allclose(s.velocities, 0, atol=1e-3)
+
+
+def test_reference_follows_the_firmware_profile_timing():
+    # 1 ms reference updates so the 39.7 ms acceleration phase is resolved
+    pv, pa = 62, 100
+    with SimRobot(reference_period=0.001, profile_velocity=pv, profile_acceleration=pa) as robot:
+        robot.command([1.5, 0, 0, 0, 0])
+        ref_vel = []
+        for _ in range(200):
+            robot.step(0.001)
+            ref_vel.append(robot.data.ctrl[0])  # the actuator's reference velocity
+        ref_vel = np.array(ref_vel)
+        vmax = pv * VELOCITY_UNIT
+        # ref_vel[i] is the reference's mean velocity over [i, i+1] ms: the first interval at
+        # full speed starts on the first whole millisecond after t1 = 64 * 62 / 100 = 39.68 ms
+        first_full = int(np.argmax(ref_vel >= vmax * (1 - 1e-9)))
+        assert first_full - 1 < 64 * pv / pa <= first_full
+        assert 0 < ref_vel[first_full - 1] < vmax
+        # the joint itself follows: its speed settles at the profile velocity
+        robot.step(0.3)
+        assert robot.read().velocities[0] == pytest.approx(vmax, rel=0.03)
+
+
+def test_a_large_step_saturates_the_torque():
+    with SimRobot(profile_velocity=0) as robot:  # velocity 0: no profile, a step
+        robot.command([1.0, 0, 0, 0, 0])
+        efforts = []
+        for _ in range(100):
+            robot.step(0.002)
+            efforts.append(robot.read().efforts[0])
+    efforts = np.array(efforts)
+    assert efforts.max() == pytest.approx(SPEC.servo.stall_torque)  # clamped at 2.5 N m
+    assert np.abs(efforts).max() <= SPEC.servo.stall_torque + 1e-12
+    assert np.sum(np.isclose(efforts, 2.5)) >= 5  # held at the limit for a while
+
+
+def test_two_identical_runs_are_bit_identical():
+    rng = np.random.default_rng(3)
+    q = np.cumsum(rng.uniform(-0.05, 0.05, (40, 5)), axis=0)
+    q[0] = 0
+    tr = Trajectory(np.arange(40) * 0.1, q)
+    runs = []
+    for _ in range(2):
+        with SimRobot() as robot:
+            runs.append(robot.run(tr))
+    a, b = runs
+    for x, y in [(a.measured.times, b.measured.times), (a.measured.positions, b.measured.positions),
+                 (a.measured.velocities, b.measured.velocities), (a.efforts, b.efforts),
+                 (a.commanded.times, b.commanded.times)]:
+        assert np.array_equal(x, y)
+
+
+def test_the_sweep_stays_inside_the_limits_and_returns_home():
+    with SimRobot() as robot:
+        run = robot.run(snakekit.side_sweep())
+    assert run.limits_held()
+    assert np.diff(run.measured.times).max() <= 0.01 + 1e-12  # recorded at 100 Hz
+    assert run.robot_time == pytest.approx(49.9 + 0.5)
+    assert run.final_distance_from_home() < 0.005
+    assert np.abs(run.measured.positions).max() < 0.25  # the sweep's amplitude is 0.2 rad
+    assert np.all(run.tracking_error() < 0.25)
+    assert "limits held:        yes" in run.summary()
+
+
+def test_a_trajectory_outside_the_limits_is_refused_before_anything_moves():
+    bad = joint_trajectory(np.zeros(5), [1.5, 0, 0, 0, 0], 1.0)  # 1.5 rad in 1 s: too fast
+    with SimRobot() as robot:
+        with pytest.raises(snakekit.LimitError, match="Nothing was sent"):
+            robot.run(bad)
+        assert robot.read().time == 0.0
+        np.testing.assert_array_equal(robot.planner.goals, 0)
+        np.testing.assert_array_equal(robot.read().positions, 0)
+
+
+def test_a_command_outside_the_limits_is_refused():
+    with SimRobot() as robot:
+        with pytest.raises(snakekit.LimitError, match="joint 2 = -1.6000 rad"):
+            robot.command([0, -1.6, 0, 0, 0])
+        np.testing.assert_array_equal(robot.planner.goals, 0)
+
+
+def test_a_trajectory_starting_away_from_the_arm_is_refused():
+    tr = joint_trajectory([0.5, 0, 0, 0, 0], [0.6, 0, 0, 0, 0])
+    with SimRobot() as robot:
+        with pytest.raises(snakekit.LimitError, match=r"starts 0.500 rad away.*robot.move_to"):
+            robot.run(tr)
+        run = robot.move_to([0.5, 0, 0, 0, 0])
+        assert abs(run.measured.positions[-1, 0] - 0.5) < 0.01
+        robot.run(tr)  # now it starts where the arm is
+
+
+def test_a_closed_robot_says_so():
+    robot = SimRobot()
+    robot.close()
+    robot.close()  # twice is fine
+    with pytest.raises(snakekit.BackendError, match="robot is closed"):
+        robot.command(np.zeros(5))
+
+
+def test_real_time_mode_follows_the_wall_clock():
+    tr = joint_trajectory(np.zeros(5), [0.2, 0, 0, 0, 0], 0.5)
+    with SimRobot(realtime=True) as robot:
+        t0 = time.perf_counter()
+        run = robot.run(tr, settle=0.2)
+        wall = time.perf_counter() - t0
+    assert run.realtime and wall >= 0.7 - 0.02
+    assert wall < 0.7 * 3  # generous: paced, not stalled
+
+
+def test_render_shows_the_pose():
+    with SimRobot() as robot:
+        home = robot.render(np.zeros(5), width=160, height=120)
+        bent = robot.render([1.2, 0.8, 0.5, 0.3, 0.2], width=160, height=120)
+        assert home.shape == (120, 160, 3) and home.dtype == np.uint8
+        assert np.abs(home.astype(int) - bent).mean() > 1.0  # the picture changed
+        again = robot.render(np.zeros(5), width=160, height=120)
+        np.testing.assert_array_equal(home, again)
+        assert robot.read().time == 0  # rendering a pose does not move the arm
+    assert robot._renderer is None  # closed with the robot
+
+
+def test_joint_state_is_read_only():
+    with SimRobot() as robot:
+        s = robot.read()
+    with pytest.raises(ValueError):
+        s.positions[0] = 1.0
