@@ -1,0 +1,464 @@
+"""The emulated bus: MX-28(2.0) servos behind a pseudo-terminal any serial client can open.
+
+>>> from snakekit.emulator import BusEmulator
+>>> with BusEmulator(motion="profile") as bus:             # doctest: +SKIP
+...     print(bus.port)                                    # open this with the SDK
+/dev/pts/7
+
+The emulator runs in a background thread (:meth:`BusEmulator.start`) or in the foreground
+(:meth:`BusEmulator.serve`). It keeps a record of every instruction packet that reached
+the bus (:attr:`BusEmulator.record`), decoded, so tests can check what a driver sent.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import os
+import random
+import select
+import threading
+import time
+import tty
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model import SPEC, SnakeSpec
+from . import protocol as p
+from .control_table import field_at, to_signed
+from .faults import NO_FAULTS, Faults
+from .motion import MOTION_SOURCES, MotionSource
+from .servo import OVERLOAD, EmulatedServo
+
+BAUD_RATES = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
+
+
+@dataclass(frozen=True)
+class Received:
+    """One instruction packet as it reached the bus.
+
+    Attributes:
+        time: emulator clock when it was decoded [s].
+        packet: the decoded packet.
+        fault: the fault injected on it (``"dropped"``, ``"corrupted"``, ``"delayed"``) or "".
+    """
+
+    time: float
+    packet: p.Packet
+    fault: str = ""
+
+    @property
+    def name(self) -> str:
+        return self.packet.name
+
+
+@dataclass(frozen=True)
+class Write:
+    """One value written to a servo register, decoded from the record.
+
+    Attributes:
+        time: emulator clock [s].
+        id: servo id (254 for a broadcast WRITE).
+        value: the value (two's complement decoded for signed registers).
+        instruction: which instruction carried it.
+        dropped: True if a fault dropped the packet before any servo saw it.
+    """
+
+    time: float
+    id: int
+    value: int
+    instruction: str
+    dropped: bool
+
+
+class BusEmulator:
+    """MX-28(2.0) servos on a pseudo-terminal.
+
+    Args:
+        ids: servo ids on the bus, base to tip (joint i is driven by ``ids[i]``).
+        motion: ``"mujoco"`` (the simulated arm), ``"profile"`` (the firmware profile,
+            followed exactly) or a :class:`~snakekit.emulator.motion.MotionSource`.
+        q0: initial joint angles [rad] (default: home).
+        baudrate: the bus speed [baud]; only used for wire timing.
+        timing: wait the Return Delay Time and the wire time of each status packet
+            before sending it, like a real bus (off: answer at once).
+        boot_time: how long a servo is silent after REBOOT or FACTORY_RESET [s].
+        faults: faults to inject from the start.
+        record_limit: how many received packets to keep.
+        spec: the arm.
+    """
+
+    def __init__(self, *, ids=(1, 2, 3, 4, 5), motion: str | MotionSource = "mujoco", q0=None,
+                 baudrate: int = 4_000_000, timing: bool = False, boot_time: float = 0.05,
+                 faults: Faults = NO_FAULTS, record_limit: int = 200_000, spec: SnakeSpec = SPEC):
+        ids = tuple(int(i) for i in ids)
+        if len(ids) != spec.n_joints or len(set(ids)) != len(ids) or not all(0 <= i <= p.MAX_ID for i in ids):
+            raise ValueError(f"ids must be {spec.n_joints} distinct servo ids in 0..252, got {ids}")
+        if baudrate not in BAUD_RATES:
+            raise ValueError(f"an MX-28 runs at one of {', '.join(map(str, BAUD_RATES))} baud, got {baudrate}")
+        q0 = spec.home if q0 is None else np.asarray(q0, dtype=float)
+        if isinstance(motion, str):
+            if motion not in MOTION_SOURCES:
+                raise ValueError(f"unknown motion source '{motion}'; choose one of {', '.join(MOTION_SOURCES)}")
+            kw = {"spec": spec} if motion == "mujoco" else {}
+            motion = MOTION_SOURCES[motion](q0, **kw)
+        self.motion = motion
+        self.ids = ids
+        self.baudrate = baudrate
+        self.timing = timing
+        self.boot_time = boot_time
+        self.spec = spec
+        self.servos = [EmulatedServo(i, j, motion) for j, i in enumerate(ids)]
+        self.record: collections.deque[Received] = collections.deque(maxlen=record_limit)
+        self._by_id = {s.id: s for s in self.servos}
+        self._parser = p.Parser()
+        self._lock = threading.RLock()
+        self._t0 = time.perf_counter()
+        self._faults = NO_FAULTS
+        self._fault_budget: int | None = None
+        self._rng = random.Random(0)
+        self._overload_at = math.inf
+        self.faults = faults
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        self._wake_r, self._wake_w = os.pipe()
+        self.port = os.ttyname(self._slave)
+        self.closed = False
+
+    # --- clock and faults -------------------------------------------------------------------
+
+    def now(self) -> float:
+        """The emulator clock [s] (wall clock since creation)."""
+        return time.perf_counter() - self._t0
+
+    @property
+    def faults(self) -> Faults:
+        return self._faults
+
+    @faults.setter
+    def faults(self, faults: Faults) -> None:
+        if not isinstance(faults, Faults):
+            raise TypeError(f"faults must be a snakekit.emulator.Faults, got {type(faults).__name__}")
+        with self._lock:
+            self._faults = faults
+            self._fault_budget = faults.count
+            self._rng = random.Random(faults.seed)
+            self._overload_at = self.now() + faults.overload_after if faults.overload else math.inf
+            if faults.overload and not faults.overload_after:
+                self._overload(self.now())
+
+    def inject_overload(self, servo_id: int) -> None:
+        """Make ``servo_id`` report an overload alert now (torque goes off, as in the firmware)."""
+        with self._lock:
+            self._servo(servo_id).raise_hardware_error(self.now(), OVERLOAD)
+
+    def _overload(self, t: float) -> None:
+        self._overload_at = math.inf
+        for i in self._faults.overload:
+            if i in self._by_id:
+                self._by_id[i].raise_hardware_error(t, OVERLOAD)
+
+    def _roll(self, rate: float) -> bool:
+        if rate <= 0 or self._fault_budget == 0:
+            return False
+        if self._rng.random() >= rate:
+            return False
+        if self._fault_budget is not None:
+            self._fault_budget -= 1
+        return True
+
+    def _servo(self, servo_id: int) -> EmulatedServo:
+        try:
+            return self._by_id[servo_id]
+        except KeyError:
+            raise KeyError(f"no emulated servo with id {servo_id}; ids: {sorted(self._by_id)}") from None
+
+    def servo(self, servo_id: int) -> EmulatedServo:
+        """The emulated servo with id ``servo_id`` (to inspect its control table)."""
+        return self._servo(servo_id)
+
+    # --- the record -------------------------------------------------------------------------
+
+    def received(self, name: str | None = None) -> list[Received]:
+        """The recorded instruction packets (optionally only those named ``name``, e.g. "SYNC_WRITE")."""
+        with self._lock:
+            return [r for r in self.record if name is None or r.packet.name == name]
+
+    def clear_record(self) -> None:
+        with self._lock:
+            self.record.clear()
+
+    def writes(self, address: int, size: int) -> list[Write]:
+        """Every value written to the ``size``-byte register at ``address``, by any write instruction."""
+        out = []
+        for r in self.received():
+            pk = r.packet
+            for servo_id, start, data in _write_blocks(pk):
+                if start <= address and address + size <= start + len(data):
+                    raw = int.from_bytes(data[address - start:address - start + size], "little")
+                    value = to_signed(raw, size) if _signed(address) else raw
+                    out.append(Write(r.time, servo_id, value, pk.name, r.fault == "dropped"))
+        return out
+
+    # --- running ----------------------------------------------------------------------------
+
+    def start(self) -> "BusEmulator":
+        """Serve in a background thread; returns self."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self.serve, name=f"bus-emulator {self.port}", daemon=True)
+            self._thread.start()
+        return self
+
+    def serve(self) -> None:
+        """Answer packets until :meth:`stop` (or Ctrl-C in the foreground)."""
+        advance = getattr(self.motion, "advance", None)
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self._master, self._wake_r], [], [], 0.05)
+            if self._master in ready:
+                try:
+                    data = os.read(self._master, 65536)
+                except (BlockingIOError, InterruptedError):
+                    data = b""
+                except OSError:
+                    break
+                if data:
+                    for packet in self._parser.feed(data):
+                        self.handle(packet)
+            with self._lock:
+                t = self.now()
+                if t >= self._overload_at:
+                    self._overload(t)
+                if advance is not None:
+                    advance(t)
+
+    def stop(self) -> None:
+        """Stop serving, close the pty and free the motion source. Safe to call twice."""
+        if self.closed:
+            return
+        self.closed = True
+        self._stop.set()
+        os.write(self._wake_w, b"x")
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5)
+        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self.motion.close()
+
+    close = stop
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+        return False
+
+    def __del__(self):
+        try:
+            self.stop()
+        except Exception:
+            pass
+
+    def describe(self) -> str:
+        ids = self.ids
+        span = f"{ids[0]}-{ids[-1]}" if ids == tuple(range(ids[0], ids[0] + len(ids))) else ", ".join(map(str, ids))
+        return f"{len(ids)} MX-28 servos (ids {span}) on {self.port} at {self.baudrate} baud"
+
+    # --- the firmware -----------------------------------------------------------------------
+
+    def handle(self, packet: p.Packet) -> None:
+        """Process one received packet and send the replies (public for unit tests)."""
+        with self._lock:
+            t = self.now()
+            if packet.instruction == p.STATUS:
+                return  # a status packet from another device: not for us
+            fault = ""
+            if self._roll(self._faults.drop):
+                fault = "dropped"
+            elif self._roll(self._faults.delay):
+                fault = "delayed"
+            self.record.append(Received(t, packet, fault))
+            if fault == "dropped":
+                return
+            replies = self._execute(t, packet)
+            if not replies:
+                return
+            out = []
+            for servo, pkt in replies:
+                if self._roll(self._faults.corrupt):
+                    i = self._rng.randrange(7, len(pkt))
+                    pkt = pkt[:i] + bytes((pkt[i] ^ 0x5A,)) + pkt[i + 1:]
+                out.append((servo, pkt))
+        if fault == "delayed":
+            time.sleep(self._faults.delay_time)
+        for servo, pkt in out:
+            if self.timing:
+                _sleep(servo.return_delay + len(pkt) * 10 / self.baudrate)
+            self._send(pkt)
+
+    def _send(self, data: bytes) -> None:
+        try:
+            os.write(self._master, data)
+        except (BlockingIOError, OSError):
+            pass  # nobody reads the port: the bytes are lost, as on an open bus
+
+    def _present(self, t: float, servo_id: int) -> EmulatedServo | None:
+        s = self._by_id.get(servo_id)
+        if s is None or servo_id in self._faults.missing or t < s.booting_until:
+            return None
+        return s
+
+    def _refresh(self, t: float, servos) -> None:
+        pos, vel, eff = self.motion.state(t)
+        for s in servos:
+            s.refresh(t, float(pos[s.joint]), float(vel[s.joint]), float(eff[s.joint]))
+
+    def _execute(self, t: float, pk: p.Packet) -> list[tuple[EmulatedServo, bytes]]:
+        inst, params, bid = pk.instruction, pk.params, pk.id
+        broadcast = bid == p.BROADCAST_ID
+        if broadcast:
+            targets = [s for s in (self._present(t, i) for i in sorted(self._by_id)) if s]
+        else:
+            s = self._present(t, bid)
+            targets = [s] if s else []
+        if not targets:
+            return []
+        if not pk.crc_ok:
+            return [] if broadcast else [(s, p.status(s.id, s.error_byte(p.CRC_ERROR)))]
+
+        def reply(s, error=0, data=b"", level=2):
+            if broadcast and inst not in (p.PING,):
+                return []
+            if s.status_return_level < level:
+                return []
+            return [(s, p.status(s.id, s.error_byte(error), data))]
+
+        if inst == p.PING:
+            return [(s, p.status(s.id, s.error_byte(), s.memory.data[0:2] + s.memory.data[6:7])) for s in targets]
+        if inst in (p.READ, p.WRITE, p.REG_WRITE) and len(params) < (4 if inst == p.READ else 3):
+            return [] if broadcast else reply(s, p.DATA_LENGTH_ERROR, level=1)
+        if inst == p.READ:
+            if broadcast:
+                return []
+            address, length = _u16(params, 0), _u16(params, 2)
+            if len(params) != 4:
+                return reply(s, p.DATA_LENGTH_ERROR, level=1)
+            self._refresh(t, [s])
+            error, data = s.memory.read(address, length)
+            return reply(s, error, data, level=1)
+        if inst in (p.WRITE, p.REG_WRITE):
+            address, data = _u16(params, 0), params[2:]
+            out = []
+            for s in targets:
+                error = s.write(t, address, data) if inst == p.WRITE else s.register(address, data)
+                out += reply(s, error)
+            self._reindex()
+            return out
+        if inst == p.ACTION:
+            out = []
+            for s in targets:
+                s.action(t)
+                out += reply(s)
+            self._reindex()
+            return out
+        if inst == p.REBOOT:
+            out = []
+            for s in targets:
+                out += reply(s)
+                s.reboot(t, self.boot_time)
+            return out
+        if inst == p.FACTORY_RESET:
+            if broadcast:
+                return []  # the MX-28 ignores a broadcast factory reset
+            option = params[0] if len(params) == 1 else -1
+            out = reply(s)  # the reply leaves before the reset
+            error = s.factory_reset(t, option, self.boot_time)
+            if error:
+                return reply(s, error)
+            self._reindex()
+            return out
+        if inst in (p.SYNC_READ, p.SYNC_WRITE, p.BULK_READ, p.BULK_WRITE) and not broadcast:
+            return reply(s, p.INSTRUCTION_ERROR)
+        if inst == p.SYNC_READ:
+            if len(params) < 4:
+                return []
+            address, length = _u16(params, 0), _u16(params, 2)
+            wanted = [self._present(t, i) for i in params[4:]]
+            wanted = [s for s in wanted if s is not None]
+            self._refresh(t, wanted)
+            out = []
+            for s in wanted:
+                error, data = s.memory.read(address, length)
+                if s.status_return_level >= 1:
+                    out.append((s, p.status(s.id, s.error_byte(error), data)))
+            return out
+        if inst == p.BULK_READ:
+            blocks = [(params[i], _u16(params, i + 1), _u16(params, i + 3))
+                      for i in range(0, len(params) - 4, 5)]
+            wanted = [(self._present(t, i), a, n) for i, a, n in blocks]
+            wanted = [w for w in wanted if w[0] is not None]
+            self._refresh(t, [w[0] for w in wanted])
+            out = []
+            for s, a, n in wanted:
+                error, data = s.memory.read(a, n)
+                if s.status_return_level >= 1:
+                    out.append((s, p.status(s.id, s.error_byte(error), data)))
+            return out
+        if inst in (p.SYNC_WRITE, p.BULK_WRITE):
+            for servo_id, address, data in _write_blocks(pk):
+                s = self._present(t, servo_id)
+                if s is not None:
+                    s.write(t, address, data)
+            self._reindex()
+            return []
+        return [] if broadcast else reply(s, p.INSTRUCTION_ERROR)
+
+    def _reindex(self) -> None:
+        self._by_id = {s.id: s for s in self.servos}
+
+
+def _u16(b: bytes, i: int) -> int:
+    return b[i] | b[i + 1] << 8
+
+
+def _signed(address: int) -> bool:
+    try:
+        return field_at(address).signed
+    except KeyError:
+        return False
+
+
+def _write_blocks(pk: p.Packet) -> list[tuple[int, int, bytes]]:
+    """``(servo id, address, data)`` for every write carried by an instruction packet."""
+    b, inst = pk.params, pk.instruction
+    if inst in (p.WRITE, p.REG_WRITE) and len(b) >= 3:
+        return [(pk.id, _u16(b, 0), b[2:])]
+    if inst == p.SYNC_WRITE and len(b) >= 4:
+        address, length = _u16(b, 0), _u16(b, 2)
+        step = 1 + length
+        return [(b[i], address, b[i + 1:i + step]) for i in range(4, len(b) - step + 1, step)]
+    if inst == p.BULK_WRITE:
+        out, i = [], 0
+        while i + 5 <= len(b):
+            servo_id, address, length = b[i], _u16(b, i + 1), _u16(b, i + 3)
+            out.append((servo_id, address, b[i + 5:i + 5 + length]))
+            i += 5 + length
+        return out
+    return []
+
+
+def _sleep(seconds: float) -> None:
+    """Sleep ``seconds`` [s], spinning the last 0.2 ms for sub-millisecond precision."""
+    end = time.perf_counter() + seconds
+    if seconds > 3e-4:
+        time.sleep(seconds - 2e-4)
+    while time.perf_counter() < end:
+        pass
+

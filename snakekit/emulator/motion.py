@@ -1,0 +1,146 @@
+"""How the emulated servos move: the firmware profile alone, or the MuJoCo arm.
+
+A motion source turns goals and torque switches, stamped with the emulator's clock [s],
+into present joint positions [rad], velocities [rad/s] and torques [N m]:
+
+* :class:`ProfileMotion`: each servo follows :class:`snakekit.servo.ProfilePlanner`
+  exactly (a perfect position loop); the load is zero.
+* :class:`MujocoMotion`: a :class:`snakekit.sim.SimRobot` advanced to the emulator's clock,
+  so the emulated servos move (and lag, and load) like the simulated arm.
+
+With torque off a joint is limp: it stays where it is (profile) or coasts (MuJoCo).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import SPEC, SnakeSpec
+from ..servo import JointProfile, ProfilePlanner
+
+
+class MotionSource:
+    """What the bus emulator needs from a physical model of the arm."""
+
+    name = "motion"
+
+    def set_goal(self, t: float, joint: int, goal: float) -> None:
+        """A new goal [rad] for ``joint`` (0-based) at time ``t`` [s]."""
+        raise NotImplementedError
+
+    def set_profile(self, t: float, joint: int, velocity: int, acceleration: int) -> None:
+        """Profile Velocity / Acceleration register values of ``joint``."""
+        raise NotImplementedError
+
+    def set_torque(self, t: float, joint: int, on: bool, goal: float) -> None:
+        """Torque on or off; on, the joint moves from where it is towards ``goal`` [rad]."""
+        raise NotImplementedError
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions [rad], velocities [rad/s] and torques [N m] of every joint at ``t`` [s]."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Free the model."""
+
+
+class ProfileMotion(MotionSource):
+    """The servos reach the firmware's reference motion exactly."""
+
+    name = "profile"
+
+    def __init__(self, q0, *, profile_velocity: int = 0, profile_acceleration: int = 0):
+        q0 = np.asarray(q0, dtype=float)
+        self.planner = ProfilePlanner(q0, profile_velocity, profile_acceleration)
+        self.torque = np.zeros(q0.size, dtype=bool)
+        self.limp = q0.copy()  # where torque-off joints rest
+
+    def set_goal(self, t, joint, goal):
+        if self.torque[joint]:
+            self.planner.set_goal(t, [goal], [joint])
+
+    def set_profile(self, t, joint, velocity, acceleration):
+        self.planner.set_profile(joint, velocity, acceleration)
+
+    def set_torque(self, t, joint, on, goal):
+        if on == self.torque[joint]:
+            return
+        if on:
+            p = float(self.limp[joint])
+            self.planner.profiles[joint] = JointProfile(t, p, 0.0, p, 0.0, 0.0)
+            self.torque[joint] = True
+            self.planner.set_goal(t, [goal], [joint])
+        else:
+            self.limp[joint] = self.planner.profiles[joint].at(t)[0]
+            self.torque[joint] = False
+
+    def state(self, t):
+        pos, vel = self.planner.at(t)
+        off = ~self.torque
+        pos[off] = self.limp[off]
+        vel[off] = 0.0
+        return pos, vel, np.zeros_like(pos)
+
+
+class MujocoMotion(MotionSource):
+    """The simulated arm, advanced to the emulator's clock (1 ms steps)."""
+
+    name = "mujoco"
+
+    def __init__(self, q0, *, spec: SnakeSpec = SPEC, profile_velocity: int = 0,
+                 profile_acceleration: int = 0):
+        from ..sim import SimRobot  # MuJoCo only when this source is used
+
+        self.sim = SimRobot(q0=q0, spec=spec, profile_velocity=profile_velocity,
+                            profile_acceleration=profile_acceleration)
+        m = self.sim.model
+        self._gain = m.actuator_gainprm[:, 0].copy()
+        self._bias = m.actuator_biasprm[:, :3].copy()
+        self.torque = np.ones(spec.n_joints, dtype=bool)
+        for j in range(spec.n_joints):
+            self._actuator(j, False)
+
+    def _actuator(self, joint: int, on: bool) -> None:
+        m = self.sim.model
+        m.actuator_gainprm[joint, 0] = self._gain[joint] if on else 0.0
+        m.actuator_biasprm[joint, :3] = self._bias[joint] if on else 0.0
+        self.torque[joint] = on
+
+    def advance(self, t: float) -> None:
+        if t > self.sim._now():
+            self.sim._advance(t)
+
+    def set_goal(self, t, joint, goal):
+        self.advance(t)
+        if self.torque[joint]:
+            self.sim.planner.set_goal(self.sim._now(), [goal], [joint])
+            self.sim._plan_reference()
+
+    def set_profile(self, t, joint, velocity, acceleration):
+        self.sim.planner.set_profile(joint, velocity, acceleration)
+
+    def set_torque(self, t, joint, on, goal):
+        self.advance(t)
+        if on == self.torque[joint]:
+            return
+        now = self.sim._now()
+        if on:
+            p = float(self.sim.data.qpos[joint])
+            self.sim.planner.profiles[joint] = JointProfile(now, p, 0.0, p, 0.0, 0.0)
+            self.sim.data.act[joint] = p
+            self._actuator(joint, True)
+            self.sim.planner.set_goal(now, [goal], [joint])
+        else:
+            self._actuator(joint, False)
+        self.sim._plan_reference()
+
+    def state(self, t):
+        self.advance(t)
+        d = self.sim.data
+        return d.qpos.copy(), d.qvel.copy(), d.actuator_force.copy()
+
+    def close(self):
+        self.sim.close()
+
+
+MOTION_SOURCES = {"profile": ProfileMotion, "mujoco": MujocoMotion}

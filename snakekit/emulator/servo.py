@@ -1,0 +1,156 @@
+"""One emulated MX-28(2.0): its control table, its firmware rules and its link to the motion.
+
+Ticks exist here and in :mod:`snakekit.hardware` only: 2048 ticks = 0 rad, 4096 ticks a turn,
+Present Position = motor position + Homing Offset.
+"""
+
+from __future__ import annotations
+
+import math
+
+from . import protocol as p
+from .control_table import FIELDS, HARDWARE_ERROR_STATUS, Memory
+
+TICKS_PER_RAD = 4096 / (2 * math.pi)
+VELOCITY_UNIT = 0.229 * 2 * math.pi / 60  # rad/s per Present Velocity unit
+STALL_TORQUE = 2.5  # N m, = 100 % Present Load
+OVERLOAD = 1 << 5
+
+
+class EmulatedServo:
+    """An MX-28(2.0) on the emulated bus.
+
+    Args:
+        servo_id: its id (control-table address 7).
+        joint: which joint of the motion source it drives (0-based).
+        motion: the shared :class:`~snakekit.emulator.motion.MotionSource`.
+    """
+
+    def __init__(self, servo_id: int, joint: int, motion):
+        self.memory = Memory(servo_id)
+        self.joint = joint
+        self.motion = motion
+        self.registered: list | None = None  # a REG_WRITE waiting for ACTION
+        self.booting_until = -math.inf
+        self._sync_profile(0.0)
+
+    @property
+    def id(self) -> int:
+        return self.memory.get("ID")
+
+    @property
+    def hardware_error(self) -> int:
+        return self.memory.data[HARDWARE_ERROR_STATUS]
+
+    @property
+    def status_return_level(self) -> int:
+        return self.memory.data[68]
+
+    @property
+    def return_delay(self) -> float:
+        """Return Delay Time [s]."""
+        return self.memory.data[9] * 2e-6
+
+    def error_byte(self, error: int = 0) -> int:
+        return error | (p.ALERT if self.hardware_error else 0)
+
+    # --- units ------------------------------------------------------------------------------
+
+    def ticks_to_rad(self, ticks: int) -> float:
+        """A Goal/Present Position value to the joint angle [rad] (Homing Offset removed)."""
+        return (ticks - self.memory.get("Homing Offset") - 2048) / TICKS_PER_RAD
+
+    def rad_to_ticks(self, q: float) -> int:
+        return int(round(2048 + q * TICKS_PER_RAD)) + self.memory.get("Homing Offset")
+
+    # --- present values ---------------------------------------------------------------------
+
+    def refresh(self, t: float, q: float, qd: float, tau: float) -> None:
+        """Update the read-only present values from the motion at time ``t`` [s]."""
+        m = self.memory
+        m.set("Present Position", self.rad_to_ticks(q))
+        vel = int(round(qd / VELOCITY_UNIT))
+        m.set("Present Velocity", vel)
+        load = max(-1000, min(1000, int(round(1000 * tau / STALL_TORQUE))))
+        m.set("Present Load", load)
+        m.set("Present PWM", load * 885 // 1000)
+        m.set("Realtime Tick", int(t * 1000) % 32768)
+        moving = abs(vel) > m.get("Moving Threshold")
+        m.set("Moving", int(moving))
+        m.set("Moving Status", 1 if not moving else 2)
+        m.set("Position Trajectory", m.get("Goal Position") if m.data[64] else m.get("Present Position"))
+        m.set("Velocity Trajectory", vel)
+
+    # --- writes -----------------------------------------------------------------------------
+
+    def write(self, t: float, address: int, data: bytes) -> int:
+        """A WRITE (or the write part of SYNC/BULK WRITE, ACTION); returns the error code."""
+        error, values = self.memory.check_write(address, data)
+        if error:
+            return error
+        self.apply(t, values)
+        return 0
+
+    def apply(self, t: float, values) -> None:
+        """Store checked ``(field, value)`` pairs and act on them."""
+        m = self.memory
+        for f, v in values:
+            if f.name == "Torque Enable" and v == 1 and self.hardware_error & m.get("Shutdown"):
+                continue  # after a shutdown only REBOOT brings torque back
+            m.set(f.name, v)
+            if f.name == "Torque Enable":
+                self.motion.set_torque(t, self.joint, bool(v), self.ticks_to_rad(m.get("Goal Position")))
+            elif f.name == "Goal Position":
+                self.motion.set_goal(t, self.joint, self.ticks_to_rad(v))
+            elif f.name in ("Profile Velocity", "Profile Acceleration"):
+                self._sync_profile(t)
+
+    def _sync_profile(self, t: float) -> None:
+        m = self.memory
+        self.motion.set_profile(t, self.joint, m.get("Profile Velocity"), m.get("Profile Acceleration"))
+
+    def register(self, address: int, data: bytes) -> int:
+        error, values = self.memory.check_write(address, data)
+        if error:
+            return error
+        self.registered = values
+        self.memory.set("Registered Instruction", 1)
+        return 0
+
+    def action(self, t: float) -> None:
+        if self.registered is not None:
+            values, self.registered = self.registered, None
+            self.memory.set("Registered Instruction", 0)
+            self.apply(t, values)
+
+    # --- faults and resets ------------------------------------------------------------------
+
+    def raise_hardware_error(self, t: float, bits: int) -> None:
+        """Set Hardware Error Status bits; a bit in Shutdown (63) turns torque off."""
+        m = self.memory
+        m.set("Hardware Error Status", self.hardware_error | bits)
+        if bits & m.get("Shutdown") and m.data[64]:
+            m.set("Torque Enable", 0)
+            self.motion.set_torque(t, self.joint, False, 0.0)
+
+    def reboot(self, t: float, boot_time: float) -> None:
+        """RAM back to defaults (torque off, errors cleared); silent for ``boot_time`` [s]."""
+        if self.memory.data[64]:
+            self.motion.set_torque(t, self.joint, False, 0.0)
+        self.memory.reset_ram()
+        self.registered = None
+        self._sync_profile(t)
+        self.booting_until = t + boot_time
+
+    def factory_reset(self, t: float, option: int, boot_time: float) -> int:
+        keep = {0xFF: (), 0x01: ("ID",), 0x02: ("ID", "Baud Rate")}.get(option)
+        if keep is None:
+            return p.DATA_RANGE_ERROR
+        servo_id = self.id
+        self.reboot(t, boot_time)
+        self.memory.factory_reset(keep)
+        if "ID" not in keep:
+            self.memory.set("ID", FIELDS["ID"].default)
+        else:
+            self.memory.set("ID", servo_id)
+        return 0
