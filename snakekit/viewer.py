@@ -37,6 +37,7 @@ import time
 import weakref
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -280,11 +281,25 @@ def workspace_boundary(*, bins: int = 120, samples: int = 20000, refine: int = 6
                        spec: SnakeSpec = SPEC) -> np.ndarray:
     """Outer boundary of the tool's reachable points, as a closed polygon (bins, 2) [m].
 
+    See :func:`boundary_configurations` for how it is found.
+    """
+    return boundary_configurations(bins=bins, samples=samples, refine=refine, seed=seed, spec=spec)[0].copy()
+
+
+@lru_cache(maxsize=8)
+def boundary_configurations(*, bins: int = 120, samples: int = 20000, refine: int = 60, seed: int = 0,
+                            spec: SnakeSpec = SPEC) -> tuple[np.ndarray, np.ndarray]:
+    """Outer boundary of the tool's reachable points, as a closed polygon (bins, 2) [m].
+
     For each of ``bins`` directions around joint 1 it keeps the farthest tool point found
     among ``samples`` random configurations and the evenly curled ones (joints 2..n bent
     alike), then pushes each direction's best configuration outwards with ``refine`` small
     random steps (a step that lands in another direction improves that one). Every vertex
     is a reachable tool point.
+
+    Returns:
+        the boundary points (M, 2) [m] and the joint angles (M, n_joints) [rad] reaching
+        them (cached; read-only arrays).
     """
     rng = np.random.default_rng(seed)
     n = spec.n_joints
@@ -310,7 +325,11 @@ def workspace_boundary(*, bins: int = 120, samples: int = 20000, refine: int = 6
             r, k = float(np.hypot(*p)), int(bin_of(p))
             if r > best_r[k]:  # a farther point for whichever direction it lands in
                 best_r[k], best_q[k], best_p[k] = r, q, p
-    return best_p[best_r > 0].copy()
+    keep = best_r > 0
+    points, configurations = best_p[keep], best_q[keep]
+    points.setflags(write=False)
+    configurations.setflags(write=False)
+    return points, configurations
 
 
 def _translation(x: float, y: float, z: float = 0.0) -> np.ndarray:

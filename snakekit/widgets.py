@@ -27,8 +27,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .errors import SnakekitError, UnreachableTargetError
-from .kinematics import check_limits, inverse_kinematics, tool_pose_2d
+from .kinematics import check_limits, inverse_kinematics, planar_jacobian, tool_pose_2d
 from .robot import Robot, Run
+from .viewer import boundary_configurations
 
 _OK = "#1a7f37"
 _BAD = "#c62828"
@@ -255,18 +256,32 @@ class ControlPanel:
     def _closest_point(self, x: float, y: float, error: UnreachableTargetError) -> tuple[float, float]:
         """The closest reachable tool point [m] to (x, y), ignoring the heading.
 
-        The solver's own ``closest`` depends on where it started; a position-only solve from
-        the goal and from home (a straight arm points the tool outwards) is usually closer.
+        The IK solver aims at exact solutions: for a target out of reach its lightly damped
+        steps hit the joint limits and its ``closest`` can be far off. Here, damped least
+        squares (clamped to the limits) starts from the goal, from the solver's answer and
+        from the three workspace-boundary points nearest the target, and keeps the nearest
+        tool point reached.
         """
+        spec = self.spec
+        target = np.array([x, y])
+        points, configurations = boundary_configurations(spec=spec)
+        near = np.argsort(np.linalg.norm(points - target, axis=1))[:3]
+        starts = [self.goal, np.asarray(error.q_closest, dtype=float), *configurations[near]]
         best = np.array(error.closest, dtype=float)
-        for q0 in (self.goal, self.spec.home):
-            try:
-                q = inverse_kinematics([x, y], None, q0=q0, spec=self.spec)
-            except UnreachableTargetError as e:
-                q = e.q_closest
-            p = tool_pose_2d(q, spec=self.spec)[:2]
-            if np.hypot(*(p - (x, y))) < np.hypot(*(best - (x, y))):
-                best = p
+        best_d = np.linalg.norm(best - target)
+        for q in starts:
+            q = np.clip(q, spec.lower, spec.upper)
+            for _ in range(60):
+                p = tool_pose_2d(q, spec=spec)[:2]
+                d = np.linalg.norm(target - p)
+                if d < best_d:  # every iterate is reachable: keep the nearest one seen
+                    best, best_d = p, d
+                J = planar_jacobian(q, spec=spec)[:2]
+                step = J.T @ np.linalg.solve(J @ J.T + 0.01**2 * np.eye(2), target - p)
+                step *= min(1.0, 0.2 / max(np.abs(step).max(), 1e-12))  # at most 0.2 rad a joint
+                q = np.clip(q + step, spec.lower, spec.upper)
+                if np.abs(step).max() < 1e-6:
+                    break
         return float(best[0]), float(best[1])
 
     def _set_goal(self, q, *, move_sliders: bool) -> None:
