@@ -34,6 +34,7 @@ import selectors
 import subprocess
 import sys
 import time
+import warnings
 import weakref
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -49,11 +50,14 @@ from .robot import Run
 from .trajectory import Trajectory
 
 try:
-    import meshcat
-    import meshcat.geometry as mg
     import zmq
-    from meshcat.animation import Animation
-    from meshcat.visualizer import ViewerWindow
+
+    with warnings.catch_warnings():  # meshcat 0.3 imports a pyzmq module deprecated since 17
+        warnings.simplefilter("ignore", DeprecationWarning)
+        import meshcat
+        import meshcat.geometry as mg
+        from meshcat.animation import Animation
+        from meshcat.visualizer import ViewerWindow
 except ImportError as _e:  # pragma: no cover - the kit's environment has meshcat
     raise ImportError(f"snakekit.viewer needs meshcat ({_e}); install the kit's environment "
                       "with tools/setup (or `pip install meshcat`)") from _e
