@@ -410,7 +410,9 @@ class DynamixelSnake(Robot):
         self._check_open()
         reader = self._reader
         result = sdk.COMM_SUCCESS
+        t_sent = 0.0
         for attempt in range(self.retries + 1):
+            t_sent = self._now()
             with self._bus():
                 result = reader.txRxPacket()
             if result == sdk.COMM_SUCCESS and all(reader.isAvailable(i, *STATE_BLOCK) for i in self.ids):
@@ -421,7 +423,7 @@ class DynamixelSnake(Robot):
             who = reader.failed_id
             self._fail(f"servo {who} on {self.port_name} did not answer the SyncRead of the joint "
                        f"state ({COMM_RESULTS.get(result, result)}, {self.retries + 1} tries)", who, result)
-        t = self._now()
+        t = 0.5 * (t_sent + self._now())  # the servos sampled about half-way through
         n = len(self.ids)
         loads, vels, ticks = np.empty(n), np.empty(n), np.empty(n)
         for j, i in enumerate(self.ids):

@@ -357,8 +357,10 @@ class BusEmulator:
             address, data = _u16(params, 0), params[2:]
             out = []
             for s in targets:
+                answers = s.status_return_level >= 2  # as set when the instruction arrived
                 error = s.write(t, address, data) if inst == p.WRITE else s.register(address, data)
-                out += reply(s, error)
+                if answers and not broadcast:
+                    out.append((s, p.status(s.id, s.error_byte(error))))
             self._reindex()
             return out
         if inst == p.ACTION:
