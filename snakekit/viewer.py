@@ -585,7 +585,7 @@ class Viewer:
             raise TypeError(f"animate() takes a snakekit Trajectory or Run, got {type(motion).__name__}")
         if not fps > 0:
             raise ValueError(f"fps must be > 0 [Hz], got {fps}")
-        count = int(np.floor(traj.duration * fps + 1e-9)) + 1
+        count = int(np.ceil(traj.duration * fps - 1e-9)) + 1  # the last frame holds the end pose
         times = traj.times[0] + np.arange(count) / fps
         qs = traj.sample(times)
         anim = Animation(default_framerate=fps)

@@ -75,6 +75,7 @@ class ControlPanel:
         message: the last status text shown to the student.
         last_run: the :class:`~snakekit.robot.Run` of the last move, or None.
         last_error: the :class:`~snakekit.UnreachableTargetError` of the last target, or None.
+        closest: the closest reachable tool point (x, y) [m] to the last unreachable target.
         widget: the ipywidgets box (displaying the panel displays it).
     """
 
@@ -91,6 +92,7 @@ class ControlPanel:
         self.last_run: Run | None = None
         self.last_figure: Figure | None = None
         self.last_error: UnreachableTargetError | None = None
+        self.closest: tuple[float, float] | None = None
         self.runs: list[Run] = []
         self.message = ""
         self._syncing = False
@@ -189,7 +191,7 @@ class ControlPanel:
         except UnreachableTargetError as e:
             self.execute_button.disabled = True
             self.last_error = e
-            cx, cy = self._closest_point(x, y, e)
+            cx, cy = self.closest = self._closest_point(x, y, e)
             if heading is not None and np.hypot(cx - x, cy - y) < 1e-4:
                 self._say(f"Unreachable: the tool can reach ({x:.3f}, {y:.3f}) m but not with heading "
                           f"{heading:.2f} rad inside the joint limits. Change the heading or untick "
@@ -202,7 +204,7 @@ class ControlPanel:
             if self.viewer is not None:
                 self.viewer.draw_target(x, y, heading, closest=(cx, cy))
             return None
-        self.last_error = None
+        self.last_error = self.closest = None
         self._set_goal(q, move_sliders=True)
         if self.viewer is not None:
             self.viewer.draw_target(x, y, heading)

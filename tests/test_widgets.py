@@ -1,0 +1,202 @@
+"""The control panel, driven through the same callbacks its widgets call (no browser)."""
+
+import numpy as np
+import pytest
+
+from tests.conftest import need
+
+need("ipywidgets")
+need("meshcat")
+
+import snakekit  # noqa: E402
+from snakekit.model import SPEC  # noqa: E402
+from snakekit.robot import JointState, Robot  # noqa: E402
+from snakekit.viewer import Viewer, boundary_configurations  # noqa: E402
+from snakekit.widgets import ControlPanel, plot_run  # noqa: E402
+
+
+class IdealArm(Robot):
+    """A backend written here, to show the panel needs nothing but the Robot interface."""
+
+    backend = "ideal"
+
+    def __init__(self):
+        super().__init__(SPEC)
+        self.t, self.q, self.sent = 0.0, np.zeros(5), 0
+
+    def read(self):
+        return JointState(self.t, self.q, np.zeros(5), np.zeros(5))
+
+    def _send(self, q):
+        self.q, self.sent = np.array(q), self.sent + 1
+
+    def _now(self):
+        return self.t
+
+    def _advance(self, t):
+        self.t = max(self.t, t)
+
+
+@pytest.fixture(scope="module")
+def viewer():
+    with Viewer() as v:
+        yield v
+
+
+@pytest.fixture
+def sim():
+    with snakekit.make_robot("sim") as robot:
+        yield robot
+
+
+def test_sliders_start_at_the_robot_and_move_the_goal(sim, viewer):
+    sim.command([0.3, 0, 0, 0, 0])
+    sim.step(2.0)
+    panel = ControlPanel(sim, viewer)
+    assert panel.slider_values == pytest.approx(sim.read().positions, abs=0.01)
+    panel.sliders[2].value = 0.9  # what dragging the slider does
+    assert panel.goal[2] == 0.9
+    x, y, h = snakekit.tool_pose_2d(panel.goal)
+    assert (panel.target_x.value, panel.target_y.value) == pytest.approx((x, y))
+    assert panel.target_heading.value == pytest.approx(h)
+    assert viewer.q == pytest.approx(sim.read().positions)  # the robot arm did not move
+    assert "Press Execute" in panel.message
+
+
+def test_sliders_are_bounded_by_the_joint_limits(sim):
+    panel = ControlPanel(sim)
+    for s in panel.sliders:
+        assert (s.min, s.max) == (SPEC.lower, SPEC.upper)
+        assert "[rad]" in s.description
+    with pytest.raises(snakekit.LimitError, match="outside the joint limits"):
+        panel.set_joints([2.0, 0, 0, 0, 0])
+
+
+@pytest.mark.parametrize("target", [(0.25, 0.10, 0.3), (0.12, 0.22, 1.6), (-0.05, -0.20, None)])
+def test_target_is_reached_by_forward_kinematics(sim, target):
+    panel = ControlPanel(sim)
+    x, y, heading = target
+    q = panel.set_target(x, y, heading)
+    assert q is not None and panel.execute_button.disabled is False
+    assert np.all(np.abs(q) <= SPEC.upper)
+    pose = snakekit.tool_pose_2d(q)
+    assert pose[:2] == pytest.approx([x, y], abs=1e-5)
+    if heading is not None:
+        assert pose[2] == pytest.approx(heading, abs=1e-5)
+    assert panel.slider_values == pytest.approx(q)
+    assert "reachable" in panel.message
+
+
+def test_moving_the_target_controls_solves_ik(sim):
+    panel = ControlPanel(sim, heading=False)
+    panel.target_x.value = 0.2  # what dragging the control does: the callback solves IK
+    assert snakekit.tool_pose_2d(panel.goal)[:2] == pytest.approx([0.2, 0.0], abs=1e-5)
+    panel.target_y.value = 0.12
+    assert snakekit.tool_pose_2d(panel.goal)[:2] == pytest.approx([0.2, 0.12], abs=1e-5)
+    assert panel.slider_values == pytest.approx(panel.goal)
+
+
+def test_unreachable_target_names_the_closest_point(sim, viewer):
+    panel = ControlPanel(sim, viewer)
+    before = panel.goal.copy()
+    assert panel.set_target(0.45, 0.05) is None
+    # the closest reachable point to a target beyond reach is on the reach circle, towards it
+    direction = np.array([0.45, 0.05]) / np.hypot(0.45, 0.05)
+    expected = SPEC.reach * direction
+    assert panel.closest == pytest.approx(expected, abs=0.003)
+    assert f"Closest reachable tool point: ({panel.closest[0]:.3f}, {panel.closest[1]:.3f}) m" in panel.message
+    assert panel.message.startswith("Unreachable")
+    assert 'color:#c62828' in panel.status.value
+    assert panel.goal == pytest.approx(before)
+    assert panel.execute_button.disabled
+    start = sim.read().positions
+    assert panel.execute() is None and "unreachable" in panel.message
+    assert sim.read().positions == pytest.approx(start)
+
+
+def test_position_reachable_but_heading_not(sim):
+    panel = ControlPanel(sim)
+    assert panel.set_target(0.33, 0.0, np.pi) is None
+    assert "but not with heading" in panel.message and "hold heading" in panel.message
+
+
+def test_closest_point_is_no_farther_than_the_workspace_boundary(sim):
+    panel = ControlPanel(sim)
+    points, _ = boundary_configurations()
+    for target in [(-0.35, 0.2), (0.0, -0.40), (-0.30, -0.05)]:
+        panel.set_target(*target)
+        cx, cy = panel.closest
+        nearest = np.linalg.norm(points - target, axis=1).min()
+        assert np.hypot(cx - target[0], cy - target[1]) <= nearest + 1e-9
+        assert f"({cx:.3f}, {cy:.3f})" in panel.message
+
+
+def test_execute_moves_the_robot_smoothly_within_limits(sim, viewer):
+    panel = ControlPanel(sim, viewer)
+    goal = panel.set_target(0.20, 0.15, 0.5)
+    run = panel.execute()
+    assert run is panel.last_run and run.backend == "sim"
+    run.commanded.check_limits()  # positions and speeds
+    v = run.commanded.finite_difference_velocities()
+    assert np.abs(v[0]).max() < 0.05 and np.abs(v[-1]).max() < 0.05  # starts and ends at rest
+    assert sim.read().positions == pytest.approx(goal, abs=0.01)
+    assert snakekit.tool_pose_2d(sim.read().positions)[:2] == pytest.approx([0.20, 0.15], abs=0.003)
+    assert viewer.q == pytest.approx(run.measured.positions[-1])
+    assert panel.message.startswith("Move 1 done")
+
+
+def test_plot_shows_commanded_and_measured_with_units(sim):
+    panel = ControlPanel(sim)
+    panel.set_joints([0.5, -0.3, 0.2, 0.0, 0.1])
+    run = panel.execute()
+    ax = panel.last_figure.axes[0]
+    assert ax.get_xlabel() == "time [s]" and ax.get_ylabel() == "joint angle [rad]"
+    lines = [ln for ln in ax.get_lines() if len(ln.get_xdata())]
+    assert len(lines) == 10  # measured and commanded, per joint
+    measured = lines[0]
+    assert measured.get_ydata() == pytest.approx(run.measured.positions[:, 0])
+    assert lines[1].get_linestyle() == "--"
+    assert plot_run(run).axes[0].get_legend() is not None
+
+
+def test_execute_button_click_runs_the_move(sim):
+    panel = ControlPanel(sim)
+    panel.set_joints([0.2, 0.2, 0, 0, 0])
+    panel.execute_button.click()
+    assert panel.last_run is not None
+    assert sim.read().positions == pytest.approx([0.2, 0.2, 0, 0, 0], abs=0.01)
+
+
+def test_a_refused_move_is_reported_not_raised():
+    robot = snakekit.make_robot("sim")
+    panel = ControlPanel(robot)
+    panel.set_joints([0.3, 0, 0, 0, 0])
+    robot.close()
+    assert panel.execute() is None
+    assert "refused" in panel.message and "closed" in panel.message
+    assert panel.execute_button.disabled is False
+
+
+def test_any_backend_three_goal_changes():
+    """The study's Task 1 on a backend that only implements the Robot interface."""
+    arm = IdealArm()
+    panel = ControlPanel(arm)
+    for x, y, h in [(0.25, 0.10, 0.3), (0.12, 0.22, 1.6), (0.28, -0.08, -0.4)]:
+        q = panel.set_target(x, y, h)
+        panel.execute()
+        assert arm.read().positions == pytest.approx(q)
+        assert snakekit.tool_pose_2d(arm.read().positions) == pytest.approx([x, y, h], abs=1e-5)
+    assert len(panel.runs) == 3 and arm.sent > 100
+
+
+def test_emulated_bus_backend():
+    try:
+        robot = snakekit.make_robot("emulator")
+    except snakekit.BackendError as e:  # the emulator is optional
+        pytest.skip(f"emulator backend unavailable: {e}")
+    with robot:
+        panel = ControlPanel(robot, duration=0.5)
+        panel.set_joints([0.15, -0.1, 0, 0, 0])
+        run = panel.execute()
+        assert run.backend == "emulator"
+        assert robot.read().positions == pytest.approx([0.15, -0.1, 0, 0, 0], abs=0.02)
