@@ -1,0 +1,344 @@
+"""The hardware backend (DynamixelSnake over the real dynamixel-sdk), against the bus emulator."""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+import snakekit
+from snakekit import CommunicationError, HardwareError, LimitError
+from snakekit.emulator import BusEmulator, Faults, make_emulated_robot
+from snakekit.emulator.motion import ProfileMotion
+from tests.conftest import need
+
+sdk = need("dynamixel_sdk")
+hw = pytest.importorskip("snakekit.hardware")
+
+IDS = (1, 2, 3, 4, 5)
+LO, HI = 1025, 3071  # +-1.57 rad in ticks, rounded inwards
+
+
+@pytest.fixture
+def robot():
+    r = make_emulated_robot(motion="profile", boot_time=0.02)
+    yield r
+    r.close()
+
+
+def torques(bus):
+    return [bus.servo(i).memory.get("Torque Enable") for i in IDS]
+
+
+def goal_ticks_on_the_bus(bus):
+    return [w.value for w in bus.writes(116, 4)]
+
+
+# --- units --------------------------------------------------------------------------------------------
+
+def test_ticks_and_radians():
+    assert hw.radians_to_ticks([0.0, math.pi / 2, -math.pi / 2]).tolist() == [2048, 3072, 1024]
+    assert np.allclose(hw.ticks_to_radians([2048, 3072, 0]), [0.0, math.pi / 2, -math.pi])
+    assert hw.position_limit_ticks() == (LO, HI)
+    assert hw.ticks_to_radians(HI) <= 1.57 < hw.ticks_to_radians(HI + 1)
+    assert hw.to_signed(0xFFFFFFFF, 4) == -1 and hw.to_signed(0x8000, 2) == -32768
+    assert float(hw.load_to_torque(1000)) == pytest.approx(2.5)
+
+
+class _Holding(ProfileMotion):
+    """Profile motion with a fixed joint torque, to check the Present Load conversion."""
+
+    def state(self, t):
+        pos, vel, _ = super().state(t)
+        return pos, vel, np.array([-1.0, 0.5, 0.0, 2.5, -3.0])
+
+
+def test_read_converts_ticks_velocity_and_load():
+    q0 = np.array([0.3, -0.2, 0.0, 1.0, -1.5])
+    bus = BusEmulator(motion=_Holding(q0), q0=q0).start()
+    with hw.DynamixelSnake(bus.port) as robot:
+        robot._release.append(bus.stop)
+        time.sleep(0.1)  # torque-on moved each joint the fraction of a tick to its goal
+        s = robot.read()
+    ticks = np.rint(2048 + q0 * 4096 / (2 * np.pi))
+    assert np.allclose(s.positions, (ticks - 2048) * 2 * np.pi / 4096)
+    assert np.allclose(s.velocities, 0.0)
+    # Present Load in 0.1 % of 2.5 N m, saturating at 100 %
+    assert np.allclose(s.efforts, [-1.0, 0.5, 0.0, 2.5, -2.5])
+
+
+# --- start-up -----------------------------------------------------------------------------------------
+
+def test_start_up_configures_every_servo(robot):
+    bus = robot.emulator
+    for i in IDS:
+        m = bus.servo(i).memory
+        assert m.get("Return Delay Time") == 0
+        assert (m.get("Min Position Limit"), m.get("Max Position Limit")) == (LO, HI)
+        assert m.get("Profile Velocity") == snakekit.servo.DEFAULT_PROFILE_VELOCITY
+        assert m.get("Profile Acceleration") == snakekit.servo.DEFAULT_PROFILE_ACCELERATION
+        assert m.get("Torque Enable") == 1
+        assert m.get("Goal Position") == 2048
+
+
+def test_start_up_order_ping_torque_off_eeprom_goal_torque_on(robot):
+    record = robot.emulator.received()
+    for i in IDS:
+        mine = [r.packet for r in record if r.packet.id == i]
+        steps = []
+        for pk in mine:
+            if pk.name == "PING":
+                steps.append("ping")
+            elif pk.name == "WRITE":
+                address, value = pk.params[0], int.from_bytes(pk.params[2:], "little")
+                steps.append({64: f"torque {value}", 116: "goal", 9: "eeprom", 11: "eeprom", 48: "eeprom",
+                              52: "eeprom"}.get(address, "ram"))
+        assert steps[0] == "ping"
+        assert steps.index("torque 0") < steps.index("eeprom")
+        assert steps.index("goal") < steps.index("torque 1")
+        assert steps.count("torque 1") == 1
+
+
+def test_eeprom_is_written_only_where_it_differs():
+    bus = BusEmulator(motion="profile").start()
+    try:
+        with hw.DynamixelSnake(bus.port):
+            pass
+        bus.clear_record()
+        with hw.DynamixelSnake(bus.port):
+            pass
+        eeprom_writes = [w for a in (9, 11) for w in bus.writes(a, 1)] + bus.writes(48, 4) + bus.writes(52, 4)
+        assert eeprom_writes == []
+    finally:
+        bus.stop()
+
+
+def test_a_missing_servo_is_named_with_the_port():
+    bus = BusEmulator(motion="profile", faults=Faults(missing=(3,))).start()
+    try:
+        with pytest.raises(CommunicationError, match=rf"no servo answered at id 3 on {bus.port} "
+                                                     r"\(ping timed out\); check the cable and power, or the id"):
+            hw.DynamixelSnake(bus.port, retries=1)
+    finally:
+        bus.stop()
+
+
+def test_a_servo_of_another_model_is_refused():
+    bus = BusEmulator(motion="profile").start()
+    bus.servo(4).memory.set("Model Number", 1060)
+    try:
+        with pytest.raises(hw.ServoMismatchError, match=rf"servo 4 on {bus.port} is model number 1060"):
+            hw.DynamixelSnake(bus.port)
+        assert torques(bus) == [0] * 5
+    finally:
+        bus.stop()
+
+
+def test_a_servo_with_an_alert_at_start_up_is_refused_or_rebooted():
+    bus = BusEmulator(motion="profile", boot_time=0.02).start()
+    bus.inject_overload(2)
+    try:
+        with pytest.raises(HardwareError, match="servo 2 .* overload .* reboot_faulted=True"):
+            hw.DynamixelSnake(bus.port)
+        with hw.DynamixelSnake(bus.port, reboot_faulted=True) as robot:
+            assert robot.hardware_error_status(2) == []
+            assert torques(bus) == [1] * 5
+    finally:
+        bus.stop()
+
+
+def test_bad_port_and_baud_rate_say_what_to_do():
+    with pytest.raises(snakekit.BackendError, match="could not open the servo bus at /nonexistent/tty"):
+        hw.DynamixelSnake("/nonexistent/tty")
+    bus = BusEmulator(motion="profile").start()
+    try:
+        with pytest.raises(snakekit.BackendError, match="123 baud is not a rate"):
+            hw.DynamixelSnake(bus.port, baudrate=123)
+    finally:
+        bus.stop()
+
+
+def test_make_robot_maps_the_backends():
+    with snakekit.make_robot("emulator", motion="profile") as robot:
+        assert isinstance(robot, hw.DynamixelSnake) and robot.backend == "emulator"
+        bus = robot.emulator
+        assert robot.ping(1) == hw.ServoInfo(1, 30, bus.servo(1).memory.get("Firmware Version"))
+    assert bus.closed and not bus._thread.is_alive()
+
+
+# --- the control cycle ----------------------------------------------------------------------------------
+
+def test_one_sync_write_and_one_sync_read_a_cycle(robot):
+    bus = robot.emulator
+    bus.clear_record()
+    for _ in range(10):
+        robot.read()
+        robot.command(np.full(5, 0.1))
+    time.sleep(0.02)  # a SyncWrite has no reply: let the emulator take the last one
+    names = [r.name for r in bus.received()]
+    assert names == ["SYNC_READ", "SYNC_WRITE"] * 10
+    sync_read = bus.received("SYNC_READ")[0].packet.params
+    assert sync_read == bytes((126, 0, 10, 0)) + bytes(IDS)   # load, velocity, position as one block
+    assert goal_ticks_on_the_bus(bus) == [round(2048 + 0.1 * 4096 / (2 * np.pi))] * 50
+
+
+def test_out_of_limit_goal_never_reaches_the_bus(robot):
+    bus = robot.emulator
+    bus.clear_record()
+    with pytest.raises(LimitError):
+        robot.command([0, 0, 1.6, 0, 0])
+    with pytest.raises(LimitError):
+        robot.run(snakekit.Trajectory([0, 1], [[0] * 5, [0, 0, 0, 0, 2.0]]))
+    assert bus.writes(116, 4) == []
+    robot._send(np.array([3.0, -3.0, 1.57, -1.57, 0.0]))  # past the software check: clamped at the wire
+    time.sleep(0.02)
+    assert goal_ticks_on_the_bus(bus) == [HI, LO, HI, LO, 2048]
+
+
+def test_a_move_arrives(robot):
+    run = robot.move_to([0.4, -0.3, 0.2, 0.0, -0.1], duration=0.5)
+    assert run.backend == "emulator" and run.limits_held()
+    assert np.allclose(robot.read().positions, [0.4, -0.3, 0.2, 0.0, -0.1], atol=0.002)
+
+
+# --- faults ------------------------------------------------------------------------------------------
+
+def test_a_few_lost_packets_are_retried(robot):
+    bus = robot.emulator
+    bus.faults = Faults(drop=1.0, count=2)
+    s = robot.read()
+    assert robot.retried == 2 and np.allclose(s.positions, 0.0)
+    bus.faults = Faults(corrupt=1.0, count=6)  # the 5 statuses of one SyncRead, the 1st of the next
+    robot.read()
+    assert robot.retried == 4
+    bus.faults = Faults(delay=1.0, count=1, delay_time=0.05)
+    robot.read()
+    assert torques(bus) == [1] * 5
+
+
+def test_a_servo_lost_mid_run_stops_the_arm(robot):
+    bus = robot.emulator
+    bus.faults = Faults(missing=(3,))
+    with pytest.raises(CommunicationError, match=r"servo 3 on .* did not answer the SyncRead.*stopped \(torque off\)"):
+        robot.move_to(np.full(5, 0.2), duration=0.5)
+    assert torques(bus)[:2] + torques(bus)[3:] == [0] * 4  # servo 3 is unplugged: nobody can reach it
+
+
+def test_a_corrupt_bus_raises_communication_error_and_leaves_torque_off(robot):
+    bus = robot.emulator
+    with pytest.raises(CommunicationError, match="corrupt status packet, 4 tries"):
+        bus.faults = Faults(corrupt=1.0)
+        robot.read()
+    bus.faults = Faults()
+    assert torques(bus) == [0] * 5
+
+
+def test_noisy_bus_never_carries_a_goal_outside_the_limits(robot):
+    bus = robot.emulator
+    bus.faults = Faults(drop=0.02, corrupt=0.01, delay=0.01, delay_time=0.04, seed=7)
+    target = np.array([1.5, -1.5, 1.5, -1.5, 1.5])
+    robot.move_to(target)  # as fast as the velocity limit allows
+    bus.faults = Faults()
+    goals = goal_ticks_on_the_bus(bus)
+    assert len(goals) > 100 and min(goals) >= LO and max(goals) <= HI
+    assert any(r.fault for r in bus.received())     # faults really happened
+    assert np.allclose(robot.read().positions, target, atol=0.002)
+
+
+def test_overload_mid_run_raises_hardware_error_then_reboot_recovers(robot):
+    bus = robot.emulator
+    bus.faults = Faults(overload=(3,), overload_after=0.2)
+    with pytest.raises(HardwareError, match=r"servo 3 \(joint 3\) on .* overload \(Hardware Error Status 0x20\)"
+                                            r".*robot.reboot\(3\)"):
+        robot.move_to(np.full(5, 0.3), duration=1.0)
+    assert torques(bus) == [0] * 5 and not robot.torque_enabled
+    bus.faults = Faults()
+    assert robot.hardware_error_status(3) == ["overload"]
+    robot.reboot(3)
+    assert robot.hardware_error_status(3) == []
+    assert [r.packet.id for r in bus.received("REBOOT")] == [3]   # only the faulted servo
+    m = bus.servo(3).memory
+    assert m.get("Profile Velocity") == snakekit.servo.DEFAULT_PROFILE_VELOCITY
+    robot.torque_on()
+    assert torques(bus) == [1] * 5
+    robot.home(duration=1.0)
+    assert np.allclose(robot.read().positions, 0.0, atol=0.002)
+
+
+def test_ctrl_c_inside_the_sdk_leaves_the_port_usable_and_torque_off(robot, monkeypatch):
+    bus = robot.emulator
+    calls = {"n": 0}
+    real = robot.port.readPort
+
+    def interrupted(length):
+        calls["n"] += 1
+        if calls["n"] == 50:
+            raise KeyboardInterrupt
+        return real(length)
+
+    monkeypatch.setattr(robot.port, "readPort", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        robot.move_to(np.full(5, 0.3), duration=1.0)
+    assert robot.port.is_using is False
+    assert torques(bus) == [0] * 5
+    robot.torque_on()
+    assert torques(bus) == [1] * 5
+
+
+def test_close_turns_torque_off_and_stops_the_emulator():
+    robot = make_emulated_robot(motion="profile")
+    bus = robot.emulator
+    robot.command(np.full(5, 0.1))
+    robot.close()
+    assert torques(bus) == [0] * 5
+    assert bus.closed
+    with pytest.raises(snakekit.BackendError, match="closed"):
+        robot.read()
+
+
+def test_close_with_hold_keeps_torque_on_where_it_is():
+    bus = BusEmulator(motion="profile").start()
+    try:
+        robot = hw.DynamixelSnake(bus.port, on_close="hold")
+        robot.move_to(np.full(5, 0.2), duration=0.4)
+        robot.close()
+        assert torques(bus) == [1] * 5
+        goals = [bus.servo(i).memory.get("Goal Position") for i in IDS]
+        present = [bus.servo(i).memory.get("Present Position") for i in IDS]
+        assert goals == present
+    finally:
+        bus.stop()
+
+
+def test_options_are_checked():
+    with pytest.raises(ValueError, match="on_close must be one of 'torque_off', 'hold'"):
+        hw.DynamixelSnake("/dev/null", on_close="sleep")
+
+
+# --- the study's Task 2, emulated bus vs simulator ----------------------------------------------------------
+
+def test_task2_sweep_on_the_emulator_matches_the_simulator():
+    """The Task 2 sweep (500 goals at 10 Hz, ~50 s in real time) on the emulated bus moves like the sim.
+
+    Tolerance: every recorded position within 0.03 rad of the simulator's at the same time,
+    RMS difference under 0.01 rad. The differences come from goals sent up to a few ms late
+    on the wall clock, the position's 1.5 mrad tick quantisation and reading time stamps.
+    """
+    sweep = snakekit.side_sweep()
+    with snakekit.make_robot("sim") as sim:
+        reference = sim.run(sweep)
+    with snakekit.make_robot("emulator") as robot:
+        run = robot.run(sweep)
+        bus = robot.emulator
+        goals = goal_ticks_on_the_bus(bus)
+    assert run.backend == "emulator" and run.realtime
+    assert len(run.commanded) == 500 and abs(run.wall_time - reference.robot_time) < 1.0
+    assert min(goals) >= LO and max(goals) <= HI and run.limits_held()
+    t = run.measured.times
+    ref = np.column_stack([np.interp(t, reference.measured.times, reference.measured.positions[:, j])
+                           for j in range(5)])
+    diff = np.abs(run.measured.positions - ref)
+    assert diff.max() < 0.03, diff.max(axis=0)
+    assert np.sqrt((diff ** 2).mean()) < 0.01
+    assert np.allclose(run.tracking_error(), reference.tracking_error(), atol=0.03)
+    assert run.final_distance_from_home() < 0.002
