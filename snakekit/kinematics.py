@@ -25,8 +25,21 @@ class _Kin:
     joint_frames: tuple[int, ...]
 
 
-@lru_cache(maxsize=4)
 def _kin(spec: SnakeSpec = SPEC) -> _Kin:
+    """The Pinocchio model of ``spec`` (built once; the default spec skips the cache lookup)."""
+    global _DEFAULT
+    if spec is SPEC:
+        if _DEFAULT is None:
+            _DEFAULT = _build(SPEC)
+        return _DEFAULT
+    return _build(spec)
+
+
+_DEFAULT: _Kin | None = None
+
+
+@lru_cache(maxsize=4)
+def _build(spec: SnakeSpec) -> _Kin:
     model = pin.buildModelFromXML(urdf(spec))
     tool = model.getFrameId("tool")
     frames = tuple(model.getFrameId(f"link{i + 1}") for i in range(spec.n_joints))
@@ -50,7 +63,8 @@ def as_configuration(q, spec: SnakeSpec = SPEC, name: str = "q") -> np.ndarray:
     if q.shape != (spec.n_joints,):
         raise ShapeError(name, f"({spec.n_joints},)", q.shape,
                          f"Give one angle [rad] per joint, base to tip")
-    if not np.isfinite(q).all():
+    total = sum(q.tolist())  # NaN or inf anywhere makes the sum NaN or inf (and is cheap)
+    if not (total - total == 0) and not np.isfinite(q).all():
         raise NotFiniteError(f"{name} holds NaN or infinity: {q.tolist()}; give finite angles [rad]")
     return q
 

@@ -203,26 +203,12 @@ class Robot(ABC):
             record_rate: how often the state is recorded [Hz].
             settle: how long to keep recording after the last goal [s].
         """
-        self._check_open()
-        if not isinstance(trajectory, Trajectory):
-            raise TypeError(f"run() takes a snakekit.Trajectory, got {type(trajectory).__name__}; "
-                            "build one with snakekit.Trajectory(times, positions)")
-        trajectory.check_limits(self.spec)
-        present = self.read().positions
-        gap = np.abs(trajectory.positions[0] - present)
-        if gap.max() > self.start_tolerance:
-            j = int(gap.argmax())
-            raise LimitError(
-                f"the trajectory starts {gap[j]:.3f} rad away from the arm's present position "
-                f"(joint {j + 1}: {present[j]:+.3f} -> {trajectory.positions[0, j]:+.3f} rad); nothing was sent. "
-                "Move there first with robot.move_to(trajectory.positions[0]).")
-
+        self._check_trajectory(trajectory)
         times = trajectory.times - trajectory.times[0]
         goals = trajectory.positions
         n_goals = len(times)
-        dt_rec = 1.0 / record_rate
-        end = times[-1] + settle
-        n_rec = int(np.floor(end / dt_rec + 1e-9)) + 1
+        record_at = self._record_times(trajectory, record_rate, settle)
+        n_rec = len(record_at)
         rec_t = np.empty(n_rec)
         rec_p = np.empty((n_rec, self.spec.n_joints))
         rec_v = np.empty_like(rec_p)
@@ -234,7 +220,7 @@ class Robot(ABC):
         k = r = 0
         while k < n_goals or r < n_rec:
             t_goal = times[k] if k < n_goals else np.inf
-            t_rec = r * dt_rec if r < n_rec else np.inf
+            t_rec = record_at[r] if r < n_rec else np.inf
             self._advance(t0 + min(t_goal, t_rec))
             if k < n_goals and t_goal <= t_rec:
                 self._send(goals[k])
@@ -249,6 +235,32 @@ class Robot(ABC):
         return Run(Trajectory(sent_t + offset, goals, n_joints=self.spec.n_joints),
                    Trajectory(rec_t + offset, rec_p, rec_v, n_joints=self.spec.n_joints),
                    rec_e, self.backend, wall, bool(getattr(self, "realtime", True)), self.spec)
+
+    def _check_trajectory(self, trajectory: Trajectory) -> None:
+        """Refuse, before anything moves, a trajectory this arm must not run."""
+        self._check_open()
+        if not isinstance(trajectory, Trajectory):
+            raise TypeError(f"run() takes a snakekit.Trajectory, got {type(trajectory).__name__}; "
+                            "build one with snakekit.Trajectory(times, positions)")
+        if trajectory.n_joints != self.spec.n_joints:
+            raise LimitError(f"the trajectory has {trajectory.n_joints} joints, the arm {self.spec.n_joints}")
+        trajectory.check_limits(self.spec)
+        present = self.read().positions
+        gap = np.abs(trajectory.positions[0] - present)
+        if gap.max() > self.start_tolerance:
+            j = int(gap.argmax())
+            raise LimitError(
+                f"the trajectory starts {gap[j]:.3f} rad away from the arm's present position "
+                f"(joint {j + 1}: {present[j]:+.3f} -> {trajectory.positions[0, j]:+.3f} rad); nothing was sent. "
+                "Move there first with robot.move_to(trajectory.positions[0]).")
+
+    @staticmethod
+    def _record_times(trajectory: Trajectory, record_rate: float, settle: float) -> np.ndarray:
+        """When the state is recorded during a run, from the run's start [s]."""
+        if not record_rate > 0 or settle < 0:
+            raise ValueError(f"record_rate must be > 0 Hz and settle >= 0 s; got {record_rate}, {settle}")
+        end = trajectory.duration + settle
+        return np.arange(int(np.floor(end * record_rate + 1e-9)) + 1) / record_rate
 
     def move_to(self, q, duration: float | None = None, **run_options) -> Run:
         """Move smoothly (quintic, within the velocity limit) from the present position to ``q``."""

@@ -173,3 +173,40 @@ class ProfilePlanner:
 
     def moving(self, t: float) -> bool:
         return any(p.end_time > t for p in self.profiles)
+
+    def step_velocities(self, first: int, dt: float, goal_steps, goals) -> np.ndarray:
+        """Apply ``goals`` at their ``goal_steps`` and return the reference's mean velocity of
+        every step [rad/s] from step ``first`` until every joint is at rest again.
+
+        Row i moves the reference from step ``first + i`` to ``first + i + 1``; the simulator
+        feeds it to MuJoCo as the actuator's control. Steps are of ``dt`` [s]; goal steps
+        must not decrease. With no profile (velocity 0) a goal's jump happens in one step.
+        """
+        n = len(self.profiles)
+        goal_steps = np.asarray(goal_steps, dtype=int)
+        plans = [list(p.segments) for p in self.profiles]
+        before = np.empty((len(goal_steps), n))  # the reference at each goal step, before it
+        for g, (step, q) in enumerate(zip(goal_steps.tolist(), np.asarray(goals, dtype=float))):
+            t = step * dt
+            if g and step == goal_steps[g - 1]:
+                before[g] = before[g - 1]
+            else:
+                before[g] = self.at(t)[0]
+            self.set_goal(t, q)
+            for plan, prof in zip(plans, self.profiles):
+                while plan and plan[-1].t0 >= t:  # the old plan's future is replaced
+                    plan.pop()
+                plan.extend(prof.segments)
+        end = max(p.end_time for p in self.profiles)
+        last = max(int(np.ceil(end / dt - 1e-9)), int(goal_steps[-1]) + 1 if len(goal_steps) else first + 1)
+        steps = np.arange(first, last + 1)
+        pos = np.empty((len(steps), n))
+        t = steps * dt
+        for j, plan in enumerate(plans):
+            table = np.array(plan)  # rows t0, p0, v0, a
+            i = np.maximum(np.searchsorted(table[:, 0], t, side="right") - 1, 0)
+            dtj = np.maximum(t - table[i, 0], 0.0)
+            pos[:, j] = table[i, 1] + table[i, 2] * dtj + 0.5 * table[i, 3] * dtj * dtj
+        inside = (goal_steps >= first) & (goal_steps <= last)
+        pos[goal_steps[inside] - first] = before[inside]
+        return np.diff(pos, axis=0) / dt

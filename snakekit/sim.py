@@ -4,9 +4,6 @@ Per joint, the simulator runs the servo firmware's profile generator
 (:class:`snakekit.servo.ProfilePlanner`), and MuJoCo runs the position loop at 1 kHz:
 ``tau = clip(kp (q_ref - q) - kv qdot, -2.5, 2.5) N m``, with back-EMF damping, friction
 and rotor inertia on the joint (numbers in :class:`snakekit.model.ServoSpec`).
-
-The profile is evaluated every :attr:`SimRobot.reference_period` seconds; in between, the
-actuator's integrator state moves the reference linearly, inside MuJoCo's step.
 """
 
 from __future__ import annotations
@@ -18,11 +15,17 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
+from mujoco import rollout  # noqa: E402
 
 from .kinematics import as_configuration, check_limits  # noqa: E402
 from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf  # noqa: E402
-from .robot import JointState, Robot  # noqa: E402
+from .robot import JointState, Robot, Run  # noqa: E402
+from .trajectory import Trajectory  # noqa: E402
 from .servo import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner  # noqa: E402
+
+
+# qpos, qvel and act first, in that order (rows of rollout's state: time, qpos, qvel, act, ...)
+_STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
 
 
 def load_model(spec: SnakeSpec = SPEC) -> mujoco.MjModel:
@@ -42,28 +45,31 @@ class SimRobot(Robot):
         profile_velocity: Profile Velocity register value (0.229 rev/min units; 0 = step).
         profile_acceleration: Profile Acceleration register value (214.577 rev/min^2 units;
             0 = rectangular).
-        reference_period: how often the profile is evaluated [s] (a multiple of 1 ms).
+
+    Each physics step (1 ms) the actuator's control is the profile's mean velocity over the
+    step, and MuJoCo integrates it into the reference position (the actuator's state). In
+    fast mode, :meth:`run` knows every goal in advance, so it computes the controls for the
+    whole trajectory and lets ``mujoco.rollout`` step them in C; real-time mode and
+    :meth:`step` step from Python. Both do the same arithmetic, so they give the same motion.
     """
 
     backend = "sim"
 
     def __init__(self, *, realtime: bool = False, q0=None, spec: SnakeSpec = SPEC,
                  profile_velocity: int = DEFAULT_PROFILE_VELOCITY,
-                 profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION,
-                 reference_period: float = 0.01):
+                 profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION):
         super().__init__(spec)
         self.realtime = bool(realtime)
         self.model = load_model(spec)
         self.data = mujoco.MjData(self.model)
         self.dt = float(self.model.opt.timestep)
-        self._knot = max(int(round(reference_period / self.dt)), 1)
         q0 = spec.home if q0 is None else check_limits(q0, spec, "q0")
         self.data.qpos[:] = q0
         self.data.act[:] = q0
         mujoco.mj_forward(self.model, self.data)
         self._steps = 0
         self.planner = ProfilePlanner(q0, profile_velocity, profile_acceleration)
-        self._plan_reference()
+        self._ref = (0, np.zeros((0, spec.n_joints)))  # (first step, controls from it)
         self._wall_origin = None  # (wall clock, robot clock) pair for real-time pacing
         self._renderer = None
         self._scratch = None
@@ -83,44 +89,78 @@ class SimRobot(Robot):
         return self._now(), d.qpos, d.qvel, d.actuator_force
 
     def _send(self, q: np.ndarray) -> None:
-        self.planner.set_goal(self._now(), q)
-        self._plan_reference()
-
-    def _plan_reference(self) -> None:
-        """Sample the profile at every knot from now until all joints are at rest.
-
-        Knots start at the present step, so a goal takes effect at once. Each knot holds
-        the reference position and the velocity that ramps it linearly to the next knot.
-        """
-        k0, knot, dt = self._steps, self._knot, self.dt
-        end = max(p.end_time for p in self.planner.profiles)
-        count = max(int(np.ceil((end - k0 * dt) / (knot * dt) - 1e-9)), 0) + 2
-        pos, _ = self.planner.sample((k0 + knot * np.arange(count)) * dt)
-        vel = np.zeros_like(pos)
-        vel[:-1] = np.diff(pos, axis=0) / (knot * dt)
-        self._ref = (k0, pos, vel)
+        self._ref = (self._steps, self.planner.step_velocities(self._steps, self.dt, [self._steps], [q]))
 
     def _advance(self, t: float) -> None:
         target = int(np.ceil(t / self.dt - 1e-6))
-        m, d, knot = self.model, self.data, self._knot
-        k0, pos, vel = self._ref
-        last = len(pos) - 1
+        m, d = self.model, self.data
+        k0, ctrl = self._ref
         if self.realtime and self._wall_origin is None:
             self._wall_origin = (time.perf_counter(), self._now())
         while self._steps < target:
-            offset = (self._steps - k0) % knot
-            if offset == 0:
-                i = min((self._steps - k0) // knot, last)
-                d.act[:] = pos[i]
-                d.ctrl[:] = vel[i]
-            n = min(knot - offset, target - self._steps)
-            mujoco.mj_step(m, d, nstep=n)
-            self._steps += n
+            i = self._steps - k0
+            if i < len(ctrl):
+                d.ctrl[:] = ctrl[i]
+                mujoco.mj_step(m, d)
+                self._steps += 1
+            else:  # the profile has ended: the reference holds still
+                d.ctrl[:] = 0.0
+                mujoco.mj_step(m, d, nstep=target - self._steps)
+                self._steps = target
         if self.realtime:
             wall0, sim0 = self._wall_origin
             delay = wall0 + (self._now() - sim0) - time.perf_counter()
             if delay > 0:
                 time.sleep(delay)
+
+    def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5) -> Run:
+        """Send each point of ``trajectory`` at its time and record the motion.
+
+        In real time this is :meth:`Robot.run`. As fast as possible, the controls for the
+        whole run are computed first and stepped by ``mujoco.rollout``; the result is the
+        same motion, with the same checks before anything moves.
+        """
+        if self.realtime:
+            return super().run(trajectory, record_rate=record_rate, settle=settle)
+        self._check_trajectory(trajectory)
+        wall0 = time.perf_counter()
+        m, d, dt, n = self.model, self.data, self.dt, self.spec.n_joints
+        k0 = self._steps
+        times = trajectory.times - trajectory.times[0]
+        record_at = self._record_times(trajectory, record_rate, settle)
+        goal_steps = np.ceil(times / dt - 1e-6).astype(int)
+        rec_steps = np.ceil(record_at / dt - 1e-6).astype(int)
+        total = int(rec_steps[-1])
+
+        # The controls of the whole run, in one pass (and what follows, for later steps).
+        ctrl = self.planner.step_velocities(k0, dt, k0 + goal_steps, trajectory.positions)
+        if len(ctrl) < total:
+            ctrl = np.vstack([ctrl, np.zeros((total - len(ctrl), n))])
+        self._ref = (k0 + total, ctrl[total:])
+        ctrl = ctrl[:total]
+
+        size = mujoco.mj_stateSize(m, _STATE)
+        state0 = np.empty(size)
+        mujoco.mj_getState(m, d, state0, _STATE)
+        first = (d.qpos.copy(), d.qvel.copy(), d.actuator_force.copy())
+        if total > 0:
+            state, sensors = rollout.rollout(m, d, state0, ctrl[None], initial_warmstart=d.qacc_warmstart.copy())
+            state, sensors = state[0], sensors[0]
+        self._steps = k0 + total  # rollout leaves ``d`` in the final state
+
+        rec_p = np.empty((len(rec_steps), n))
+        rec_v, rec_e = np.empty_like(rec_p), np.empty_like(rec_p)
+        at_start = rec_steps == 0
+        rec_p[at_start], rec_v[at_start], rec_e[at_start] = first
+        later = rec_steps[~at_start] - 1  # row i of the rollout is the state after step i+1
+        if len(later):
+            rec_p[~at_start] = state[later, 1: 1 + n]
+            rec_v[~at_start] = state[later, 1 + n: 1 + 2 * n]
+            rec_e[~at_start] = sensors[later]
+        offset = trajectory.times[0]
+        return Run(Trajectory(goal_steps * dt + offset, trajectory.positions, n_joints=n),
+                   Trajectory(rec_steps * dt + offset, rec_p, rec_v, n_joints=n),
+                   rec_e, self.backend, time.perf_counter() - wall0, False, self.spec)
 
     def step(self, duration: float) -> None:
         """Let the simulation run for ``duration`` [s] holding the present goals."""

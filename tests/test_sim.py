@@ -33,7 +33,7 @@ def test_a_held_goal_converges():
 def test_reference_follows_the_firmware_profile_timing():
     # 1 ms reference updates so the 39.7 ms acceleration phase is resolved
     pv, pa = 62, 100
-    with SimRobot(reference_period=0.001, profile_velocity=pv, profile_acceleration=pa) as robot:
+    with SimRobot(profile_velocity=pv, profile_acceleration=pa) as robot:
         robot.command([1.5, 0, 0, 0, 0])
         ref_vel = []
         for _ in range(200):
@@ -154,3 +154,26 @@ def test_joint_state_is_read_only():
         s = robot.read()
     with pytest.raises(ValueError):
         s.positions[0] = 1.0
+
+
+def test_real_time_and_fast_modes_give_the_same_motion():
+    tr = joint_trajectory(np.zeros(5), [0.3, -0.2, 0.1, 0.25, -0.3], 0.6, rate=10)
+    runs = []
+    for realtime in (False, True):
+        with SimRobot(realtime=realtime) as robot:
+            runs.append(robot.run(tr, settle=0.3))
+            robot.step(0.2)  # holding afterwards continues the same way
+            runs.append(robot.read())
+    fast, fast_after, slow, slow_after = runs
+    np.testing.assert_array_equal(fast.measured.times, slow.measured.times)
+    np.testing.assert_allclose(fast.measured.positions, slow.measured.positions, atol=1e-12)
+    np.testing.assert_allclose(fast.efforts, slow.efforts, atol=1e-9)
+    np.testing.assert_allclose(fast_after.positions, slow_after.positions, atol=1e-12)
+
+
+def test_goals_without_a_profile_jump_within_one_step():
+    tr = Trajectory([0.0, 0.2], [[0] * 5, [0.05, 0, 0, 0, -0.05]])  # 0.25 rad/s: inside limits
+    with SimRobot(profile_velocity=0) as robot:
+        run = robot.run(tr, settle=1.0)
+        assert robot.data.act[0] == pytest.approx(0.05, abs=1e-12)  # the servo's reference
+    np.testing.assert_allclose(run.measured.positions[-1], [0.05, 0, 0, 0, -0.05], atol=5e-3)
