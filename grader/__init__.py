@@ -1,0 +1,1 @@
+"""The trajectory autograder (not built yet; see grader/README.md)."""
