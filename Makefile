@@ -14,7 +14,7 @@ setup:
 	@tools/setup
 
 lab: setup
-	@echo "snakekit: JupyterLab on the lessons (robot backend: $${SNAKEKIT_BACKEND:-sim})"
+	@echo "snakekit: JupyterLab on the lessons in notebooks/ (the simulator is the default robot)"
 	$(VENV)/bin/jupyter lab --no-browser --allow-root --ip=$(LAB_IP) --port=$(LAB_PORT) \
 	    --ServerApp.root_dir=notebooks
 

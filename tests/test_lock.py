@@ -41,3 +41,11 @@ def test_every_pin_has_a_hash():
 def test_numpy_2_for_pinocchio_4():
     pins, _ = locked()
     assert pins["numpy"] >= Version("2") and pins["pin"] >= Version("4")
+
+
+def test_setup_does_nothing_when_the_venv_is_current():
+    import subprocess
+
+    r = subprocess.run([str(ROOT / "tools" / "setup")], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().endswith(".venv is current")
