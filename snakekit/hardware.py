@@ -28,6 +28,7 @@ configured by ``on_close``: ``"torque_off"`` (limp) or ``"hold"`` (stay where it
 from __future__ import annotations
 
 import math
+import select
 import struct
 import threading
 import time
@@ -167,6 +168,24 @@ class ServoInfo:
     firmware: int
 
 
+class _Port(sdk.PortHandler):
+    """The SDK's port handler, waiting in ``select`` for the first byte instead of spinning.
+
+    The SDK polls the port with a zero timeout until a status packet arrives or its packet
+    timeout passes. Sleeping in ``select`` until a byte arrives gives the same timing
+    without burning a CPU core (and without holding Python's lock, which an emulator in
+    the same process needs to answer).
+    """
+
+    def readPort(self, length):
+        ser = self.ser
+        if not ser.in_waiting:
+            left = (self.packet_timeout - self.getTimeSinceStart()) / 1000.0  # ms -> s
+            if left > 0:
+                select.select([ser.fileno()], [], [], min(left, 0.05))
+        return ser.read(length)
+
+
 class _SyncRead(sdk.GroupSyncRead):
     """The SDK's SyncRead, keeping each status packet's error byte (the SDK drops it)."""
 
@@ -239,7 +258,7 @@ class DynamixelSnake(Robot):
         self._t0 = time.perf_counter()
         self._last_positions = None
 
-        self.port = sdk.PortHandler(self.port_name)
+        self.port = _Port(self.port_name)
         self.ph = sdk.PacketHandler(2.0)
         try:
             opened = self.port.openPort()

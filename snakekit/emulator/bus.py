@@ -17,8 +17,10 @@ import math
 import os
 import random
 import select
+import sys
 import threading
 import time
+import traceback
 import tty
 from dataclasses import dataclass
 
@@ -31,6 +33,8 @@ from .faults import NO_FAULTS, Faults
 from .motion import MOTION_SOURCES, MotionSource
 from .servo import OVERLOAD, EmulatedServo
 
+SWITCH_INTERVAL = 0.0005  # s, while an emulator thread runs
+_CLASS_LOCK = threading.Lock()
 BAUD_RATES = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
 
 
@@ -111,6 +115,8 @@ class BusEmulator:
         self.spec = spec
         self.servos = [EmulatedServo(i, j, motion) for j, i in enumerate(ids)]
         self.record: collections.deque[Received] = collections.deque(maxlen=record_limit)
+        #: packets whose handling raised (the first traceback is printed), for tests
+        self.errors: list[tuple[p.Packet, Exception]] = []
         self._by_id = {s.id: s for s in self.servos}
         self._parser = p.Parser()
         self._lock = threading.RLock()
@@ -206,9 +212,22 @@ class BusEmulator:
 
     # --- running ----------------------------------------------------------------------------
 
+    _threads_running = 0
+    _saved_switch_interval = None
+
     def start(self) -> "BusEmulator":
-        """Serve in a background thread; returns self."""
+        """Serve in a background thread; returns self.
+
+        While an emulator thread runs, Python's thread switch interval is lowered to 0.5 ms
+        (restored when the last one stops): a client in the same process that polls the
+        port would otherwise keep the emulator waiting up to 5 ms for each switch.
+        """
         if self._thread is None:
+            with _CLASS_LOCK:
+                if BusEmulator._threads_running == 0:
+                    BusEmulator._saved_switch_interval = sys.getswitchinterval()
+                    sys.setswitchinterval(min(BusEmulator._saved_switch_interval, SWITCH_INTERVAL))
+                BusEmulator._threads_running += 1
             self._thread = threading.Thread(target=self.serve, name=f"bus-emulator {self.port}", daemon=True)
             self._thread.start()
         return self
@@ -227,7 +246,12 @@ class BusEmulator:
                     break
                 if data:
                     for packet in self._parser.feed(data):
-                        self.handle(packet)
+                        try:
+                            self.handle(packet)
+                        except Exception as e:  # a bug must not kill the bus: keep it, go on
+                            self.errors.append((packet, e))
+                            if len(self.errors) == 1:
+                                traceback.print_exc()
             with self._lock:
                 t = self.now()
                 if t >= self._overload_at:
@@ -242,8 +266,13 @@ class BusEmulator:
         self.closed = True
         self._stop.set()
         os.write(self._wake_w, b"x")
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=5)
+        if self._thread is not None:
+            if self._thread is not threading.current_thread():
+                self._thread.join(timeout=5)
+            with _CLASS_LOCK:
+                BusEmulator._threads_running -= 1
+                if BusEmulator._threads_running == 0 and BusEmulator._saved_switch_interval:
+                    sys.setswitchinterval(BusEmulator._saved_switch_interval)
         for fd in (self._master, self._slave, self._wake_r, self._wake_w):
             try:
                 os.close(fd)

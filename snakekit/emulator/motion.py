@@ -83,7 +83,13 @@ class ProfileMotion(MotionSource):
 
 
 class MujocoMotion(MotionSource):
-    """The simulated arm, advanced to the emulator's clock (1 ms steps)."""
+    """The simulated arm, advanced to the emulator's clock (1 ms steps).
+
+    Only the robot interface of :class:`~snakekit.sim.SimRobot` is used (``_send``,
+    ``_now``, ``_advance``, its ``planner``, ``model`` and ``data``): goals for all joints
+    go in together, a joint's unchanged goal re-plans to the same motion. Torque off sets
+    the joint's actuator gains to zero, so the joint coasts.
+    """
 
     name = "mujoco"
 
@@ -96,6 +102,7 @@ class MujocoMotion(MotionSource):
         m = self.sim.model
         self._gain = m.actuator_gainprm[:, 0].copy()
         self._bias = m.actuator_biasprm[:, :3].copy()
+        self.goals = np.array(q0, dtype=float)
         self.torque = np.ones(spec.n_joints, dtype=bool)
         for j in range(spec.n_joints):
             self._actuator(j, False)
@@ -107,14 +114,15 @@ class MujocoMotion(MotionSource):
         self.torque[joint] = on
 
     def advance(self, t: float) -> None:
+        """Step the simulation up to the emulator's time ``t`` [s]."""
         if t > self.sim._now():
             self.sim._advance(t)
 
     def set_goal(self, t, joint, goal):
         self.advance(t)
+        self.goals[joint] = goal
         if self.torque[joint]:
-            self.sim.planner.set_goal(self.sim._now(), [goal], [joint])
-            self.sim._plan_reference()
+            self.sim._send(self.goals.copy())
 
     def set_profile(self, t, joint, velocity, acceleration):
         self.sim.planner.set_profile(joint, velocity, acceleration)
@@ -123,16 +131,16 @@ class MujocoMotion(MotionSource):
         self.advance(t)
         if on == self.torque[joint]:
             return
-        now = self.sim._now()
         if on:
+            now = self.sim._now()
             p = float(self.sim.data.qpos[joint])
             self.sim.planner.profiles[joint] = JointProfile(now, p, 0.0, p, 0.0, 0.0)
             self.sim.data.act[joint] = p
             self._actuator(joint, True)
-            self.sim.planner.set_goal(now, [goal], [joint])
+            self.goals[joint] = goal
+            self.sim._send(self.goals.copy())
         else:
             self._actuator(joint, False)
-        self.sim._plan_reference()
 
     def state(self, t):
         self.advance(t)
