@@ -277,7 +277,7 @@ def mjcf(spec: SnakeSpec = SPEC) -> str:
         "  </option>",
         "  <visual>",
         '    <global offwidth="1280" offheight="960"/>',
-        '    <headlight ambient="0.4 0.4 0.4" diffuse="0.6 0.6 0.6"/>',
+        '    <headlight ambient="0.35 0.35 0.35" diffuse="0.35 0.35 0.35" specular="0.1 0.1 0.1"/>',
         "  </visual>",
         "  <asset>",
         '    <texture name="grid" type="2d" builtin="checker" width="256" height="256" '
@@ -296,9 +296,9 @@ def mjcf(spec: SnakeSpec = SPEC) -> str:
         "  </default>",
         "  <worldbody>",
         f'    <geom name="floor" type="plane" size="0.6 0.6 0.01" pos="0.12 0 {_f(floor_z)}" material="grid"/>',
-        '    <light name="top" pos="0.15 0 1.0" dir="0 0 -1"/>',
-        '    <camera name="top" pos="0.15 0 0.75" xyaxes="1 0 0 0 1 0"/>',
-        '    <camera name="perspective" pos="0.15 -0.45 0.35" xyaxes="1 0 0 0 0.6 0.8"/>',
+        '    <light name="top" pos="0.15 -0.3 1.0" dir="0 0.3 -1" diffuse="0.45 0.45 0.45" specular="0.1 0.1 0.1"/>',
+        '    <camera name="top" pos="0.12 0 0.8" xyaxes="1 0 0 0 1 0"/>',
+        '    <camera name="perspective" pos="0.14 -0.36 0.3" xyaxes="1 0 0 0 0.64 0.77"/>',
     ]
     for b in _base_geometry(spec):
         out.append(f'    <geom name="{b.name}" pos="{_v(b.centre)}" size="{_v(np.array(b.size) / 2)}" rgba="{b.rgba}"/>')

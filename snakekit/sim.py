@@ -187,7 +187,7 @@ class SimRobot(Robot):
         else:
             data = self._scratch
             data.qpos[:] = as_configuration(q, self.spec)
-            mujoco.mj_kinematics(self.model, data)
+            mujoco.mj_forward(self.model, data)  # kinematics alone leaves the cameras unplaced
         self._renderer.update_scene(data, camera=camera)
         return self._renderer.render()
 

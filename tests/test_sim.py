@@ -137,15 +137,27 @@ def test_real_time_mode_follows_the_wall_clock():
     assert wall < 0.7 * 3  # generous: paced, not stalled
 
 
+def red_tool_tip(image):
+    """Pixel (row, column) centroid of the red tool tip."""
+    r, g, b = (image[..., i].astype(int) for i in range(3))
+    rows, cols = np.nonzero((r > 150) & (g < 90) & (b < 90))
+    assert len(rows) > 3, "the red tool tip is not in the picture"
+    return rows.mean(), cols.mean()
+
+
 def test_render_shows_the_pose():
+    # The top camera looks down: image right is +x, image up is +y.
     with SimRobot() as robot:
-        home = robot.render(np.zeros(5), width=160, height=120)
-        bent = robot.render([1.2, 0.8, 0.5, 0.3, 0.2], width=160, height=120)
-        assert home.shape == (120, 160, 3) and home.dtype == np.uint8
-        assert np.abs(home.astype(int) - bent).mean() > 1.0  # the picture changed
-        again = robot.render(np.zeros(5), width=160, height=120)
-        np.testing.assert_array_equal(home, again)
+        home = robot.render(np.zeros(5), width=320, height=240, camera="top")
+        left = robot.render([1.2, 0, 0, 0, 0], width=320, height=240, camera="top")
+        assert home.shape == (240, 320, 3) and home.dtype == np.uint8
+        (hr, hc), (lr, lc) = red_tool_tip(home), red_tool_tip(left)
+        assert hc > 160 + 40 and abs(hr - 120) < 20  # straight arm: tip right of centre, on the x axis
+        assert lr < hr - 60 and lc < hc - 60  # turned left: the tip moves up and back
+        np.testing.assert_array_equal(home, robot.render(np.zeros(5), width=320, height=240, camera="top"))
         assert robot.read().time == 0  # rendering a pose does not move the arm
+        persp = robot.render(width=160, height=120)  # the present pose, default camera
+        assert persp.shape == (120, 160, 3) and persp.std() > 10
     assert robot._renderer is None  # closed with the robot
 
 
