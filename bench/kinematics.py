@@ -16,7 +16,7 @@ import pinocchio as pin
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import snakekit  # noqa: E402
-from common import per_call, table  # noqa: E402
+from _common import per_call, table  # noqa: E402
 from snakekit.kinematics import pinocchio_model  # noqa: E402
 
 N_IK = 1000

@@ -29,7 +29,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 import snakekit  # noqa: E402
-from common import table  # noqa: E402
+from _common import table  # noqa: E402
 from snakekit.servo import ProfilePlanner  # noqa: E402
 from snakekit.sim import SimRobot  # noqa: E402
 
