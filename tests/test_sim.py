@@ -189,3 +189,17 @@ def test_goals_without_a_profile_jump_within_one_step():
         run = robot.run(tr, settle=1.0)
         assert robot.data.act[0] == pytest.approx(0.05, abs=1e-12)  # the servo's reference
     np.testing.assert_allclose(run.measured.positions[-1], [0.05, 0, 0, 0, -0.05], atol=5e-3)
+
+
+def test_the_kit_chooses_egl_before_mujoco_is_imported():
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY")}
+    code = ("import snakekit, os, sys; from snakekit.sim import render; "
+            "img = render([0.5, 0, 0, 0, 0], width=64, height=48); "
+            "print(os.environ['MUJOCO_GL'], img.shape, 'mujoco' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["egl", "(48,", "64,", "3)", "True"]
