@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import BackendError, CommunicationError, HardwareError
+from .errors import BackendError, CommunicationError, HardwareError, LimitError
 from .model import SPEC, SnakeSpec
 from .robot import JointState, Robot
 from .servo import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY
@@ -61,6 +61,7 @@ TORQUE_ENABLE, STATUS_RETURN_LEVEL, HARDWARE_ERROR_STATUS = 64, 68, 70
 PROFILE_ACCELERATION, PROFILE_VELOCITY, GOAL_POSITION = 108, 112, 116
 PRESENT_LOAD, PRESENT_POSITION = 126, 132
 STATE_BLOCK = (126, 10)  # Present Load (2), Velocity (4), Position (4)
+_STATE = struct.Struct("<hii")  # the block, signed little-endian
 POSITION_MODE = 3
 
 HARDWARE_ERROR_BITS = {0: "input voltage", 2: "overheating", 3: "motor encoder",
@@ -172,17 +173,28 @@ class _Port(sdk.PortHandler):
     """The SDK's port handler, waiting in ``select`` for the first byte instead of spinning.
 
     The SDK polls the port with a zero timeout until a status packet arrives or its packet
-    timeout passes. Sleeping in ``select`` until a byte arrives gives the same timing
-    without burning a CPU core (and without holding Python's lock, which an emulator in
-    the same process needs to answer).
+    timeout passes. Polling a moment, then sleeping in ``select`` until a byte arrives,
+    gives the same timing without burning a CPU core (and without holding Python's lock
+    for long, which an emulator in the same process needs to answer).
     """
+
+    #: how long to poll before sleeping in select [s]: a fast answer is caught without the
+    #: cost of a wake-up, a slow one costs no CPU
+    spin = 3e-4
 
     def readPort(self, length):
         ser = self.ser
-        if not ser.in_waiting:
-            left = (self.packet_timeout - self.getTimeSinceStart()) / 1000.0  # ms -> s
-            if left > 0:
-                select.select([ser.fileno()], [], [], min(left, 0.05))
+        data = ser.read(length)  # what the SDK does: a read that never waits
+        if data:
+            return data
+        end = time.perf_counter() + self.spin
+        while time.perf_counter() < end:
+            data = ser.read(length)
+            if data:
+                return data
+        left = (self.packet_timeout - self.getTimeSinceStart()) / 1000.0  # ms -> s
+        if left > 0:
+            select.select([ser.fileno()], [], [], min(left, 0.05))
         return ser.read(length)
 
 
@@ -253,6 +265,8 @@ class DynamixelSnake(Robot):
         self.torque_enabled = False
         #: packets sent again after a loss or corruption, since start-up
         self.retried = 0
+        #: SyncWrites of goal positions sent, since start-up
+        self.goals_sent = 0
         self._lock = threading.RLock()
         self._release: list = []  # extra clean-ups (e.g. stop an emulator) run by close()
         self._t0 = time.perf_counter()
@@ -267,7 +281,8 @@ class DynamixelSnake(Robot):
                                "name, that the adapter is plugged in, and that you may use it "
                                "(the 'dialout' group)") from e
         if not opened or not self.port.setBaudRate(self.baudrate):
-            self.port.closePort() if self.port.is_open else None
+            if self.port.is_open:
+                self.port.closePort()
             raise BackendError(f"{self.baudrate} baud is not a rate the Dynamixel SDK supports on "
                                f"{self.port_name}; use 57600, 1000000, 2000000, 3000000 or 4000000")
         self.closed = False
@@ -349,9 +364,9 @@ class DynamixelSnake(Robot):
                 self.retried += 1
         self._fail(f"servo {servo_id} on {self.port_name} did not answer {what} "
                    f"({COMM_RESULTS.get(result, result)}, {self.retries + 1} tries)",
-                   servo_id, result)
+                   result)
 
-    def _fail(self, message: str, servo_id: int | None, result: int):
+    def _fail(self, message: str, result: int):
         hint = ("check the cable and power, or the id" if result == sdk.COMM_RX_TIMEOUT
                 else "check the cable, the baud rate and for noise on the bus")
         self.stop()
@@ -393,14 +408,10 @@ class DynamixelSnake(Robot):
         Raises:
             CommunicationError: nobody answered at that id (after the retries).
         """
-        def call():
-            model, result, error = self.ph.ping(self.port, servo_id)
-            return model, result, error
-
         result = sdk.COMM_SUCCESS
         for attempt in range(self.retries + 1):
             with self._bus():
-                model, result, error = call()
+                model, result, error = self.ph.ping(self.port, servo_id)
             if result == sdk.COMM_SUCCESS:
                 break
         else:
@@ -441,53 +452,67 @@ class DynamixelSnake(Robot):
         else:
             who = reader.failed_id
             self._fail(f"servo {who} on {self.port_name} did not answer the SyncRead of the joint "
-                       f"state ({COMM_RESULTS.get(result, result)}, {self.retries + 1} tries)", who, result)
+                       f"state ({COMM_RESULTS.get(result, result)}, {self.retries + 1} tries)", result)
         t = 0.5 * (t_sent + self._now())  # the servos sampled about half-way through
-        n = len(self.ids)
-        loads, vels, ticks = np.empty(n), np.empty(n), np.empty(n)
-        for j, i in enumerate(self.ids):
+        values = []
+        for i in self.ids:
             error = reader.errors.get(i, 0)
             if error:
                 self._check_error(i, error, "the SyncRead of the joint state")
-            loads[j], vels[j], ticks[j] = struct.unpack("<hii", bytes(reader.data_dict[i]))
-        q = ticks_to_radians(ticks)
+            values.append(_STATE.unpack(bytes(reader.data_dict[i])))  # two's complement
+        load, vel, ticks = np.array(values, dtype=float).T
+        q = (ticks - CENTER_TICK) / TICKS_PER_RAD
         self._last_positions = q
-        return JointState(t, q, vels * VELOCITY_UNIT, load_to_torque(loads))
+        return JointState(t, q, vel * VELOCITY_UNIT, load * (LOAD_UNIT * STALL_TORQUE))
 
     def _send(self, q: np.ndarray) -> None:
         """One SyncWrite of the five goals, clamped to the position limits in ticks."""
         lo, hi = self.tick_limits
-        ticks = np.clip(radians_to_ticks(q), lo, hi)
         writer = self._writer
-        for i, tick in zip(self.ids, ticks.tolist()):
+        for i, x in zip(self.ids, q.tolist()):  # plain floats: faster than numpy for five values
+            tick = min(max(round(CENTER_TICK + x * TICKS_PER_RAD), lo), hi)
             writer.changeParam(i, [tick & 0xFF, tick >> 8 & 0xFF, tick >> 16 & 0xFF, tick >> 24 & 0xFF])
         result = sdk.COMM_SUCCESS
         for attempt in range(self.retries + 1):
             with self._bus():
                 result = writer.txPacket()
             if result == sdk.COMM_SUCCESS:
+                self.goals_sent += 1
                 return
             if attempt < self.retries:
                 self.retried += 1
         self._fail(f"the SyncWrite of goal positions could not be sent on {self.port_name} "
-                   f"({COMM_RESULTS.get(result, result)})", None, result)
+                   f"({COMM_RESULTS.get(result, result)})", result)
 
     def command(self, q) -> None:
-        """Send a position goal ``q`` [rad]; on Ctrl-C or a fault the arm is stopped."""
+        """Send a position goal ``q`` [rad]; on Ctrl-C the arm is stopped (``on_close``)."""
         try:
             super().command(q)
         except (KeyboardInterrupt, SystemExit):
-            self.stop()
+            self._stop_once()
             raise
 
     def run(self, trajectory, **options):
-        """:meth:`Robot.run`, stopping the arm (``on_close``) on any exception or Ctrl-C."""
+        """:meth:`Robot.run`, stopping the arm (``on_close``) on any exception or Ctrl-C.
+
+        A trajectory refused by the checks (limits, start pose, type) never moved the arm: it
+        is left as it is, torque on.
+        """
+        sent = self.goals_sent
         try:
             return super().run(trajectory, **options)
-        except BaseException:
-            if not self.closed:
-                self.stop()
+        except (LimitError, TypeError, ValueError):
+            if self.goals_sent != sent:
+                self._stop_once()
             raise
+        except BaseException:
+            self._stop_once()
+            raise
+
+    def _stop_once(self) -> None:
+        """Stop after an exception, unless the arm is closed or its torque is already off."""
+        if not self.closed and (self.torque_enabled or self.on_close == "hold"):
+            self.stop()
 
     # --- torque, stop, reboot ------------------------------------------------------------------
 
@@ -518,10 +543,15 @@ class DynamixelSnake(Robot):
         """Stop the arm now, as ``on_close`` says; never raises (the bus may be failing)."""
         with self._lock:
             self.port.is_using = False
-            if self.on_close == "hold":
-                self._hold_safely()
-            else:
-                self._torque_off_safely()
+            try:
+                if self.on_close == "hold":
+                    self._hold_safely()
+                else:
+                    self._torque_off_safely()
+            except Exception:  # a closed or broken port: nothing more can be sent
+                pass
+            finally:
+                self.port.is_using = False
 
     def _torque_off_safely(self) -> None:
         for attempt in range(self.retries + 1):

@@ -190,6 +190,7 @@ def test_out_of_limit_goal_never_reaches_the_bus(robot):
     with pytest.raises(LimitError):
         robot.run(snakekit.Trajectory([0, 1], [[0] * 5, [0, 0, 0, 0, 2.0]]))
     assert bus.writes(116, 4) == []
+    assert torques(bus) == [1] * 5  # a refused command leaves the arm as it was
     robot._send(np.array([3.0, -3.0, 1.57, -1.57, 0.0]))  # past the software check: clamped at the wire
     time.sleep(0.02)
     assert goal_ticks_on_the_bus(bus) == [HI, LO, HI, LO, 2048]
