@@ -76,3 +76,31 @@ def test_parser_flags_a_bad_crc():
                                           (0x07, "access error")])
 def test_error_byte_in_words(error, words):
     assert p.describe_error(error) == words
+
+
+@pytest.mark.parametrize("name", ["snakekit.hardware", "snakekit.emulator.protocol", "snakekit.emulator.faults"])
+def test_docstring_examples(name):
+    import doctest
+    import importlib
+
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+    assert result.failed == 0 and result.attempted > 0
+
+
+def test_control_table_fields_do_not_overlap_and_match_the_e_manual():
+    from snakekit.emulator.control_table import FIELDS, MX28_TABLE, TABLE_SIZE
+
+    ends = 0
+    for f in MX28_TABLE:
+        assert f.address >= ends, f"{f.name} overlaps the field before it"
+        ends = f.address + f.size
+    assert ends == TABLE_SIZE
+    expected = {"Model Number": (0, 2, 30), "Return Delay Time": (9, 1, 250), "Homing Offset": (20, 4, 0),
+                "Max Position Limit": (48, 4, 4095), "Torque Enable": (64, 1, 0), "Status Return Level": (68, 1, 2),
+                "Hardware Error Status": (70, 1, 0), "Position P Gain": (84, 2, 850), "Goal Position": (116, 4, 0),
+                "Present Load": (126, 2, 0), "Present Velocity": (128, 4, 0), "Present Position": (132, 4, 0),
+                "Present Temperature": (146, 1, 35)}
+    for name, (address, size, default) in expected.items():
+        f = FIELDS[name]
+        assert (f.address, f.size, f.default) == (address, size, default), name
+    assert [f.name for f in MX28_TABLE if f.eeprom and f.writable][:3] == ["ID", "Baud Rate", "Return Delay Time"]
