@@ -343,3 +343,25 @@ def test_task2_sweep_on_the_emulator_matches_the_simulator():
     assert np.sqrt((diff ** 2).mean()) < 0.005
     assert np.allclose(run.tracking_error(), reference.tracking_error(), atol=0.02)
     assert run.final_distance_from_home() < 0.002
+
+
+def test_two_threads_share_the_bus_without_port_busy(robot):
+    import threading
+
+    errors = []
+
+    def reader():
+        try:
+            for _ in range(100):
+                robot.read()
+        except Exception as e:  # pragma: no cover - the failure being tested for
+            errors.append(e)
+
+    threads = [threading.Thread(target=reader) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for _ in range(100):
+        robot.command(np.full(5, 0.05))
+    for t in threads:
+        t.join()
+    assert errors == [] and robot.retried == 0
