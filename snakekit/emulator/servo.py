@@ -7,6 +7,7 @@ Present Position = motor position + Homing Offset.
 from __future__ import annotations
 
 import math
+import struct
 
 from . import protocol as p
 from .control_table import FIELDS, HARDWARE_ERROR_STATUS, Memory
@@ -15,6 +16,11 @@ TICKS_PER_RAD = 4096 / (2 * math.pi)
 VELOCITY_UNIT = 0.229 * 2 * math.pi / 60  # rad/s per Present Velocity unit
 STALL_TORQUE = 2.5  # N m, = 100 % Present Load
 OVERLOAD = 1 << 5
+# Realtime Tick, Moving, Moving Status, Present PWM, Load, Velocity, Position,
+# Velocity Trajectory, Position Trajectory: addresses 120..143, one block
+_PRESENT = struct.Struct("<HBBhhiiii")
+_HOMING_AND_THRESHOLD = struct.Struct("<iI")  # addresses 20 and 24
+_I32 = struct.Struct("<i")
 
 
 class EmulatedServo:
@@ -66,20 +72,16 @@ class EmulatedServo:
     # --- present values ---------------------------------------------------------------------
 
     def refresh(self, t: float, q: float, qd: float, tau: float) -> None:
-        """Update the read-only present values from the motion at time ``t`` [s]."""
-        m = self.memory
-        m.set("Present Position", self.rad_to_ticks(q))
+        """Update the read-only present values (addresses 120..143) from the motion at ``t`` [s]."""
+        data = self.memory.data
+        homing, threshold = _HOMING_AND_THRESHOLD.unpack_from(data, 20)
+        position = int(round(2048 + q * TICKS_PER_RAD)) + homing
         vel = int(round(qd / VELOCITY_UNIT))
-        m.set("Present Velocity", vel)
         load = max(-1000, min(1000, int(round(1000 * tau / STALL_TORQUE))))
-        m.set("Present Load", load)
-        m.set("Present PWM", load * 885 // 1000)
-        m.set("Realtime Tick", int(t * 1000) % 32768)
-        moving = abs(vel) > m.get("Moving Threshold")
-        m.set("Moving", int(moving))
-        m.set("Moving Status", 1 if not moving else 2)
-        m.set("Position Trajectory", m.get("Goal Position") if m.data[64] else m.get("Present Position"))
-        m.set("Velocity Trajectory", vel)
+        moving = abs(vel) > threshold
+        goal = _I32.unpack_from(data, 116)[0] if data[64] else position
+        _PRESENT.pack_into(data, 120, int(t * 1000) % 32768, int(moving), 2 if moving else 1,
+                           int(load * 885 / 1000), load, vel, position, vel, goal)
 
     # --- writes -----------------------------------------------------------------------------
 
