@@ -177,9 +177,9 @@ def main(argv=None) -> int:
         words = f"{delay} = {delay * 2} us a servo"
         print(f"| {baud:>10} | {words:>23} | {ms:>10.3f} | {hz:>13.0f} |")
     print()
-    print("The pty has no wire delay: the measured rates are the software's. DynamixelSnake waits for")
-    print("replies in select(); the bare SDK spins on the port, which on a small machine takes CPU")
-    print("from the emulator process; that is why the driver can beat the bare loop.")
+    print("The pty has no wire delay: the measured rates are the software's (client and emulator")
+    print("process share the machine). DynamixelSnake polls the port for 0.3 ms, then sleeps in")
+    print("select() until the reply; the bare SDK spins until it arrives.")
     if missed:
         print(f"MISSED: {', '.join(missed)}")
     return 1 if missed else 0
