@@ -82,12 +82,6 @@ def _generate(args, out) -> int:
     return model.main(["--check"] if args.check else [])
 
 
-def _emulator(args, out) -> int:
-    from . import emulator
-
-    return emulator.cli(args.rest)
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="snakekit", description="snakekit: the 5-joint MX-28 snake arm kit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -98,9 +92,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="RUN.npz", help="save the recorded run")
     p.add_argument("--plot", metavar="PLOT.png", help="plot commanded vs measured angles per joint")
     p.set_defaults(func=_sweep)
-    p = sub.add_parser("emulator", help="emulate the arm's MX-28 bus on a pseudo-terminal", add_help=False)
-    p.add_argument("rest", nargs=argparse.REMAINDER)
-    p.set_defaults(func=_emulator)
+    sub.add_parser("emulator", help="emulate the arm's MX-28 bus on a pseudo-terminal "
+                                    "(snakekit emulator --help for its options)", add_help=False)
     p = sub.add_parser("generate", help="write the URDF and MJCF from the robot spec")
     p.add_argument("--check", action="store_true", help="only check that the committed files are current")
     p.set_defaults(func=_generate)
@@ -109,6 +102,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["emulator"]:  # the emulator parses its own options (argparse can't pass them on)
+        from . import emulator
+
+        return emulator.cli(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         return args.func(args, out)

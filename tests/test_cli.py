@@ -73,3 +73,34 @@ def test_console_script_is_installed():
     exe = Path(sys.executable).parent / "snakekit"
     r = subprocess.run([str(exe), "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "sweep" in r.stdout and "emulator" in r.stdout
+
+
+def test_emulator_command_prints_a_port_the_sdk_can_use():
+    import re
+    import signal
+
+    from tests.conftest import need
+
+    sdk = need("dynamixel_sdk")
+    proc = subprocess.Popen(SNAKEKIT + ["emulator", "--motion", "profile"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        m = re.search(r"(/dev/pts/\d+)", line)
+        assert m, f"no port in {line!r}"
+        port = sdk.PortHandler(m.group(1))
+        assert port.openPort() and port.setBaudRate(4_000_000)
+        packet = sdk.PacketHandler(2.0)
+        for dxl_id in (1, 2, 3, 4, 5):
+            model, result, error = packet.ping(port, dxl_id)
+            assert (model, result, error) == (30, sdk.COMM_SUCCESS, 0)
+        port.closePort()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        code = proc.wait(timeout=20)
+    assert code in (0, 130)
+
+
+def test_emulator_command_rejects_a_bad_option():
+    r = subprocess.run(SNAKEKIT + ["emulator", "--drop", "2"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "drop is a probability in [0, 1], got 2.0" in r.stderr
