@@ -20,6 +20,7 @@ the same code without a browser, and nothing here waits for a front end.
 
 from __future__ import annotations
 
+import collections
 import html
 
 import ipywidgets as w
@@ -96,12 +97,15 @@ class ControlPanel:
         self.runs: list[Run] = []
         self.message = ""
         self._syncing = False
+        self._sent = [collections.deque(maxlen=64) for _ in range(robot.spec.n_joints)]  # see _is_echo
         spec = self.spec
 
         present = np.clip(robot.read().positions, spec.lower, spec.upper)
         self.goal = present.copy()
         self.sliders = [
-            w.FloatSlider(value=float(present[j]), min=spec.lower, max=spec.upper, step=0.01,
+            # No step: the browser would snap every value the kernel sets to the grid and
+            # send the snapped value back as if a student had moved the slider.
+            w.FloatSlider(value=float(present[j]), min=spec.lower, max=spec.upper, step=None,
                           description=f"joint {j + 1} [rad]", readout_format=".2f",
                           continuous_update=True, style={"description_width": "7em"},
                           layout=w.Layout(width="26em"))
@@ -162,6 +166,8 @@ class ControlPanel:
     def on_slider(self, change=None) -> np.ndarray:
         """A joint slider moved: the goal becomes the sliders' values. Returns the goal [rad]."""
         if self._syncing:
+            return self.goal
+        if change is not None and self._is_echo(change):
             return self.goal
         self._set_goal(self.slider_values, move_sliders=False)
         x, y, h = tool_pose_2d(self.goal, spec=self.spec)
@@ -286,13 +292,34 @@ class ControlPanel:
                     break
         return float(best[0]), float(best[1])
 
+    def _is_echo(self, change) -> bool:
+        """Whether a slider change is the browser repeating a value the kernel set.
+
+        A slider view in the browser reports every value it is given back to the kernel,
+        up to rounding noise, and such a report can arrive after the kernel has set a newer
+        value (three goal changes in one cell). A student's drag does not land within 1e-9
+        rad of an earlier value; an echo does. An echo of an old value is undone.
+        """
+        j = self.sliders.index(change["owner"])
+        new = float(change["new"])
+        if not any(abs(new - v) < 1e-9 for v in self._sent[j]):
+            return False
+        if abs(new - self.goal[j]) > 1e-9:
+            self._syncing = True
+            try:
+                self.sliders[j].value = float(self.goal[j])
+            finally:
+                self._syncing = False
+        return True
+
     def _set_goal(self, q, *, move_sliders: bool) -> None:
         self.goal = np.array(q, dtype=float)
         self.execute_button.disabled = False
         if move_sliders:
             self._syncing = True
             try:
-                for s, v in zip(self.sliders, self.goal):
+                for j, (s, v) in enumerate(zip(self.sliders, self.goal)):
+                    self._sent[j].append(float(v))
                     s.value = float(v)
             finally:
                 self._syncing = False

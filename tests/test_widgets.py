@@ -200,3 +200,15 @@ def test_emulated_bus_backend():
         run = panel.execute()
         assert run.backend == "emulator"
         assert robot.read().positions == pytest.approx([0.15, -0.1, 0, 0, 0], abs=0.02)
+
+
+def test_a_late_echo_from_the_browser_does_not_overwrite_the_goal(sim):
+    """The browser sends back every value the kernel sets; an old one can arrive late."""
+    panel = ControlPanel(sim)
+    first = panel.set_target(0.28, -0.08, -0.4)
+    panel.set_joints([0.6, -0.4, 0.8, -0.5, 0.3])
+    panel.sliders[2].value = float(first[2]) + 1e-13  # the browser echoing the first value
+    assert panel.goal == pytest.approx([0.6, -0.4, 0.8, -0.5, 0.3], abs=1e-12)
+    assert panel.sliders[2].value == pytest.approx(0.8, abs=1e-12)
+    panel.sliders[2].value = 0.55  # a student's drag still moves the goal
+    assert panel.goal[2] == 0.55

@@ -1,0 +1,238 @@
+"""Lesson 0 in a real browser: JupyterLab + headless Chromium, the 3D view reacts to a slider.
+
+Starts JupyterLab on a free loopback port over a temporary copy of ``notebooks/``, opens
+lesson 0 in Chromium (Debian's, driven by Playwright), runs every cell, waits for meshcat's
+canvas, drags the joint 1 slider, and checks that the picture changed by comparing
+screenshot pixels. Screenshots are kept in ``artifacts/`` at the repository root.
+Afterwards JupyterLab, its kernel, the meshcat server and Chromium must all be gone.
+"""
+
+import io
+import os
+import secrets
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.conftest import need, need_program
+
+ROOT = Path(__file__).resolve().parents[1]
+ARTIFACTS = ROOT / "artifacts"
+LESSON = "00_meet_the_arm.ipynb"
+CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                  "--disable-component-update", "--disable-sync", "--no-first-run"]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def port_open(port: int) -> bool:
+    with socket.socket() as s:
+        s.settimeout(0.5)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+class JupyterLab:
+    """A JupyterLab server in its own session, with everything it starts tracked for cleanup."""
+
+    def __init__(self, root: Path, home: Path):
+        self.psutil = need("psutil")
+        self.port = free_port()
+        self.token = secrets.token_hex(16)
+        env = dict(os.environ,
+                   JUPYTER_CONFIG_DIR=str(home / "config"), JUPYTER_RUNTIME_DIR=str(home / "runtime"),
+                   IPYTHONDIR=str(home / "ipython"), MPLBACKEND="module://matplotlib_inline.backend_inline",
+                   PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+        self.log = open(home / "jupyterlab.log", "wb")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "jupyter", "lab", "--no-browser", "--allow-root", "--ip=127.0.0.1",
+             f"--port={self.port}", "--ServerApp.port_retries=0", f"--IdentityProvider.token={self.token}",
+             f"--ServerApp.root_dir={root}", "--LabApp.expose_app_in_browser=True",
+             f"--LabApp.workspaces_dir={home / 'workspaces'}", f"--LabApp.user_settings_dir={home / 'settings'}",
+             "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate", "--LabApp.news_url=None"],
+            cwd=root, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
+        self.seen: dict[int, str] = {}
+        self.url = f"http://127.0.0.1:{self.port}"
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                urllib.request.urlopen(f"{self.url}/api/status?token={self.token}", timeout=2)
+                break
+            except OSError:
+                if self.proc.poll() is not None or time.monotonic() > deadline:
+                    self.stop()
+                    raise RuntimeError(f"JupyterLab did not start; see {home / 'jupyterlab.log'}")
+                time.sleep(0.3)
+
+    def track(self) -> dict[int, str]:
+        """Remember every process JupyterLab has started so far (kernels, meshcat servers)."""
+        try:
+            for p in self.psutil.Process(self.proc.pid).children(recursive=True):
+                try:
+                    self.seen[p.pid] = " ".join(p.cmdline())
+                except self.psutil.Error:
+                    pass
+        except self.psutil.Error:
+            pass
+        return self.seen
+
+    def stop(self) -> None:
+        """Shut down as a user would (kernels first), then make sure of it."""
+        self.track()
+        if self.proc.poll() is None:
+            try:
+                req = urllib.request.Request(f"{self.url}/api/shutdown", method="POST",
+                                             headers={"Authorization": f"token {self.token}"})
+                urllib.request.urlopen(req, timeout=10)
+            except OSError:
+                pass
+            try:
+                self.proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(timeout=10)
+        self.log.close()
+
+    def leftovers(self, timeout: float = 5.0) -> list[str]:
+        """Tracked processes still alive after ``timeout`` seconds (zombies count as ended)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            alive = []
+            for pid, cmd in self.seen.items():
+                try:
+                    if self.psutil.Process(pid).status() != self.psutil.STATUS_ZOMBIE:
+                        alive.append(f"{pid}: {cmd[:200]}")
+                except self.psutil.Error:
+                    pass
+            if not alive or time.monotonic() > deadline:
+                return alive
+            time.sleep(0.1)
+
+
+def pixels(png: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
+
+
+def changed_fraction(a: np.ndarray, b: np.ndarray, threshold: int = 24) -> float:
+    """Share of pixels whose colour moved by more than ``threshold`` (0..255) in any channel."""
+    assert a.shape == b.shape
+    return float((np.abs(a - b).max(axis=-1) > threshold).mean())
+
+
+def steady_screenshot(element, *, timeout: float = 20.0) -> bytes:
+    """A screenshot of ``element`` once two in a row, 0.5 s apart, are identical."""
+    last = element.screenshot()
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        time.sleep(0.5)
+        shot = element.screenshot()
+        if changed_fraction(pixels(shot), pixels(last), 0) == 0:
+            return shot
+        last = shot
+    raise AssertionError(f"the 3D view kept changing for {timeout} s with nothing moving it")
+
+
+def test_lesson0_slider_moves_the_3d_view(tmp_path):
+    sync_api = need("playwright.sync_api")
+    need("jupyterlab")
+    need("meshcat")
+    chromium = need_program("chromium")
+    ARTIFACTS.mkdir(exist_ok=True)
+    root = tmp_path / "notebooks"
+    shutil.copytree(ROOT / "notebooks", root, ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.html"))
+    home = tmp_path / "home"
+    home.mkdir()
+
+    lab = JupyterLab(root, home)
+    browser_pids: list[int] = []
+    meshcat_ports: list[int] = []
+    try:
+        with sync_api.sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_FLAGS)
+            try:
+                page = browser.new_page(viewport={"width": 1400, "height": 1000})
+                page.goto(f"{lab.url}/lab/tree/{LESSON}?token={lab.token}")
+                page.wait_for_function(
+                    "() => window.jupyterapp && window.jupyterapp.shell.currentWidget"
+                    " && window.jupyterapp.shell.currentWidget.sessionContext"
+                    " && window.jupyterapp.shell.currentWidget.sessionContext.session"
+                    " && window.jupyterapp.shell.currentWidget.sessionContext.session.kernel"
+                    " && window.jupyterapp.shell.currentWidget.sessionContext.session.kernel.status === 'idle'",
+                    timeout=90_000)
+                page.evaluate("() => window.jupyterapp.commands.execute('notebook:run-all-cells')")
+                page.wait_for_selector("text=saved meet_the_arm.html", timeout=120_000)
+                lab.track()
+                errors = page.locator(".jp-OutputArea-output[data-mime-type='application/vnd.jupyter.stderr']")
+                tracebacks = [t for t in errors.all_text_contents() if "Traceback" in t or "Error" in t]
+                assert tracebacks == []
+
+                view = page.locator("iframe[title='snakekit 3D view']").first
+                view.scroll_into_view_if_needed()
+                src = view.get_attribute("src")
+                assert src.startswith("http://127.0.0.1:")
+                meshcat_ports.append(int(src.split(":")[2].split("/")[0]))
+                view.content_frame.locator("canvas").first.wait_for(state="visible", timeout=30_000)
+
+                before = steady_screenshot(view)  # the last move's playback has ended
+                (ARTIFACTS / "browser_lesson0_before.png").write_bytes(before)
+                page.screenshot(path=str(ARTIFACTS / "browser_lesson0_page.png"))
+
+                slider = page.locator(".widget-slider", has_text="joint 1 [rad]").first
+                readout = slider.locator(".widget-readout")
+                value_before = float(readout.inner_text().replace("\u2212", "-"))  # a real minus sign
+                handle = slider.locator(".noUi-handle")
+                handle.scroll_into_view_if_needed()
+                box = handle.bounding_box()
+                x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+                page.mouse.move(x, y)
+                page.mouse.down()
+                for step in range(1, 11):  # a real drag, 12 px at a time
+                    page.mouse.move(x - 12 * step, y)
+                    time.sleep(0.03)
+                page.mouse.up()
+                page.wait_for_function(
+                    "([el, v]) => Math.abs(parseFloat(el.textContent.replace('\u2212', '-')) - v) > 0.2",
+                    arg=[readout.element_handle(), value_before], timeout=10_000)
+                value_after = float(readout.inner_text().replace("\u2212", "-"))
+
+                view.scroll_into_view_if_needed()
+                after = steady_screenshot(view)
+                (ARTIFACTS / "browser_lesson0_after.png").write_bytes(after)
+                diff = np.abs(pixels(after) - pixels(before)).max(axis=-1) > 24
+                from PIL import Image
+
+                Image.fromarray((diff * 255).astype(np.uint8)).save(ARTIFACTS / "browser_lesson0_diff.png")
+                frac = changed_fraction(pixels(before), pixels(after))
+                assert value_after < value_before - 0.2
+                assert frac > 0.002, f"the view did not change after the slider moved ({frac:.4%} of pixels)"
+                assert frac < 0.5, f"the whole view changed ({frac:.1%}): not just the arm moving"
+            finally:
+                browser_pids += [p.pid for p in lab.psutil.Process().children(recursive=True)
+                                 if "chrom" in p.name().lower()]
+                browser.close()
+    finally:
+        lab.stop()
+    assert browser_pids, "no Chromium process was seen"
+    for pid in browser_pids:
+        lab.seen[pid] = "chromium"
+    left = lab.leftovers()
+    assert left == [], f"processes left after JupyterLab shut down: {left}"
+    kinds = [c[:80] for c in lab.seen.values()]
+    assert any("ipykernel" in c for c in lab.seen.values()), kinds
+    assert any("meshcat.servers" in c for c in lab.seen.values()), kinds  # the viewer server was tracked
+    assert not port_open(lab.port)
+    for port in meshcat_ports:
+        assert not port_open(port), f"meshcat port {port} still open"
