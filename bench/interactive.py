@@ -1,0 +1,138 @@
+"""Benchmark of the study's Task 1: three goal changes executed from the control panel.
+
+Each repeat starts a fresh Python process that plays the kernel: it makes a real-time
+simulated arm, a viewer and a control panel; headless Chromium opens the viewer page (so
+the server really streams the scene); then the worker sets three tool targets and executes
+each through the panel's callbacks, exactly what the widgets call. Meanwhile this process
+samples the worker and its meshcat server with psutil: average CPU over the task (% of one
+core, both processes summed) and peak RSS (both summed). Chromium is not counted (the
+study's figures do not include the Windows host's browser either).
+
+Run: ``.venv/bin/python bench/interactive.py [--repeats 3] [--no-browser]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import time
+
+TARGETS = [(0.25, 0.10, 0.3), (0.12, 0.22, 1.6), (0.28, -0.08, -0.4)]  # x [m], y [m], heading [rad]
+STUDY = [("VM (VMware, Ubuntu desktop)", "7.67", "384-450"),
+         ("Docker, one container", "20.67", "217-242"),
+         ("Docker, several containers", "15.35", "235-236")]
+CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                  "--disable-component-update", "--disable-sync", "--no-first-run"]
+
+
+def worker() -> None:
+    """The 'kernel': set up, wait for 'go', run Task 1, report."""
+    import snakekit
+    from snakekit.viewer import Viewer
+    from snakekit.widgets import ControlPanel
+
+    robot = snakekit.make_robot("sim", realtime=True)
+    viewer = Viewer()
+    viewer.draw_workspace()
+    panel = ControlPanel(robot, viewer)
+    print(f"ready {viewer.server_pid} {viewer.url}", flush=True)
+    sys.stdin.readline()
+    for x, y, heading in TARGETS:
+        if panel.set_target(x, y, heading) is None:
+            raise SystemExit(f"target ({x}, {y}, {heading}) unreachable: {panel.message}")
+        panel.execute()
+        time.sleep(0.5)  # a student looks at the result before the next goal
+    print("done", flush=True)
+    sys.stdin.readline()
+    viewer.close()
+    robot.close()
+
+
+def measure(browser) -> dict:
+    import psutil
+
+    proc = subprocess.Popen([sys.executable, __file__, "--worker"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    page = None
+    try:
+        line = proc.stdout.readline().split()
+        if not line or line[0] != "ready":
+            raise RuntimeError("the worker did not start")
+        procs = [psutil.Process(proc.pid), psutil.Process(int(line[1]))]
+        if browser is not None:
+            page = browser.new_page(viewport={"width": 1000, "height": 700})
+            page.goto(line[2])
+            page.wait_for_selector("canvas", timeout=30_000)
+            time.sleep(1.0)
+        cpu0 = sum(sum(p.cpu_times()[:2]) for p in procs)
+        t0 = time.perf_counter()
+        peak = 0
+        proc.stdin.write("go\n")
+        proc.stdin.flush()
+        import selectors
+
+        sel = selectors.DefaultSelector()
+        sel.register(proc.stdout, selectors.EVENT_READ)
+        while True:
+            peak = max(peak, sum(p.memory_info().rss for p in procs))
+            if sel.select(timeout=0.05):
+                if proc.stdout.readline().strip() == "done":
+                    break
+                raise RuntimeError("the worker stopped early")
+        wall = time.perf_counter() - t0
+        cpu = sum(sum(p.cpu_times()[:2]) for p in procs) - cpu0
+        peak = max(peak, sum(p.memory_info().rss for p in procs))
+        proc.stdin.write("quit\n")
+        proc.stdin.flush()
+        proc.wait(timeout=30)
+        return {"cpu": 100 * cpu / wall, "rss": peak / 1e6, "wall": wall}
+    finally:
+        if page is not None:
+            page.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--no-browser", action="store_true", help="do not connect Chromium to the viewer")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        worker()
+        return 0
+
+    results = []
+    if args.no_browser:
+        results = [measure(None) for _ in range(args.repeats)]
+    else:
+        from playwright.sync_api import sync_playwright
+
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=CHROMIUM_FLAGS)
+            try:
+                results = [measure(browser) for _ in range(args.repeats)]
+            finally:
+                browser.close()
+    for i, r in enumerate(results, 1):
+        print(f"repeat {i}: CPU {r['cpu']:.2f} % of one core, peak RSS {r['rss']:.0f} MB, task {r['wall']:.1f} s")
+    cpu = statistics.median(r["cpu"] for r in results)
+    rss = statistics.median(r["rss"] for r in results)
+    wall = statistics.median(r["wall"] for r in results)
+    viewer = "viewer connected to headless Chromium" if not args.no_browser else "no browser connected"
+    print(f"\nTask 1: three goal changes through the control panel, sim in real time, {viewer}")
+    print(f"medians of {len(results)} repeats; CPU and RSS of kernel + meshcat server\n")
+    print(f"| set-up | Task 1 CPU [% of one core] | RAM [MB] |")
+    print(f"|---|---|---|")
+    print(f"| snakekit (kernel-like Python process + meshcat server), task {wall:.1f} s | {cpu:.2f} | {rss:.0f} (peak) |")
+    for name, c, m in STUDY:
+        print(f"| study: {name} | {c} | {m} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
