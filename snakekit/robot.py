@@ -1,9 +1,12 @@
 """The one robot interface, shared by the simulator, the emulated bus and the real arm.
 
 >>> import snakekit
->>> with snakekit.make_robot("sim") as robot:          # doctest: +SKIP
-...     run = robot.run(snakekit.side_sweep())
-...     print(run.summary())
+>>> move = snakekit.joint_trajectory([0, 0, 0, 0, 0], [0.5, -0.3, 0.2, 0, 0], duration=1.0)
+>>> with snakekit.make_robot("sim") as robot:
+...     run = robot.run(move)
+...     state = robot.read()
+>>> run.limits_held(), bool(abs(state.positions - [0.5, -0.3, 0.2, 0, 0]).max() < 0.01)
+(True, True)
 
 Every backend refuses a command or trajectory outside the joint limits *before* anything
 moves, and turns torque off (or holds) when closed, even after an exception.

@@ -10,6 +10,13 @@ and Profile Acceleration (control table 112 and 108):
 * a new goal while moving re-plans from the present reference position and velocity.
 
 Both the simulator and the bus emulator use :class:`ProfilePlanner`, so the two move alike.
+
+>>> planner = ProfilePlanner([0.0] * 5)
+>>> planner.set_goal(0.0, [1.0, 0, 0, 0, 0])
+>>> p, v = planner.at(0.0397)               # end of the acceleration phase
+>>> round(float(v[0]), 3), planner.moving(0.5), planner.moving(1.0)
+(1.487, True, False)
+
 Register units: velocity 0.229 rev/min, acceleration 214.577 rev/min^2.
 """
 
@@ -30,7 +37,11 @@ DEFAULT_PROFILE_ACCELERATION = 100
 
 
 def acceleration_time_ms(profile_velocity: int, profile_acceleration: int) -> float:
-    """The firmware's acceleration time t1 [ms] for the given register values."""
+    """The firmware's acceleration time t1 [ms] for the given register values.
+
+    >>> acceleration_time_ms(62, 100)          # the kit's defaults
+    39.68
+    """
     return 64.0 * profile_velocity / profile_acceleration
 
 

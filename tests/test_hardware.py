@@ -13,7 +13,7 @@ from snakekit.emulator.motion import ProfileMotion
 from tests.conftest import need
 
 sdk = need("dynamixel_sdk")
-hw = pytest.importorskip("snakekit.hardware")
+from snakekit import hardware as hw  # noqa: E402
 
 IDS = (1, 2, 3, 4, 5)
 LO, HI = 1025, 3071  # +-1.57 rad in ticks, rounded inwards

@@ -8,6 +8,7 @@ import pytest
 import snakekit
 from snakekit import model
 from snakekit.cli import main
+from tests.conftest import need
 
 
 def test_spec_holds_the_arms_numbers():
@@ -44,7 +45,7 @@ def test_urdf_joints_carry_the_limits():
 
 
 def test_urdf_and_mjcf_have_the_same_masses():
-    mujoco = pytest.importorskip("mujoco")
+    mujoco = need("mujoco")
     root = ET.fromstring(model.urdf())
     urdf_masses = [float(link.find("inertial/mass").get("value"))
                    for link in root.iter("link") if link.find("inertial") is not None]

@@ -6,8 +6,10 @@ five MX-28(2.0) servos that hold a full control table, follow the firmware's rul
 like the simulated arm and fail on demand (:class:`Faults`).
 
 >>> import snakekit
->>> with snakekit.make_robot("emulator") as robot:        # doctest: +SKIP
-...     robot.home()
+>>> with snakekit.make_robot("emulator") as robot:
+...     run = robot.move_to([0.3, 0, 0, 0, 0], duration=0.5)
+...     print(round(float(robot.read().positions[0]), 2))
+0.3
 
 Modules: :mod:`.protocol` (framing), :mod:`.control_table` (registers),
 :mod:`.servo` (one servo's firmware), :mod:`.motion` (how the servos move),

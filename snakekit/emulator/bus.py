@@ -1,9 +1,9 @@
 """The emulated bus: MX-28(2.0) servos behind a pseudo-terminal any serial client can open.
 
 >>> from snakekit.emulator import BusEmulator
->>> with BusEmulator(motion="profile") as bus:             # doctest: +SKIP
+>>> with BusEmulator(motion="profile") as bus:
 ...     print(bus.port)                                    # open this with the SDK
-/dev/pts/7
+/dev/pts/...
 
 The emulator runs in a background thread (:meth:`BusEmulator.start`) or in the foreground
 (:meth:`BusEmulator.serve`). It keeps a record of every instruction packet that reached
