@@ -159,6 +159,55 @@ def _dls(k: _Kin, target: np.ndarray, use_heading: bool, q: np.ndarray, *, tol: 
     return q, err
 
 
+def _residual(k: _Kin, target: np.ndarray, use_heading: bool, q: np.ndarray) -> np.ndarray:
+    """Tool error towards ``target``; heading errors weighted by one link length [m/rad]."""
+    pin.framesForwardKinematics(k.model, k.data, q)
+    M = k.data.oMf[k.tool]
+    e = target[:2] - M.translation[:2]
+    if not use_heading:
+        return e
+    h = _wrap(target[2] - np.arctan2(M.rotation[1, 0], M.rotation[0, 0]))
+    return np.array([e[0], e[1], k.spec.link_length * h])
+
+
+def _closest(k: _Kin, target: np.ndarray, use_heading: bool, starts, *, max_iter: int = 40) -> np.ndarray:
+    """The configuration, inside the limits, whose tool comes closest to an unreachable target.
+
+    Projected Levenberg-Marquardt from each start: a step is kept only if it brings the tool
+    closer, so every run descends to a local minimum of the distance, even with joints
+    pressed against their limits. The best of all runs is returned.
+    """
+    lo, hi = k.spec.lower, k.spec.upper
+    rows = _PLANAR_ROWS if use_heading else _PLANAR_ROWS[:2]
+    scale = np.array([1.0, 1.0, k.spec.link_length])[: len(rows)]
+    eye = np.eye(len(rows))
+    best_q, best_f = None, np.inf
+    for q in starts:
+        q = np.clip(np.asarray(q, dtype=float), lo, hi)
+        e = _residual(k, target, use_heading, q)
+        f, lam = e @ e, 1e-2
+        for _ in range(max_iter):
+            J = pin.computeFrameJacobian(k.model, k.data, q, k.tool, pin.LOCAL_WORLD_ALIGNED)[rows]
+            J *= scale[:, None]
+            while lam < 1e6:
+                qn = np.clip(q + J.T @ np.linalg.solve(J @ J.T + lam * eye, e), lo, hi)
+                en = _residual(k, target, use_heading, qn)
+                fn = en @ en
+                if fn < f:
+                    lam = max(lam / 3, 1e-9)
+                    break
+                lam *= 4
+            else:
+                break  # no step brings the tool closer: a local minimum
+            done = f - fn < 1e-9
+            q, e, f = qn, en, fn
+            if done:
+                break
+        if f < best_f:
+            best_q, best_f = q, f
+    return best_q
+
+
 def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec: SnakeSpec = SPEC,
                        tol: float = 1e-6, max_iter: int = 100, restarts: int = 20,
                        seed: int = 0) -> np.ndarray:
@@ -202,6 +251,20 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
             best_q, best_err = q, n
         if n < tol:
             return q
+    # The DLS runs above aim at the target and may stop anywhere when it is out of reach.
+    # Look for the closest point properly: from the best of them, from the arm stretched
+    # towards the target, from the arm curled either way, and from a few random poses.
+    toward = float(np.clip(np.arctan2(target_xy[1], target_xy[0]), spec.lower, spec.upper))
+    curls = []
+    for sign in (1.0, -1.0):
+        for m in range(1, spec.n_joints):
+            c = np.zeros(spec.n_joints)
+            c[0], c[1:1 + m] = toward, sign
+            curls.append(c)
+    stretched = np.zeros(spec.n_joints)
+    stretched[0] = toward
+    randoms = rng.uniform(spec.lower, spec.upper, (4, spec.n_joints))
+    best_q = _closest(k, target, use_heading, [best_q, stretched, *curls, *randoms])
     closest = tool_pose_2d(best_q, spec=spec)
     what = f"({target_xy[0]:.4f}, {target_xy[1]:.4f}) m" + (
         f" with heading {heading:.4f} rad" if use_heading else "")

@@ -9,6 +9,9 @@ from tests.conftest import need
 
 RNG = np.random.default_rng(42)
 CONFIGS = RNG.uniform(SPEC.lower, SPEC.upper, (200, 5))
+# limits and random poses mixed, so the sample reaches the workspace's edges
+WORKSPACE_CONFIGS = np.concatenate([RNG.uniform(SPEC.lower, SPEC.upper, (20000, 5)),
+                                    RNG.choice([SPEC.lower, 0.0, SPEC.upper], (3000, 5))])
 
 
 def planar_fk(q):
@@ -116,6 +119,23 @@ def test_ik_out_of_reach_names_the_closest_point():
     assert "out of reach" in str(err) and "0.3315 m" in str(err)
     np.testing.assert_allclose(err.closest, [SPEC.reach, 0.0], atol=1e-4)
     np.testing.assert_allclose(planar_fk(err.q_closest)[:2], err.closest, atol=1e-12)
+
+
+@pytest.mark.parametrize("target", [(0.5, 0.0), (0.0, 0.5), (-0.4, 0.1), (-0.3, -0.3), (0.0, -0.34),
+                                    (-0.2, 0.3), (-0.33, 0.0)])
+@pytest.mark.parametrize("q0", [None, [1.0, -1.2, 1.3, 0.5, -0.4], [1.5] * 5])
+def test_ik_closest_point_is_the_closest_whatever_the_start(target, q0):
+    """Independent check: no point of a dense sample of the workspace lies closer to the target."""
+    angles = np.cumsum(WORKSPACE_CONFIGS, axis=1)
+    L = np.array([0.071] * 4 + [0.0475])
+    samples = np.column_stack([(L * np.cos(angles)).sum(axis=1), (L * np.sin(angles)).sum(axis=1)])
+    with pytest.raises(snakekit.UnreachableTargetError) as e:
+        snakekit.inverse_kinematics(target, q0=q0)
+    got = np.linalg.norm(np.subtract(e.value.closest, target))
+    best_sampled = np.linalg.norm(samples - target, axis=1).min()
+    assert got <= best_sampled + 1e-6, (e.value.closest, got, best_sampled)
+    assert np.all(np.abs(e.value.q_closest) <= SPEC.upper)
+    np.testing.assert_allclose(planar_fk(e.value.q_closest)[:2], e.value.closest, atol=1e-12)
 
 
 def test_ik_target_behind_the_base_blocked_by_limits():
