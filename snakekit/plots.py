@@ -49,3 +49,29 @@ def plot_run(run: Run, *, title: str | None = None, zoom: float = 3.0):
                  f"({len(run.commanded)} goals over {run.commanded.duration:.1f} s; "
                  f"limits {lim_deg[0]:.0f}..{lim_deg[1]:.0f} deg)")
     return fig
+
+
+def plot_move(run: Run, *, title: str | None = None):
+    """Commanded (dashed) and measured (solid) angle of every joint against time.
+
+    Returns a matplotlib figure that is not attached to pyplot (nothing to close, no
+    backend needed); a notebook displays it as an image. All joints share one panel: made
+    for the short moves of the control panel (see :func:`plot_run` for long runs).
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7.5, 3.2), layout="constrained")
+    ax = fig.add_subplot()
+    colors = [f"C{j}" for j in range(run.commanded.n_joints)]
+    for j, c in enumerate(colors):
+        ax.plot(run.measured.times, run.measured.positions[:, j], color=c, lw=1.6, label=f"joint {j + 1}")
+        ax.plot(run.commanded.times, run.commanded.positions[:, j], color=c, lw=1.0, ls="--")
+    ax.plot([], [], color="k", lw=1.0, ls="--", label="commanded")
+    ax.plot([], [], color="k", lw=1.6, label="measured")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("joint angle [rad]")
+    ax.set_title(title or f"commanded vs measured ({run.backend}); "
+                          f"largest tracking error {np.max(run.tracking_error()):.3f} rad")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8, frameon=False)
+    return fig

@@ -29,34 +29,12 @@ from matplotlib.figure import Figure
 
 from .errors import SnakekitError, UnreachableTargetError
 from .kinematics import check_limits, inverse_kinematics, planar_jacobian, tool_pose_2d
+from .plots import plot_move
 from .robot import Robot, Run
 from .viewer import boundary_configurations
 
 _OK = "#1a7f37"
 _BAD = "#c62828"
-
-
-def plot_run(run: Run, *, title: str | None = None) -> Figure:
-    """Commanded (dashed) and measured (solid) angle of every joint against time.
-
-    Returns a matplotlib figure that is not attached to pyplot (nothing to close, no
-    backend needed); a notebook displays it as an image.
-    """
-    fig = Figure(figsize=(7.5, 3.2), layout="constrained")
-    ax = fig.add_subplot()
-    colors = [f"C{j}" for j in range(run.commanded.n_joints)]
-    for j, c in enumerate(colors):
-        ax.plot(run.measured.times, run.measured.positions[:, j], color=c, lw=1.6, label=f"joint {j + 1}")
-        ax.plot(run.commanded.times, run.commanded.positions[:, j], color=c, lw=1.0, ls="--")
-    ax.plot([], [], color="k", lw=1.0, ls="--", label="commanded")
-    ax.plot([], [], color="k", lw=1.6, label="measured")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("joint angle [rad]")
-    ax.set_title(title or f"commanded vs measured ({run.backend}); "
-                          f"largest tracking error {np.max(run.tracking_error()):.3f} rad")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8, frameon=False)
-    return fig
 
 
 class ControlPanel:
@@ -240,7 +218,7 @@ class ControlPanel:
         if self.viewer is not None:
             self.viewer.animate(run)
         if self.show_plot:
-            fig = plot_run(run, title=f"move {len(self.runs)}: commanded vs measured ({run.backend})")
+            fig = plot_move(run, title=f"move {len(self.runs)}: commanded vs measured ({run.backend})")
             self.last_figure = fig
             self._show_figure(fig)
         err = float(np.abs(run.measured.positions[-1] - self.goal).max())

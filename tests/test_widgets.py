@@ -12,7 +12,8 @@ import snakekit  # noqa: E402
 from snakekit.model import SPEC  # noqa: E402
 from snakekit.robot import JointState, Robot  # noqa: E402
 from snakekit.viewer import Viewer, boundary_configurations  # noqa: E402
-from snakekit.widgets import ControlPanel, plot_run  # noqa: E402
+from snakekit.plots import plot_move  # noqa: E402
+from snakekit.widgets import ControlPanel  # noqa: E402
 
 
 class IdealArm(Robot):
@@ -156,7 +157,7 @@ def test_plot_shows_commanded_and_measured_with_units(sim):
     measured = lines[0]
     assert measured.get_ydata() == pytest.approx(run.measured.positions[:, 0])
     assert lines[1].get_linestyle() == "--"
-    assert plot_run(run).axes[0].get_legend() is not None
+    assert plot_move(run).axes[0].get_legend() is not None
 
 
 def test_execute_button_click_runs_the_move(sim):
