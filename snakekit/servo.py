@@ -195,19 +195,27 @@ class ProfilePlanner:
         """
         n = len(self.profiles)
         goal_steps = np.asarray(goal_steps, dtype=int)
-        plans = [list(p.segments) for p in self.profiles]
-        before = np.empty((len(goal_steps), n))  # the reference at each goal step, before it
-        for g, (step, q) in enumerate(zip(goal_steps.tolist(), np.asarray(goals, dtype=float))):
+        profiles, plans = self.profiles, [list(p.segments) for p in self.profiles]
+        vmax = [int(x) * VELOCITY_UNIT for x in self.profile_velocity]
+        amax = [int(x) * ACCELERATION_UNIT for x in self.profile_acceleration]
+        step_list = goal_steps.tolist()
+        goal_rows = np.asarray(goals, dtype=float).reshape(len(step_list), n).tolist()
+        before = [None] * len(step_list)  # the reference at each goal step, before it
+        for g, step in enumerate(step_list):
             t = step * dt
-            if g and step == goal_steps[g - 1]:
-                before[g] = before[g - 1]
-            else:
-                before[g] = self.at(t)[0]
-            self.set_goal(t, q)
-            for plan, prof in zip(plans, self.profiles):
+            same = g > 0 and step == step_list[g - 1]
+            row = before[g - 1] if same else [0.0] * n
+            for j in range(n):  # what set_goal does, with the reference read once
+                p, v = profiles[j].at(t)
+                if not same:
+                    row[j] = p
+                prof = profiles[j] = JointProfile(t, p, v, goal_rows[g][j], vmax[j], amax[j])
+                plan = plans[j]
                 while plan and plan[-1].t0 >= t:  # the old plan's future is replaced
                     plan.pop()
                 plan.extend(prof.segments)
+            before[g] = row
+        before = np.array(before, dtype=float).reshape(len(step_list), n)
         end = max(p.end_time for p in self.profiles)
         last = max(int(np.ceil(end / dt - 1e-9)), int(goal_steps[-1]) + 1 if len(goal_steps) else first + 1)
         steps = np.arange(first, last + 1)
