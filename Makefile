@@ -16,7 +16,7 @@ setup:
 lab: setup
 	@echo "snakekit: JupyterLab on the lessons in notebooks/ (the simulator is the default robot)"
 	$(VENV)/bin/jupyter lab --no-browser --allow-root --ip=$(LAB_IP) --port=$(LAB_PORT) \
-	    --ServerApp.root_dir=notebooks
+	    --ServerApp.root_dir=notebooks --LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate
 
 test: setup
 	$(PY) -m pytest -q $(PYTEST_ARGS)

@@ -1,0 +1,75 @@
+"""`make lab` serves the lessons in JupyterLab, offline, and prints the URL with its token."""
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import time
+import urllib.request
+from pathlib import Path
+
+from tests.conftest import need, need_program
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def get_json(url: str):
+    with urllib.request.urlopen(url, timeout=10) as r:
+        return json.loads(r.read())
+
+
+def test_make_lab_serves_the_lessons(tmp_path):
+    need("jupyterlab")
+    make = need_program("make")
+    port = free_port()
+    env = dict(os.environ, JUPYTERLAB_SETTINGS_DIR=str(tmp_path / "settings"),
+               JUPYTERLAB_WORKSPACES_DIR=str(tmp_path / "workspaces"), JUPYTER_RUNTIME_DIR=str(tmp_path / "runtime"))
+    log = open(tmp_path / "lab.log", "w+")
+    proc = subprocess.Popen([make, "lab", f"LAB_PORT={port}"], cwd=ROOT, env=env, stdout=log,
+                            stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 90
+        url = None
+        while url is None:
+            assert proc.poll() is None, f"make lab exited with {proc.returncode}:\n{(tmp_path / 'lab.log').read_text()}"
+            assert time.monotonic() < deadline, f"no URL within 90 s:\n{(tmp_path / 'lab.log').read_text()}"
+            m = re.search(rf"(http://127\.0\.0\.1:{port}/lab\?token=([0-9a-f]+))", (tmp_path / "lab.log").read_text())
+            url = m and m.group(1)
+            time.sleep(0.2)
+        token = m.group(2)
+        base = f"http://127.0.0.1:{port}"
+
+        # the lessons are at the root of the file browser, as committed
+        listing = get_json(f"{base}/api/contents?token={token}")
+        served = sorted(c["name"] for c in listing["content"] if c["type"] == "notebook")
+        assert served == sorted(p.name for p in (ROOT / "notebooks").glob("*.ipynb"))
+        with urllib.request.urlopen(url, timeout=10) as r:
+            assert r.status == 200 and b"JupyterLab" in r.read()
+
+        # offline: no news prompt and no update check
+        notes = get_json(f"{base}/lab/api/settings/@jupyterlab/apputils-extension:notification?token={token}")
+        defaults = {k: v.get("default") for k, v in notes["schema"]["properties"].items()}
+        assert defaults["fetchNews"] == "false" and defaults["checkForUpdates"] is False, defaults
+
+        # it listens on the loopback interface only
+        listening = subprocess.run(["ss", "-ltnH", f"sport = :{port}"], capture_output=True, text=True).stdout
+        addresses = {line.split()[3].rsplit(":", 1)[0] for line in listening.splitlines()}
+        assert addresses and addresses <= {"127.0.0.1", "[::1]"}, listening
+    finally:
+        os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C does in the terminal
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        log.close()
+    with socket.socket() as s:
+        assert s.connect_ex(("127.0.0.1", port)) != 0, "JupyterLab still listens after Ctrl-C"
