@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib
 import os
 import shutil
+import socket
 
 import pytest
 
@@ -34,3 +35,10 @@ def need_program(name: str) -> str:
             pytest.fail(f"program '{name}' is missing under CI=true; `make setup` must install it")
         pytest.skip(f"program '{name}' is not installed")
     return path
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on right now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

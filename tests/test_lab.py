@@ -10,15 +10,9 @@ import time
 import urllib.request
 from pathlib import Path
 
-from tests.conftest import need, need_program
+from tests.conftest import free_port, need, need_program
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def get_json(url: str):
@@ -28,6 +22,7 @@ def get_json(url: str):
 
 def test_make_lab_serves_the_lessons(tmp_path):
     need("jupyterlab")
+    psutil = need("psutil")
     make = need_program("make")
     port = free_port()
     env = dict(os.environ, JUPYTERLAB_SETTINGS_DIR=str(tmp_path / "settings"),
@@ -60,9 +55,9 @@ def test_make_lab_serves_the_lessons(tmp_path):
         assert defaults["fetchNews"] == "false" and defaults["checkForUpdates"] is False, defaults
 
         # it listens on the loopback interface only
-        listening = subprocess.run(["ss", "-ltnH", f"sport = :{port}"], capture_output=True, text=True).stdout
-        addresses = {line.split()[3].rsplit(":", 1)[0] for line in listening.splitlines()}
-        assert addresses and addresses <= {"127.0.0.1", "[::1]"}, listening
+        addresses = {c.laddr.ip for c in psutil.net_connections("tcp")
+                     if c.status == psutil.CONN_LISTEN and c.laddr.port == port}
+        assert addresses and addresses <= {"127.0.0.1", "::1"}, addresses
     finally:
         os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C does in the terminal
         try:

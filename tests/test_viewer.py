@@ -18,7 +18,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from tests.conftest import need
+from tests.conftest import free_port, need
 
 need("meshcat")
 psutil = need("psutil")
@@ -211,12 +211,6 @@ def test_all_interfaces_only_when_asked():
         assert ("0.0.0.0", v.port) in addrs
         assert all(ip == "127.0.0.1" for ip, port in addrs if port != v.port)  # ZeroMQ stays local
         assert v.url == f"http://localhost:{v.port}/static/"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_port_is_configurable():
