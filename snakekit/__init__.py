@@ -2,30 +2,51 @@
 
 The kit sets ``MUJOCO_GL=egl`` (offscreen rendering, no display needed) before MuJoCo is
 imported, unless the variable is already set.
+
+Names are loaded on first use: ``import snakekit`` is quick, and ``snakekit.Trajectory``
+does not load Pinocchio or MuJoCo (``snakekit.forward_kinematics`` loads Pinocchio).
 """
 
+import importlib as _importlib
 import os as _os
 
 _os.environ.setdefault("MUJOCO_GL", "egl")
 
 from .errors import (  # noqa: E402
-    BackendError, CommunicationError, FileFormatError, HardwareError, LimitError, NotFiniteError,
-    ShapeError, SnakekitError, TrajectoryError, UnreachableTargetError,
+    BackendError, CommunicationError, ConfigurationError, FileFormatError, HardwareError,
+    InputTypeError, InstructionError, LimitError, NotFiniteError, ServoMismatchError, ShapeError,
+    SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
 from .model import SPEC, SnakeSpec  # noqa: E402
-from .kinematics import (  # noqa: E402
-    forward_kinematics, inverse_kinematics, jacobian, joint_frames, planar_jacobian, tool_pose_2d,
-    workspace_points,
-)
-from .trajectory import Trajectory, joint_trajectory, side_sweep  # noqa: E402
-from .robot import JointState, Run, make_robot  # noqa: E402
 
 __version__ = "0.1.0"
 
+# public name -> module that defines it (imported when the name is first used)
+_LAZY = {
+    **dict.fromkeys(("forward_kinematics", "inverse_kinematics", "jacobian", "joint_frames",
+                     "planar_jacobian", "tool_pose_2d", "workspace_points", "workspace_boundary",
+                     "closest_reachable_point"), "kinematics"),
+    **dict.fromkeys(("Trajectory", "joint_trajectory", "side_sweep"), "trajectory"),
+    **dict.fromkeys(("JointState", "Run", "make_robot"), "robot"),
+    **dict.fromkeys(("as_configuration", "check_limits"), "validate"),
+}
+
 __all__ = [
-    "SPEC", "SnakeSpec", "forward_kinematics", "jacobian", "planar_jacobian", "joint_frames",
-    "inverse_kinematics", "tool_pose_2d", "workspace_points", "Trajectory", "joint_trajectory",
-    "side_sweep", "JointState", "Run", "make_robot", "SnakekitError", "ShapeError",
-    "NotFiniteError", "LimitError", "UnreachableTargetError", "TrajectoryError",
-    "FileFormatError", "BackendError", "CommunicationError", "HardwareError",
+    "SPEC", "SnakeSpec", *_LAZY,
+    "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
+    "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "BackendError",
+    "CommunicationError", "HardwareError", "ServoMismatchError", "InstructionError", "ViewerError",
 ]
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'snakekit' has no attribute '{name}'")
+    value = getattr(_importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # later lookups skip this function
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

@@ -12,6 +12,15 @@ class SnakekitError(Exception):
     """Base class of every error snakekit raises on purpose."""
 
 
+class ConfigurationError(SnakekitError, ValueError):
+    """An option or argument has a value the kit can't use (a negative rate, an unknown
+    choice, a servo id that is not on the arm...)."""
+
+
+class InputTypeError(SnakekitError, TypeError):
+    """An argument is of the wrong kind (a list where a Trajectory is needed...)."""
+
+
 class ShapeError(SnakekitError, ValueError):
     """An array has the wrong shape, e.g. 4 joint angles for a 5-joint arm."""
 
@@ -70,3 +79,24 @@ class CommunicationError(BackendError):
 
 class HardwareError(BackendError):
     """A servo reported a hardware alert (overload, overheating, voltage...)."""
+
+
+class ServoMismatchError(BackendError):
+    """A servo answered, but is not the model the arm is built from (MX-28, Protocol 2.0)."""
+
+
+class InstructionError(BackendError):
+    """A servo refused an instruction (the low bits of its status packet's error byte).
+
+    Attributes:
+        servo_id: which servo.
+        code: the error number (1..7, see ``snakekit.hardware.registers.PACKET_ERRORS``).
+    """
+
+    def __init__(self, message: str, servo_id: int, code: int):
+        self.servo_id, self.code = servo_id, code
+        super().__init__(message)
+
+
+class ViewerError(SnakekitError, RuntimeError):
+    """The 3D viewer's server could not be started, or stopped answering, or is closed."""

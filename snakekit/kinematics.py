@@ -12,8 +12,9 @@ from functools import lru_cache
 import numpy as np
 import pinocchio as pin
 
-from .errors import LimitError, NotFiniteError, ShapeError, UnreachableTargetError
+from .errors import NotFiniteError, ShapeError, UnreachableTargetError
 from .model import SPEC, SnakeSpec, urdf
+from .validate import as_configuration, check_limits  # noqa: F401  (re-exported: the lessons use them here)
 
 
 @dataclass(frozen=True)
@@ -50,35 +51,6 @@ def pinocchio_model(spec: SnakeSpec = SPEC) -> tuple[pin.Model, pin.Data, int]:
     """The Pinocchio model, its data and the tool frame id (for lessons and benchmarks)."""
     k = _kin(spec)
     return k.model, k.data, k.tool
-
-
-def as_configuration(q, spec: SnakeSpec = SPEC, name: str = "q") -> np.ndarray:
-    """``q`` as a float array of shape (n_joints,), checked for shape and finiteness.
-
-    Raises:
-        ShapeError: ``q`` does not hold one angle per joint.
-        NotFiniteError: ``q`` holds NaN or infinity.
-    """
-    q = np.asarray(q, dtype=float)
-    if q.shape != (spec.n_joints,):
-        raise ShapeError(name, f"({spec.n_joints},)", q.shape,
-                         f"Give one angle [rad] per joint, base to tip")
-    total = sum(q.tolist())  # NaN or inf anywhere makes the sum NaN or inf (and is cheap)
-    if not (total - total == 0) and not np.isfinite(q).all():
-        raise NotFiniteError(f"{name} holds NaN or infinity: {q.tolist()}; give finite angles [rad]")
-    return q
-
-
-def check_limits(q, spec: SnakeSpec = SPEC, name: str = "q") -> np.ndarray:
-    """Return ``q`` if every joint is inside its limits, else raise :class:`LimitError`."""
-    q = as_configuration(q, spec, name)
-    bad = [(i + 1, float(v), spec.lower, spec.upper) for i, v in enumerate(q)
-           if not spec.lower <= v <= spec.upper]
-    if bad:
-        text = ", ".join(f"joint {j} = {v:.4f} rad" for j, v, _, _ in bad)
-        raise LimitError(f"{name} is outside the joint limits [{spec.lower}, {spec.upper}] rad: {text}. "
-                         "Choose angles inside the limits (see snakekit.SPEC).", bad)
-    return q
 
 
 def forward_kinematics(q, *, spec: SnakeSpec = SPEC) -> np.ndarray:

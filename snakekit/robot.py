@@ -22,10 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import BackendError, FileFormatError, LimitError
-from .kinematics import check_limits, forward_kinematics
+from .errors import BackendError, ConfigurationError, FileFormatError, InputTypeError, LimitError, ShapeError
 from .model import SPEC, SnakeSpec
-from .trajectory import Trajectory, _frozen, joint_trajectory
+from .trajectory import Trajectory, joint_trajectory
+from .validate import check_limits, frozen
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,7 +46,7 @@ class JointState:
 
     def __post_init__(self):
         for name in ("positions", "velocities", "efforts"):
-            object.__setattr__(self, name, _frozen(getattr(self, name)))
+            object.__setattr__(self, name, frozen(getattr(self, name)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,7 +71,7 @@ class Run:
     spec: SnakeSpec = field(default=SPEC, repr=False)
 
     def __post_init__(self):
-        object.__setattr__(self, "efforts", _frozen(self.efforts))
+        object.__setattr__(self, "efforts", frozen(self.efforts))
 
     @property
     def robot_time(self) -> float:
@@ -96,6 +96,8 @@ class Run:
 
     def final_distance_from_home(self) -> float:
         """Tool distance [m] between the last measured pose and the home pose."""
+        from .kinematics import forward_kinematics  # Pinocchio only when asked: runs load without it
+
         a = forward_kinematics(self.measured.positions[-1], spec=self.spec)[:2, 3]
         b = forward_kinematics(self.spec.home, spec=self.spec)[:2, 3]
         return float(np.linalg.norm(a - b))
@@ -149,7 +151,11 @@ class Robot(ABC):
     the timing of :meth:`run` and the recording.
     """
 
+    #: the backend's name, as :func:`make_robot` takes it
     backend = "robot"
+    #: whether :meth:`run` is paced by the wall clock (a real or emulated bus, a real-time
+    #: simulator) rather than stepped as fast as possible
+    realtime = True
     #: How far [rad] a trajectory's first point may be from the present position.
     start_tolerance = 0.05
 
@@ -237,16 +243,18 @@ class Robot(ABC):
         offset = trajectory.times[0]
         return Run(Trajectory(sent_t + offset, goals, n_joints=self.spec.n_joints),
                    Trajectory(rec_t + offset, rec_p, rec_v, n_joints=self.spec.n_joints),
-                   rec_e, self.backend, wall, bool(getattr(self, "realtime", True)), self.spec)
+                   rec_e, self.backend, wall, bool(self.realtime), self.spec)
 
     def _check_trajectory(self, trajectory: Trajectory) -> None:
         """Refuse, before anything moves, a trajectory this arm must not run."""
         self._check_open()
         if not isinstance(trajectory, Trajectory):
-            raise TypeError(f"run() takes a snakekit.Trajectory, got {type(trajectory).__name__}; "
+            raise InputTypeError(f"run() takes a snakekit.Trajectory, got {type(trajectory).__name__}; "
                             "build one with snakekit.Trajectory(times, positions)")
         if trajectory.n_joints != self.spec.n_joints:
-            raise LimitError(f"the trajectory has {trajectory.n_joints} joints, the arm {self.spec.n_joints}")
+            raise ShapeError("trajectory positions", f"(N, {self.spec.n_joints})",
+                             (len(trajectory), trajectory.n_joints),
+                             f"the arm has {self.spec.n_joints} joints: give one column per joint")
         trajectory.check_limits(self.spec)
         present = self.read().positions
         gap = np.abs(trajectory.positions[0] - present)
@@ -261,7 +269,7 @@ class Robot(ABC):
     def _record_times(trajectory: Trajectory, record_rate: float, settle: float) -> np.ndarray:
         """When the state is recorded during a run, from the run's start [s]."""
         if not record_rate > 0 or settle < 0:
-            raise ValueError(f"record_rate must be > 0 Hz and settle >= 0 s; got {record_rate}, {settle}")
+            raise ConfigurationError(f"record_rate must be > 0 Hz and settle >= 0 s; got {record_rate}, {settle}")
         end = trajectory.duration + settle
         return np.arange(int(np.floor(end * record_rate + 1e-9)) + 1) / record_rate
 

@@ -15,14 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FileFormatError, LimitError, NotFiniteError, ShapeError, TrajectoryError
-from .kinematics import check_limits
 from .model import SPEC, SnakeSpec
-
-
-def _frozen(a) -> np.ndarray:
-    a = np.array(a, dtype=float)  # a copy: the caller's array stays theirs
-    a.setflags(write=False)
-    return a
+from .validate import check_limits, frozen
 
 
 @dataclass(frozen=True)
@@ -79,15 +73,15 @@ class Trajectory:
             i = int(np.argmax(np.diff(t) <= 0))
             raise TrajectoryError(f"trajectory times must increase strictly: times[{i}] = {t[i]:.6g} s "
                                   f"and times[{i + 1}] = {t[i + 1]:.6g} s. Sort the points or drop duplicates.")
-        object.__setattr__(self, "times", _frozen(t))
-        object.__setattr__(self, "positions", _frozen(p))
+        object.__setattr__(self, "times", frozen(t))
+        object.__setattr__(self, "positions", frozen(p))
         if self.velocities is not None:
             v = np.asarray(self.velocities, dtype=float)
             if v.shape != p.shape:
                 raise ShapeError("velocities", f"{p.shape} (same as positions)", v.shape)
             if not np.isfinite(v).all():
                 raise NotFiniteError("trajectory velocities hold NaN or infinity")
-            object.__setattr__(self, "velocities", _frozen(v))
+            object.__setattr__(self, "velocities", frozen(v))
 
     # --- basic facts ----------------------------------------------------------------
 
