@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 
 import snakekit  # noqa: E402
 from _common import table  # noqa: E402
-from snakekit.servo import ProfilePlanner  # noqa: E402
+from snakekit.profile_planner import ProfilePlanner  # noqa: E402
 from snakekit.sim import SimRobot  # noqa: E402
 
 REPEAT = 5

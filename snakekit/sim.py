@@ -1,7 +1,7 @@
 """The simulated arm: MuJoCo physics with each joint driven like an MX-28 in position mode.
 
 Per joint, the simulator runs the servo firmware's profile generator
-(:class:`snakekit.servo.ProfilePlanner`), and MuJoCo runs the position loop at 1 kHz:
+(:class:`snakekit.profile_planner.ProfilePlanner`), and MuJoCo runs the position loop at 1 kHz:
 ``tau = clip(kp (q_ref - q) - kv qdot, -2.5, 2.5) N m``, with back-EMF damping, friction
 and rotor inertia on the joint (numbers in :class:`snakekit.model.ServoSpec`).
 """
@@ -21,7 +21,7 @@ from .kinematics import as_configuration, check_limits  # noqa: E402
 from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf  # noqa: E402
 from .robot import JointState, Robot, Run  # noqa: E402
 from .trajectory import Trajectory  # noqa: E402
-from .servo import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner  # noqa: E402
+from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner  # noqa: E402
 
 
 # qpos, qvel and act first, in that order (rows of rollout's state: time, qpos, qvel, act, ...)

@@ -5,8 +5,9 @@ import importlib
 
 import pytest
 
-MODULES = ["snakekit.kinematics", "snakekit.trajectory", "snakekit.robot", "snakekit.servo",
-           "snakekit.viewer", "snakekit.emulator", "snakekit.emulator.bus"]
+MODULES = ["snakekit.kinematics", "snakekit.trajectory", "snakekit.robot", "snakekit.profile_planner",
+           "snakekit.viewer", "snakekit.emulator", "snakekit.emulator.bus",
+           "snakekit.hardware.registers", "snakekit.hardware.bus", "snakekit.validate"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -12,7 +12,7 @@ import pytest
 
 from snakekit.emulator import BusEmulator, Faults
 from snakekit.emulator import protocol as p
-from snakekit.servo import ProfilePlanner
+from snakekit.profile_planner import ProfilePlanner
 from tests.conftest import need
 
 sdk = need("dynamixel_sdk")

@@ -75,8 +75,8 @@ def test_start_up_configures_every_servo(robot):
         m = bus.servo(i).memory
         assert m.get("Return Delay Time") == 0
         assert (m.get("Min Position Limit"), m.get("Max Position Limit")) == (LO, HI)
-        assert m.get("Profile Velocity") == snakekit.servo.DEFAULT_PROFILE_VELOCITY
-        assert m.get("Profile Acceleration") == snakekit.servo.DEFAULT_PROFILE_ACCELERATION
+        assert m.get("Profile Velocity") == snakekit.profile_planner.DEFAULT_PROFILE_VELOCITY
+        assert m.get("Profile Acceleration") == snakekit.profile_planner.DEFAULT_PROFILE_ACCELERATION
         assert m.get("Torque Enable") == 1
         assert m.get("Goal Position") == 2048
 
@@ -267,7 +267,7 @@ def test_overload_mid_run_raises_hardware_error_then_reboot_recovers(robot):
     assert robot.hardware_error_status(3) == []
     assert [r.packet.id for r in bus.received("REBOOT")] == [3]   # only the faulted servo
     m = bus.servo(3).memory
-    assert m.get("Profile Velocity") == snakekit.servo.DEFAULT_PROFILE_VELOCITY
+    assert m.get("Profile Velocity") == snakekit.profile_planner.DEFAULT_PROFILE_VELOCITY
     robot.torque_on()
     assert torques(bus) == [1] * 5
     robot.home(duration=1.0)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import SPEC, SnakeSpec
-from ..servo import JointProfile, ProfilePlanner
+from ..profile_planner import JointProfile, ProfilePlanner
 
 
 class MotionSource:

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from snakekit.servo import (
+from snakekit.profile_planner import (
     ACCELERATION_UNIT, VELOCITY_UNIT, JointProfile, ProfilePlanner, acceleration_time_ms,
 )
 

@@ -1,0 +1,437 @@
+"""The driver: the arm as a :class:`~snakekit.robot.Robot` on a Dynamixel bus.
+
+What the driver does at start-up, in order (the "good driver" habits of the Dynamixel
+e-manual and of well-kept drivers):
+
+1. ping every id and check the model number (``spec.servo.model_number``: 30 = MX-28 Protocol 2.0);
+2. refuse to start on a servo with a hardware error (or reboot it, if asked);
+3. torque off, then write the EEPROM only where it differs: Return Delay Time 0, position
+   mode, Min/Max Position Limit from the joint limits;
+4. write the RAM settings: Profile Acceleration and Velocity;
+5. goal = present position, then torque on.
+
+Each control cycle is one SyncWrite of the five goals and one SyncRead of Present Load,
+Velocity and Position (addresses 126..135, one block). Lost or corrupt packets are retried
+a bounded number of times (:meth:`snakekit.hardware.bus.Bus.retry`); then the arm is
+stopped and :class:`~snakekit.errors.CommunicationError` raised. A status packet with the
+alert bit makes the driver read Hardware Error Status (70), stop the arm and raise
+:class:`~snakekit.errors.HardwareError` naming the servo and the fault.
+
+On :meth:`DynamixelSnake.close`, on an exception inside :meth:`DynamixelSnake.run` and on
+Ctrl-C the arm is stopped as configured by ``on_close``: ``"torque_off"`` (limp) or
+``"hold"`` (stay where it is).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from dataclasses import dataclass
+
+from ..errors import (BackendError, CommunicationError, ConfigurationError, HardwareError,
+                       InstructionError, LimitError, ServoMismatchError)
+from ..model import SPEC, SnakeSpec
+from ..profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY
+from ..robot import JointState, Robot
+from .bus import Bus, SyncRead, describe, sdk
+from .registers import (FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_ERROR_STATUS, MAX_POSITION_LIMIT,
+                        MIN_POSITION_LIMIT, OPERATING_MODE, PACKET_ERRORS, POSITION_MODE, PRESENT_POSITION,
+                        PROFILE_ACCELERATION, PROFILE_VELOCITY, RETURN_DELAY_TIME, STATE_BLOCK, TORQUE_ENABLE,
+                        decode_hardware_error, decode_state, load_to_torque, position_bytes,
+                        position_limit_ticks, radians_to_ticks, ticks_to_radians, to_signed,
+                        velocity_to_radians_per_second)
+
+ON_CLOSE = ("torque_off", "hold")
+
+
+@dataclass(frozen=True)
+class ServoInfo:
+    """What a PING returns.
+
+    Attributes:
+        id: servo id.
+        model_number: control-table address 0 (30 for an MX-28 Protocol 2.0).
+        firmware: firmware version (address 6).
+    """
+
+    id: int
+    model_number: int
+    firmware: int
+
+
+class DynamixelSnake(Robot):
+    """The arm on a Dynamixel bus (a U2D2 adapter, or the bus emulator's pseudo-terminal).
+
+    Args:
+        port: serial port of the bus adapter, e.g. ``"/dev/ttyUSB0"``.
+        baudrate: bus speed [baud] (the servos' Baud Rate register must match).
+        ids: servo ids from base to tip (default: ``spec.servo_ids``).
+        spec: the arm (limits, number of joints, servo ids, the servo model).
+        on_close: ``"torque_off"`` (limp) or ``"hold"`` (keep the present position) when
+            closed, after an exception in :meth:`run` and after Ctrl-C.
+        profile_velocity: Profile Velocity register (0.229 rev/min units).
+        profile_acceleration: Profile Acceleration register (214.577 rev/min^2 units).
+        retries: how many times a lost or corrupt packet is sent again before giving up.
+        torque: turn torque on at the end of the start-up.
+        reboot_faulted: reboot a servo that reports a hardware error at start-up
+            (otherwise refuse to start).
+    """
+
+    backend = "hardware"
+    realtime = True
+
+    def __init__(self, port: str, baudrate: int = 4_000_000, ids=None, *,
+                 spec: SnakeSpec = SPEC, on_close: str = "torque_off",
+                 profile_velocity: int = DEFAULT_PROFILE_VELOCITY,
+                 profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION,
+                 retries: int = 3, torque: bool = True, reboot_faulted: bool = False):
+        super().__init__(spec)
+        self.closed = True  # until the port is open: close() has nothing to release
+        ids = tuple(int(i) for i in (spec.servo_ids if ids is None else ids))
+        if len(ids) != spec.n_joints or len(set(ids)) != len(ids):
+            raise ConfigurationError(f"ids must be {spec.n_joints} distinct servo ids, one a joint, got {ids}")
+        if on_close not in ON_CLOSE:
+            raise ConfigurationError(f"on_close must be one of {', '.join(map(repr, ON_CLOSE))}, got {on_close!r}")
+        if retries < 0:
+            raise ConfigurationError(f"retries must be >= 0, got {retries}")
+        self.port_name = str(port)
+        self.baudrate = int(baudrate)
+        self.ids = ids
+        self.on_close = on_close
+        self.profile_velocity = int(profile_velocity)
+        self.profile_acceleration = int(profile_acceleration)
+        self.tick_limits = position_limit_ticks(spec)
+        self.torque_enabled = False
+        #: SyncWrites of goal positions sent, since start-up
+        self.goals_sent = 0
+        self._release: list = []  # extra clean-ups (e.g. stop an emulator) run by close()
+        self._t0 = time.perf_counter()
+        self._last_positions = None
+
+        self.bus = Bus(self.port_name, self.baudrate, retries)
+        self.closed = False
+        self._reader = SyncRead(self.port, self.bus.ph, *STATE_BLOCK)
+        self._writer = sdk.GroupSyncWrite(self.port, self.bus.ph, GOAL_POSITION, 4)
+        for i in ids:
+            self._reader.addParam(i)
+            self._writer.addParam(i, [0, 0, 0, 0])
+        try:
+            self._start(torque, reboot_faulted)
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def port(self):
+        """The SDK's port handler."""
+        return self.bus.port
+
+    @property
+    def retries(self) -> int:
+        return self.bus.retries
+
+    @property
+    def retried(self) -> int:
+        """Packets sent again after a loss or corruption, since start-up."""
+        return self.bus.retried
+
+    # --- start-up --------------------------------------------------------------------------
+
+    def _start(self, torque: bool, reboot_faulted: bool) -> None:
+        self.servos = [self._check_servo(i) for i in self.ids]
+        for i in self.ids:
+            bits = self._read(i, HARDWARE_ERROR_STATUS, 1, check_alert=False)
+            if bits:
+                if not reboot_faulted:
+                    raise HardwareError(
+                        f"servo {i} on {self.port_name} reports a hardware error at start-up: "
+                        f"{', '.join(decode_hardware_error(bits))} (Hardware Error Status 0x{bits:02X}); "
+                        "remove the cause (load, heat, supply), then power-cycle the arm or pass "
+                        "reboot_faulted=True")
+                self._reboot(i)
+        self._torque(False)
+        lo, hi = self.tick_limits
+        for i in self.ids:
+            self._write_if_different(i, RETURN_DELAY_TIME, 1, 0)
+            self._write_if_different(i, OPERATING_MODE, 1, POSITION_MODE)
+            self._write_if_different(i, MIN_POSITION_LIMIT, 4, lo)
+            self._write_if_different(i, MAX_POSITION_LIMIT, 4, hi)
+            self._apply_ram(i)
+        if torque:
+            self.torque_on()
+
+    def _check_servo(self, servo_id: int) -> ServoInfo:
+        info = self.ping(servo_id)
+        expected = self.spec.servo.model_number
+        if info.model_number != expected:
+            raise ServoMismatchError(
+                f"servo {servo_id} on {self.port_name} is model number {info.model_number}, not an "
+                f"MX-28 Protocol 2.0 (model {expected}); check the id, or switch the servo "
+                "to Protocol 2.0 with Dynamixel Wizard")
+        return info
+
+    def _apply_ram(self, servo_id: int) -> None:
+        """The RAM settings a reboot erases: profile (torque is handled by the caller)."""
+        self._write(servo_id, PROFILE_ACCELERATION, 4, self.profile_acceleration)
+        self._write(servo_id, PROFILE_VELOCITY, 4, self.profile_velocity)
+
+    def _write_if_different(self, servo_id, address, size, value) -> None:
+        if self._read(servo_id, address, size) != value:
+            self._write(servo_id, address, size, value)
+
+    # --- requests ----------------------------------------------------------------------------
+
+    def _fail(self, message: str, result: int):
+        hint = ("check the cable and power, or the id" if result == sdk.COMM_RX_TIMEOUT
+                else "check the cable, the baud rate and for noise on the bus")
+        self.stop()
+        raise CommunicationError(f"{message}; {hint}. The arm was stopped ({self._stop_words()}).")
+
+    def _tries(self) -> str:
+        return f"{self.retries + 1} tries"
+
+    def _stop_words(self) -> str:
+        return "torque off" if self.on_close == "torque_off" else "holding position"
+
+    def _check_error(self, servo_id: int, error: int, what: str, check_alert: bool = True) -> None:
+        if error & 0x80 and check_alert:
+            bits = self._read(servo_id, HARDWARE_ERROR_STATUS, 1, check_alert=False)
+            self.stop()
+            names = ", ".join(decode_hardware_error(bits)) or "an alert that has cleared"
+            raise HardwareError(
+                f"servo {servo_id} (joint {self.ids.index(servo_id) + 1}) on {self.port_name} reports "
+                f"a hardware error: {names} (Hardware Error Status 0x{bits:02X}). The servo turned its "
+                f"torque off and the arm was stopped ({self._stop_words()}). Remove the cause "
+                f"(a blocked joint, heat, the supply), then robot.reboot({servo_id}) and robot.torque_on().")
+        code = error & 0x7F
+        if code:
+            raise InstructionError(
+                f"servo {servo_id} on {self.port_name} refused {what}: "
+                f"{PACKET_ERRORS.get(code, f'error {code}')}", servo_id, code)
+
+    def _read(self, servo_id: int, address: int, size: int, *, check_alert: bool = True) -> int:
+        what = f"a read of address {address}"
+        result, value, error = self.bus.read(servo_id, address, size)
+        if result != sdk.COMM_SUCCESS:
+            self._fail(f"servo {servo_id} on {self.port_name} did not answer {what} "
+                       f"({describe(result)}, {self._tries()})", result)
+        self._check_error(servo_id, error, what, check_alert)
+        return value
+
+    def _write(self, servo_id: int, address: int, size: int, value: int) -> None:
+        what = f"a write of {value} to address {address}"
+        result, error = self.bus.write(servo_id, address, size, value)
+        if result != sdk.COMM_SUCCESS:
+            self._fail(f"servo {servo_id} on {self.port_name} did not answer {what} "
+                       f"({describe(result)}, {self._tries()})", result)
+        self._check_error(servo_id, error, what)
+
+    def ping(self, servo_id: int) -> ServoInfo:
+        """Ping one servo: its model number and firmware version.
+
+        Raises:
+            CommunicationError: nobody answered at that id (after the retries).
+        """
+        result, model, _ = self.bus.ping(servo_id)
+        if result != sdk.COMM_SUCCESS:
+            raise CommunicationError(
+                f"no servo answered at id {servo_id} on {self.port_name} (ping "
+                f"{describe(result)}); check the cable and power, or the id")
+        firmware = self._read(servo_id, FIRMWARE_VERSION, 1, check_alert=False)
+        return ServoInfo(servo_id, model, firmware)
+
+    def hardware_error_status(self, servo_id: int) -> list[str]:
+        """The faults a servo reports (Hardware Error Status, address 70), in words."""
+        return decode_hardware_error(self._read(servo_id, HARDWARE_ERROR_STATUS, 1, check_alert=False))
+
+    # --- the robot interface -----------------------------------------------------------------
+
+    def _now(self) -> float:
+        return time.perf_counter() - self._t0
+
+    def _advance(self, t: float) -> None:
+        delay = t - self._now()
+        if delay > 0:
+            time.sleep(delay)
+
+    def read(self) -> JointState:
+        """One SyncRead of Present Load, Velocity and Position: the present joint state."""
+        self._check_open()
+        reader = self._reader
+
+        def once():
+            result = reader.txRxPacket()
+            if result == sdk.COMM_SUCCESS and not all(reader.isAvailable(i, *STATE_BLOCK) for i in self.ids):
+                result = sdk.COMM_RX_CORRUPT
+            return result, None
+
+        t_sent = self._now()
+        result, _ = self.bus.retry(once)
+        if result != sdk.COMM_SUCCESS:
+            self._fail(f"servo {reader.failed_id} on {self.port_name} did not answer the SyncRead of the "
+                       f"joint state ({describe(result)}, {self._tries()})", result)
+        t = 0.5 * (t_sent + self._now())  # the servos sampled about half-way through
+        values = []
+        for i in self.ids:
+            error = reader.errors.get(i, 0)
+            if error:
+                self._check_error(i, error, "the SyncRead of the joint state")
+            values.append(decode_state(bytes(reader.data_dict[i])))
+        load, vel, ticks = np.array(values, dtype=float).T
+        q = ticks_to_radians(ticks)
+        self._last_positions = q
+        return JointState(t, q, velocity_to_radians_per_second(vel), load_to_torque(load, self.spec))
+
+    def _goal_ticks(self, q) -> list[int]:
+        """Goal ticks of joint angles ``q`` [rad], clamped to the position limits in ticks."""
+        lo, hi = self.tick_limits
+        return np.clip(radians_to_ticks(q), lo, hi).tolist()
+
+    def _load_goals(self, q) -> None:
+        for i, tick in zip(self.ids, self._goal_ticks(q)):
+            self._writer.changeParam(i, position_bytes(tick))
+
+    def _send(self, q: np.ndarray) -> None:
+        """One SyncWrite of the five goals, clamped to the position limits in ticks."""
+        self._load_goals(q)
+        writer = self._writer
+        result, _ = self.bus.retry(lambda: (writer.txPacket(), None))
+        if result != sdk.COMM_SUCCESS:
+            self._fail(f"the SyncWrite of goal positions could not be sent on {self.port_name} "
+                       f"({describe(result)}, {self._tries()})", result)
+        self.goals_sent += 1
+
+    def command(self, q) -> None:
+        """Send a position goal ``q`` [rad]; on Ctrl-C the arm is stopped (``on_close``)."""
+        try:
+            super().command(q)
+        except (KeyboardInterrupt, SystemExit):
+            self._stop_once()
+            raise
+
+    def run(self, trajectory, **options):
+        """:meth:`Robot.run`, stopping the arm (``on_close``) on any exception or Ctrl-C.
+
+        A trajectory refused by the checks (limits, start pose, type) never moved the arm: it
+        is left as it is, torque on.
+        """
+        sent = self.goals_sent
+        try:
+            return super().run(trajectory, **options)
+        except (LimitError, TypeError, ValueError):
+            if self.goals_sent != sent:
+                self._stop_once()
+            raise
+        except BaseException:
+            self._stop_once()
+            raise
+
+    def _stop_once(self) -> None:
+        """Stop after an exception, unless the arm is closed or its torque is already off."""
+        if not self.closed and (self.torque_enabled or self.on_close == "hold"):
+            self.stop()
+
+    # --- torque, stop, reboot ------------------------------------------------------------------
+
+    def _torque(self, on: bool) -> None:
+        for i in self.ids:
+            self._write(i, TORQUE_ENABLE, 1, int(on))
+        self.torque_enabled = on
+
+    def _hold_here(self, servo_id: int) -> None:
+        """Goal = present position (clamped into the limits), so torque-on doesn't jump."""
+        lo, hi = self.tick_limits
+        present = to_signed(self._read(servo_id, PRESENT_POSITION, 4), 4)
+        self._write(servo_id, GOAL_POSITION, 4, min(max(present, lo), hi))
+
+    def torque_on(self) -> None:
+        """Goal = present position on every servo, then torque on (the arm holds still)."""
+        self._check_open()
+        for i in self.ids:
+            self._hold_here(i)
+        self._torque(True)
+
+    def torque_off(self) -> None:
+        """Torque off on every servo: the arm goes limp."""
+        self._check_open()
+        self._torque(False)
+
+    def stop(self) -> None:
+        """Stop the arm now, as ``on_close`` says; never raises (the bus may be failing)."""
+        with self.bus.hold():
+            self.port.is_using = False  # an exception may have left the SDK's flag set
+            try:
+                if self.on_close == "hold":
+                    self._hold_safely()
+                else:
+                    self._torque_off_safely()
+            except Exception:  # a closed or broken port: nothing more can be sent
+                pass
+
+    def _torque_off_safely(self) -> None:
+        ph, port = self.bus.ph, self.port
+        for attempt in range(self.retries + 1):
+            try:
+                port.clearPort()
+                ph.write1ByteTxOnly(port, sdk.BROADCAST_ID, TORQUE_ENABLE, 0)
+            except Exception:
+                pass
+            port.is_using = False
+            still_on = []
+            for i in self.ids:
+                value, result, _ = ph.read1ByteTxRx(port, i, TORQUE_ENABLE)
+                port.is_using = False
+                if result != sdk.COMM_SUCCESS or value != 0:
+                    still_on.append(i)
+            if not still_on:
+                break
+        self.torque_enabled = False
+
+    def _hold_safely(self) -> None:
+        if self._last_positions is None:
+            return
+        self._load_goals(self._last_positions)
+        try:
+            self._writer.txPacket()
+        except Exception:
+            pass
+        self.port.is_using = False
+
+    def _reboot(self, servo_id: int, timeout: float = 2.0) -> None:
+        result, error = self.bus.reboot(servo_id)
+        if result != sdk.COMM_SUCCESS:
+            self._fail(f"servo {servo_id} on {self.port_name} did not answer REBOOT "
+                       f"({describe(result)}, {self._tries()})", result)
+        self._check_error(servo_id, error, "REBOOT", check_alert=False)
+        deadline = time.perf_counter() + timeout
+        while self.bus.ping_once(servo_id) != sdk.COMM_SUCCESS:
+            if time.perf_counter() > deadline:
+                raise CommunicationError(f"servo {servo_id} on {self.port_name} did not come back "
+                                         f"within {timeout:g} s of a reboot; check its power")
+            time.sleep(0.01)
+
+    def reboot(self, servo_id: int) -> None:
+        """Reboot one servo (clears its hardware error) and re-apply its RAM settings.
+
+        The other servos are not touched. The rebooted servo gets its profile back, its goal
+        set to where it is, and torque on if the arm's torque is on.
+        """
+        self._check_open()
+        if servo_id not in self.ids:
+            raise ConfigurationError(f"servo {servo_id} is not on this arm; ids: {', '.join(map(str, self.ids))}")
+        self._reboot(servo_id)
+        self._apply_ram(servo_id)
+        if self.torque_enabled:
+            self._hold_here(servo_id)
+            self._write(servo_id, TORQUE_ENABLE, 1, 1)
+
+    def _shutdown(self) -> None:
+        try:
+            if self.bus.is_open:
+                self.stop()
+                self.bus.close()
+        finally:
+            for release in self._release:
+                release()
+            self._release.clear()
