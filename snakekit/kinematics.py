@@ -180,6 +180,63 @@ def _closest(k: _Kin, target: np.ndarray, use_heading: bool, starts, *, max_iter
     return best_q
 
 
+def _closest_configuration(k: _Kin, target: np.ndarray, use_heading: bool, starts, rng) -> np.ndarray:
+    """The configuration inside the limits whose tool comes closest to ``target``.
+
+    Projected Levenberg-Marquardt (:func:`_closest`) from the given starts, from the arm
+    stretched towards the target, from the arm curled either way, from the three
+    workspace-boundary configurations nearest the target, and from a few random poses.
+    """
+    spec = k.spec
+    toward = float(np.clip(np.arctan2(target[1], target[0]), spec.lower, spec.upper))
+    curls = []
+    for sign in (1.0, -1.0):
+        for m in range(1, spec.n_joints):
+            c = np.zeros(spec.n_joints)
+            c[0], c[1:1 + m] = toward, sign
+            curls.append(c)
+    stretched = np.zeros(spec.n_joints)
+    stretched[0] = toward
+    points, configurations = boundary_configurations(spec=spec)
+    near = configurations[np.argsort(np.linalg.norm(points - target[:2], axis=1))[:3]]
+    randoms = rng.uniform(spec.lower, spec.upper, (4, spec.n_joints))
+    starts = [q for q in starts if q is not None]
+    return _closest(k, target, use_heading, [*starts, stretched, *curls, *near, *randoms])
+
+
+def closest_reachable_point(target_xy, heading: float | None = None, q0=None, *,
+                            spec: SnakeSpec = SPEC, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The reachable tool pose closest to a target, and the joint angles that reach it.
+
+    The distance is the tool's distance to ``target_xy`` [m], plus, when ``heading`` [rad] is
+    given, the heading error weighted by one link length. For a reachable target this is
+    the target itself (up to the solver's tolerance).
+
+    Returns:
+        ``(x [m], y [m], heading [rad])`` of the closest tool pose, and its joint angles [rad].
+
+    >>> import numpy as np
+    >>> pose, q = closest_reachable_point([0.5, 0.0])     # beyond the 0.3315 m reach
+    >>> np.round(pose[:2], 4).tolist()
+    [0.3315, 0.0]
+    """
+    k = _kin(spec)
+    target_xy = _target(target_xy, heading)
+    target = np.array([*target_xy, 0.0 if heading is None else heading])
+    start = None if q0 is None else np.clip(as_configuration(q0, spec, "q0"), spec.lower, spec.upper)
+    q = _closest_configuration(k, target, heading is not None, [start], np.random.default_rng(seed))
+    return tool_pose_2d(q, spec=spec), q
+
+
+def _target(target_xy, heading) -> np.ndarray:
+    target_xy = np.asarray(target_xy, dtype=float)
+    if target_xy.shape != (2,):
+        raise ShapeError("target_xy", "(2,)", target_xy.shape, "Give the tool target as (x, y) in metres")
+    if not np.isfinite(target_xy).all() or (heading is not None and not np.isfinite(heading)):
+        raise NotFiniteError(f"IK target holds NaN or infinity: {target_xy.tolist()}, heading={heading}")
+    return target_xy
+
+
 def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec: SnakeSpec = SPEC,
                        tol: float = 1e-6, max_iter: int = 100, restarts: int = 20,
                        seed: int = 0) -> np.ndarray:
@@ -198,11 +255,7 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
     [0.25, 0.1]
     """
     k = _kin(spec)
-    target_xy = np.asarray(target_xy, dtype=float)
-    if target_xy.shape != (2,):
-        raise ShapeError("target_xy", "(2,)", target_xy.shape, "Give the tool target as (x, y) in metres")
-    if not np.isfinite(target_xy).all() or (heading is not None and not np.isfinite(heading)):
-        raise NotFiniteError(f"IK target holds NaN or infinity: {target_xy.tolist()}, heading={heading}")
+    target_xy = _target(target_xy, heading)
     use_heading = heading is not None
     target = np.array([*target_xy, heading if use_heading else 0.0])
     if q0 is None:
@@ -223,20 +276,7 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
             best_q, best_err = q, n
         if n < tol:
             return q
-    # The DLS runs above aim at the target and may stop anywhere when it is out of reach.
-    # Look for the closest point properly: from the best of them, from the arm stretched
-    # towards the target, from the arm curled either way, and from a few random poses.
-    toward = float(np.clip(np.arctan2(target_xy[1], target_xy[0]), spec.lower, spec.upper))
-    curls = []
-    for sign in (1.0, -1.0):
-        for m in range(1, spec.n_joints):
-            c = np.zeros(spec.n_joints)
-            c[0], c[1:1 + m] = toward, sign
-            curls.append(c)
-    stretched = np.zeros(spec.n_joints)
-    stretched[0] = toward
-    randoms = rng.uniform(spec.lower, spec.upper, (4, spec.n_joints))
-    best_q = _closest(k, target, use_heading, [best_q, stretched, *curls, *randoms])
+    best_q = _closest_configuration(k, target, use_heading, [best_q], rng)
     closest = tool_pose_2d(best_q, spec=spec)
     what = f"({target_xy[0]:.4f}, {target_xy[1]:.4f}) m" + (
         f" with heading {heading:.4f} rad" if use_heading else "")
@@ -258,3 +298,61 @@ def workspace_points(n: int = 5000, *, seed: int = 0, spec: SnakeSpec = SPEC) ->
         pin.framesForwardKinematics(k.model, k.data, q)
         out[i] = k.data.oMf[k.tool].translation[:2]
     return out
+
+
+# --- the workspace ---------------------------------------------------------------------
+
+
+def workspace_boundary(*, bins: int = 120, samples: int = 20000, refine: int = 60, seed: int = 0,
+                       spec: SnakeSpec = SPEC) -> np.ndarray:
+    """Outer boundary of the tool's reachable points, as a closed polygon (bins, 2) [m].
+
+    See :func:`boundary_configurations` for how it is found.
+    """
+    return boundary_configurations(bins=bins, samples=samples, refine=refine, seed=seed, spec=spec)[0].copy()
+
+
+@lru_cache(maxsize=8)
+def boundary_configurations(*, bins: int = 120, samples: int = 20000, refine: int = 60, seed: int = 0,
+                            spec: SnakeSpec = SPEC) -> tuple[np.ndarray, np.ndarray]:
+    """Outer boundary of the tool's reachable points, as a closed polygon (bins, 2) [m].
+
+    For each of ``bins`` directions around joint 1 it keeps the farthest tool point found
+    among ``samples`` random configurations and the evenly curled ones (joints 2..n bent
+    alike), then pushes each direction's best configuration outwards with ``refine`` small
+    random steps (a step that lands in another direction improves that one). Every vertex
+    is a reachable tool point.
+
+    Returns:
+        the boundary points (M, 2) [m] and the joint angles (M, n_joints) [rad] reaching
+        them (cached; read-only arrays).
+    """
+    rng = np.random.default_rng(seed)
+    n = spec.n_joints
+    grid = np.linspace(spec.lower, spec.upper, 61)
+    curled = np.array([[a] + [b] * (n - 1) for a in grid for b in grid])
+    qs = np.vstack([rng.uniform(spec.lower, spec.upper, (samples, n)), curled])
+    pts = np.array([forward_kinematics(q, spec=spec)[:2, 3] for q in qs])
+
+    def bin_of(p):
+        a = np.arctan2(p[..., 1], p[..., 0])
+        return np.minimum(((a + np.pi) / (2 * np.pi) * bins).astype(int), bins - 1)
+
+    idx, rad = bin_of(pts), np.hypot(pts[:, 0], pts[:, 1])
+    best_r = np.full(bins, -1.0)
+    best_q = np.zeros((bins, n))
+    best_p = np.zeros((bins, 2))
+    for i in np.argsort(rad):  # ascending: the farthest point of each bin is written last
+        best_r[idx[i]], best_q[idx[i]], best_p[idx[i]] = rad[i], qs[i], pts[i]
+    for step in np.geomspace(0.3, 0.01, refine):
+        for b in np.flatnonzero(best_r > 0):
+            q = np.clip(best_q[b] + rng.normal(0, step, n), spec.lower, spec.upper)
+            p = forward_kinematics(q, spec=spec)[:2, 3]
+            r, k = float(np.hypot(*p)), int(bin_of(p))
+            if r > best_r[k]:  # a farther point for whichever direction it lands in
+                best_r[k], best_q[k], best_p[k] = r, q, p
+    keep = best_r > 0
+    points, configurations = best_p[keep], best_q[keep]
+    points.setflags(write=False)
+    configurations.setflags(write=False)
+    return points, configurations

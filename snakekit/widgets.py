@@ -27,11 +27,11 @@ import ipywidgets as w
 import numpy as np
 from matplotlib.figure import Figure
 
-from .errors import SnakekitError, UnreachableTargetError
-from .kinematics import check_limits, inverse_kinematics, planar_jacobian, tool_pose_2d
+from .errors import InputTypeError, SnakekitError, UnreachableTargetError
+from .kinematics import closest_reachable_point, inverse_kinematics, tool_pose_2d
 from .plots import plot_move
 from .robot import Robot, Run
-from .viewer import boundary_configurations
+from .validate import check_limits
 
 _OK = "#1a7f37"
 _BAD = "#c62828"
@@ -61,7 +61,7 @@ class ControlPanel:
     def __init__(self, robot: Robot, viewer=None, *, duration: float | None = None,
                  heading: bool = True, show_plot: bool = True):
         if not isinstance(robot, Robot):
-            raise TypeError(f"ControlPanel needs a snakekit robot, got {type(robot).__name__}; "
+            raise InputTypeError(f"ControlPanel needs a snakekit robot, got {type(robot).__name__}; "
                             "make one with snakekit.make_robot('sim')")
         self.robot = robot
         self.viewer = viewer
@@ -242,33 +242,13 @@ class ControlPanel:
     def _closest_point(self, x: float, y: float, error: UnreachableTargetError) -> tuple[float, float]:
         """The closest reachable tool point [m] to (x, y), ignoring the heading.
 
-        The IK solver aims at exact solutions: for a target out of reach its lightly damped
-        steps hit the joint limits and its ``closest`` can be far off. Here, damped least
-        squares (clamped to the limits) starts from the goal, from the solver's answer and
-        from the three workspace-boundary points nearest the target, and keeps the nearest
-        tool point reached.
+        Without a heading that is the solver's own answer; with one, the heading may be what
+        is out of reach, so the position alone is asked for.
         """
-        spec = self.spec
-        target = np.array([x, y])
-        points, configurations = boundary_configurations(spec=spec)
-        near = np.argsort(np.linalg.norm(points - target, axis=1))[:3]
-        starts = [self.goal, np.asarray(error.q_closest, dtype=float), *configurations[near]]
-        best = np.array(error.closest, dtype=float)
-        best_d = np.linalg.norm(best - target)
-        for q in starts:
-            q = np.clip(q, spec.lower, spec.upper)
-            for _ in range(60):
-                p = tool_pose_2d(q, spec=spec)[:2]
-                d = np.linalg.norm(target - p)
-                if d < best_d:  # every iterate is reachable: keep the nearest one seen
-                    best, best_d = p, d
-                J = planar_jacobian(q, spec=spec)[:2]
-                step = J.T @ np.linalg.solve(J @ J.T + 0.01**2 * np.eye(2), target - p)
-                step *= min(1.0, 0.2 / max(np.abs(step).max(), 1e-12))  # at most 0.2 rad a joint
-                q = np.clip(q + step, spec.lower, spec.upper)
-                if np.abs(step).max() < 1e-6:
-                    break
-        return float(best[0]), float(best[1])
+        if len(error.target) == 2:
+            return float(error.closest[0]), float(error.closest[1])
+        pose, _ = closest_reachable_point([x, y], q0=self.goal, spec=self.spec)
+        return float(pose[0]), float(pose[1])
 
     def _is_echo(self, change) -> bool:
         """Whether a slider change is the browser repeating a value the kernel set.

@@ -6,7 +6,7 @@ import importlib
 import pytest
 
 MODULES = ["snakekit.kinematics", "snakekit.trajectory", "snakekit.robot", "snakekit.profile_planner",
-           "snakekit.viewer", "snakekit.emulator", "snakekit.emulator.bus",
+           "snakekit.viewer.scene", "snakekit.emulator", "snakekit.emulator.bus",
            "snakekit.hardware.registers", "snakekit.hardware.bus", "snakekit.validate"]
 
 

@@ -11,7 +11,8 @@ need("meshcat")
 import snakekit  # noqa: E402
 from snakekit.model import SPEC  # noqa: E402
 from snakekit.robot import JointState, Robot  # noqa: E402
-from snakekit.viewer import Viewer, boundary_configurations  # noqa: E402
+from snakekit.kinematics import boundary_configurations  # noqa: E402
+from snakekit.viewer import Viewer  # noqa: E402
 from snakekit.plots import plot_move  # noqa: E402
 from snakekit.widgets import ControlPanel  # noqa: E402
 

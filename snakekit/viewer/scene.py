@@ -1,0 +1,327 @@
+"""A 3D view of the arm in a notebook cell, on meshcat, served from this machine.
+
+The arm is drawn from the visual boxes of the generated URDF (``snakekit/assets/snake.urdf``)
+and posed with :func:`snakekit.kinematics.joint_frames`, so the picture always matches the
+robot description.
+
+meshcat's viewer is a web page (three.js) fed by a small server process over a websocket
+(:mod:`snakekit.viewer.server` starts and stops it). Here:
+
+* the web server binds ``127.0.0.1`` unless told otherwise (``host="0.0.0.0"`` inside a
+  container whose port is published), and the ZeroMQ socket always binds ``127.0.0.1``;
+* the page and its JavaScript come from the meshcat package itself: nothing is fetched from
+  the internet;
+* the server stops with :meth:`Viewer.close`, at the end of a ``with`` block, when the
+  viewer is garbage collected, at interpreter exit, and - if the kernel dies without any of
+  those (``kill -9``) - on its own within a second, because it watches its parent;
+* no call waits for a browser: every request to the server times out with a
+  :class:`ViewerError` instead of hanging a headless notebook run.
+
+>>> from snakekit.viewer import Viewer
+>>> with Viewer() as viewer:                       # doctest: +SKIP
+...     viewer.show([0.3, -0.2, 0.4, 0.1, 0.0])
+...     viewer                                      # the last line of a cell shows it
+"""
+
+from __future__ import annotations
+
+import html
+import warnings
+import weakref
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigurationError, InputTypeError, ShapeError, ViewerError
+from ..kinematics import forward_kinematics, joint_frames, workspace_boundary
+from ..model import SPEC, SnakeSpec, urdf
+from ..robot import Run
+from ..trajectory import Trajectory
+from ..validate import as_configuration
+from .server import LIVE, Window, start_server, stop_server
+from .urdf_visuals import visual_boxes
+
+with warnings.catch_warnings():  # meshcat 0.3 imports a pyzmq module deprecated since 17
+    warnings.simplefilter("ignore", DeprecationWarning)
+    import meshcat
+    import meshcat.geometry as mg
+    from meshcat.animation import Animation
+
+
+def _translation(x: float, y: float, z: float = 0.0) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def _rot_z(a: float) -> np.ndarray:
+    T = np.eye(4)
+    c, s = np.cos(a), np.sin(a)
+    T[:2, :2] = [[c, -s], [s, c]]
+    return T
+
+
+def _points3(points) -> np.ndarray:
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2 or p.shape[1] not in (2, 3) or len(p) < 2:
+        raise ShapeError("points", "(N, 2) or (N, 3) with N >= 2 [m]", p.shape)
+    if p.shape[1] == 2:
+        p = np.column_stack([p, np.zeros(len(p))])
+    return p
+
+
+# --- the viewer ---------------------------------------------------------------------------
+
+ROBOT = "snake/robot"
+GOAL = "snake/goal"
+MARKS = "snake/marks"
+
+
+class Viewer:
+    """The arm in a meshcat scene, shown in a notebook cell.
+
+    Args:
+        host: interface the web server listens on. Keep ``"127.0.0.1"`` unless the browser
+            runs on another machine (``"0.0.0.0"`` inside a container with a published port).
+        port: web server port (default: any free port).
+        url_host: host name the browser uses to reach the server (default: ``host``, or
+            ``localhost`` when listening on every interface).
+        height: height of the view in a notebook cell [px].
+        timeout: longest wait for the server to start or to answer a request [s].
+        spec: the arm to draw.
+
+    Raises:
+        ViewerError: the server could not start (port in use, meshcat missing).
+    """
+
+    def __init__(self, *, host: str = "127.0.0.1", port: int | None = None, url_host: str | None = None,
+                 height: int = 420, timeout: float = 10.0, spec: SnakeSpec = SPEC):
+        if port is not None and not (isinstance(port, int) and 0 <= port < 65536):
+            raise ConfigurationError(f"port must be an integer in 0..65535 (or None for any free port), got {port!r}")
+        self.spec = spec
+        self.host = host
+        self.height = int(height)
+        self._proc, zmq_url, self.port = start_server(host, port or 0, timeout)
+        shown = url_host or ("localhost" if host in ("0.0.0.0", "", "::") else host)
+        if ":" in shown and not shown.startswith("["):
+            shown = f"[{shown}]"
+        self.url = f"http://{shown}:{self.port}/static/"
+        self._window = Window(zmq_url, self.url, self._proc, timeout)
+        self._finalizer = weakref.finalize(self, stop_server, self._proc, self._window.zmq_socket)
+        LIVE.add(self)
+        self.vis = meshcat.Visualizer(window=self._window)
+        self._boxes = visual_boxes(urdf(spec))
+        self._links = ["base_link"] + [f"link{i + 1}" for i in range(spec.n_joints)]
+        self._goal_drawn = False
+        self._setup_scene()
+        self.q = spec.home.copy()
+        self.show(self.q)
+
+    # --- life cycle ------------------------------------------------------------------------
+
+    @property
+    def server_pid(self) -> int:
+        """Process id of the meshcat server."""
+        return self._proc.pid
+
+    @property
+    def closed(self) -> bool:
+        return not self._finalizer.alive
+
+    def close(self) -> None:
+        """Stop the server. Safe to call more than once; the view in the page goes blank."""
+        self._finalizer()
+        LIVE.discard(self)
+
+    def __enter__(self) -> "Viewer":
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        self.close()
+        return False
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise ViewerError("this viewer is closed; make a new one with snakekit.viewer.Viewer()")
+
+    def __repr__(self) -> str:
+        state = "closed" if self.closed else f"serving {self.url} (server pid {self.server_pid})"
+        return f"<snakekit Viewer {state}>"
+
+    # --- notebook display ------------------------------------------------------------------
+
+    def iframe(self, height: int | None = None) -> str:
+        """HTML of an iframe showing the live scene (what a notebook cell displays)."""
+        h = self.height if height is None else int(height)
+        return (f'<div class="snakekit-viewer" style="height:{h}px;width:100%;resize:vertical;overflow:hidden">'
+                f'<iframe src="{html.escape(self.url)}" title="snakekit 3D view" '
+                f'style="width:100%;height:100%;border:none"></iframe></div>')
+
+    def _repr_html_(self) -> str:
+        if self.closed:
+            return "<p>snakekit viewer (closed)</p>"
+        return self.iframe()
+
+    # --- scene -----------------------------------------------------------------------------
+
+    def _setup_scene(self) -> None:
+        v = self.vis
+        v["/Background"].set_property("visible", False)  # plain white
+        v["/Axes"].set_property("visible", False)
+        # meshcat's grid is 20 m in 0.5 m squares: make it 1 m in 25 mm squares, under the base.
+        floor = min(b.origin[2] - b.size[2] / 2 for b in self._boxes)
+        grid = np.diag([0.05, 0.05, 0.05, 1.0])
+        grid[2, 3] = floor
+        v["/Grid"].set_transform(grid)
+        # The default camera sits 3 m away; bring it to the 0.33 m arm. Camera coordinates
+        # are meshcat's y-up frame: (x, y, z)_camera = (x, z, -y)_world.
+        v["/Cameras/default/rotated/<object>"].set_property("position", [-0.05, 0.32, 0.30])
+        self._draw_arm(ROBOT, opacity=1.0)
+
+    def _draw_arm(self, root: str, *, opacity: float) -> None:
+        for b in self._boxes:
+            node = self.vis[f"{root}/{b.link}/{b.name}"]
+            color = b.color if opacity == 1.0 else 0x2E86DE
+            node.set_object(mg.Box(b.size), mg.MeshLambertMaterial(color=color, opacity=opacity))
+            node.set_transform(_translation(*b.origin))
+
+    def _pose(self, root: str, q: np.ndarray) -> None:
+        frames = joint_frames(q, spec=self.spec)
+        for i, link in enumerate(self._links[1:]):
+            self.vis[f"{root}/{link}"].set_transform(frames[i])
+
+    def show(self, q) -> None:
+        """Pose the arm at joint angles ``q`` [rad] (one per joint, base to tip)."""
+        self._check_open()
+        q = as_configuration(q, self.spec)
+        self._pose(ROBOT, q)
+        self.q = q.copy()
+
+    def show_goal(self, q) -> None:
+        """Show a translucent blue arm at ``q`` [rad]: where the next move will go."""
+        self._check_open()
+        q = as_configuration(q, self.spec, "goal q")
+        if not self._goal_drawn:
+            self._draw_arm(GOAL, opacity=0.35)
+            self._goal_drawn = True
+        self.vis[GOAL].set_property("visible", True)
+        self._pose(GOAL, q)
+
+    def hide_goal(self) -> None:
+        """Hide the goal arm."""
+        self._check_open()
+        if self._goal_drawn:
+            self.vis[GOAL].set_property("visible", False)
+
+    # --- marks -----------------------------------------------------------------------------
+
+    def draw_target(self, x: float, y: float, heading: float | None = None, *,
+                    closest: tuple[float, float] | None = None, name: str = "target") -> None:
+        """Mark a tool target at (``x``, ``y``) [m], with an arrow along ``heading`` [rad].
+
+        A reachable target is green. Give ``closest`` (the closest reachable point [m]) for
+        an unreachable one: the target turns red and an orange dot on the closest point is
+        joined to it by a line.
+        """
+        self._check_open()
+        root = self.vis[f"{MARKS}/{name}"]
+        root.delete()
+        bad = closest is not None
+        color = 0xD62728 if bad else 0x2CA02C
+        root["point"].set_object(mg.Sphere(0.007), mg.MeshLambertMaterial(color=color))
+        root["point"].set_transform(_translation(x, y))
+        if heading is not None:
+            length = 0.03
+            root["heading"].set_object(mg.Box([length, 0.003, 0.003]), mg.MeshLambertMaterial(color=color))
+            root["heading"].set_transform(_translation(x, y) @ _rot_z(heading) @ _translation(length / 2, 0))
+        if bad:
+            cx, cy = closest
+            root["closest"].set_object(mg.Sphere(0.006), mg.MeshLambertMaterial(color=0xFF7F0E))
+            root["closest"].set_transform(_translation(cx, cy))
+            gap = _points3([[cx, cy], [x, y]]).T
+            root["gap"].set_object(mg.Line(mg.PointsGeometry(gap), mg.LineBasicMaterial(color=0xD62728)))
+
+    def draw_path(self, path, *, name: str = "path", color: int = 0x1F77B4) -> np.ndarray:
+        """Draw a tool path: points (N, 2) or (N, 3) [m], or the tool path of a trajectory or run.
+
+        For a :class:`~snakekit.robot.Run` the measured motion is drawn. Returns the points
+        drawn (N, 3) [m].
+        """
+        self._check_open()
+        if isinstance(path, Run):
+            path = path.measured
+        if isinstance(path, Trajectory):
+            pts = np.array([forward_kinematics(q, spec=self.spec)[:3, 3] for q in path.positions])
+        else:
+            pts = _points3(path)
+        self.vis[f"{MARKS}/{name}"].set_object(
+            mg.Line(mg.PointsGeometry(pts.T), mg.LineBasicMaterial(color=color, linewidth=2)))
+        return pts
+
+    def draw_workspace(self, *, name: str = "workspace", color: int = 0x7F7F7F) -> np.ndarray:
+        """Draw the outer boundary of the tool's workspace; returns it (N, 2) [m]."""
+        self._check_open()
+        boundary = workspace_boundary(spec=self.spec)
+        pts = _points3(boundary)
+        self.vis[f"{MARKS}/{name}"].set_object(
+            mg.LineLoop(mg.PointsGeometry(pts.T), mg.LineBasicMaterial(color=color)))
+        return boundary
+
+    def clear(self, name: str | None = None) -> None:
+        """Remove one mark (by name), or all marks."""
+        self._check_open()
+        self.vis[MARKS if name is None else f"{MARKS}/{name}"].delete()
+
+    # --- playback --------------------------------------------------------------------------
+
+    def animate(self, motion, *, fps: float = 30.0, play: bool = True, repetitions: int = 1,
+                path: bool = True) -> int:
+        """Play a trajectory or a run back in the view, with meshcat's animation controls.
+
+        The controls (play, pause, reset, time scrubber, speed) are in the view's
+        "Open Controls" menu under "Animations". A run plays its measured motion.
+
+        Args:
+            motion: a :class:`~snakekit.trajectory.Trajectory` or :class:`~snakekit.robot.Run`.
+            fps: frames per second of the animation [Hz]; the motion plays at real speed.
+            play: start playing at once.
+            repetitions: how many times to play it.
+            path: also draw the tool path (mark ``"path"``).
+
+        Returns:
+            the number of frames.
+        """
+        self._check_open()
+        traj = motion.measured if isinstance(motion, Run) else motion
+        if not isinstance(traj, Trajectory):
+            raise InputTypeError(f"animate() takes a snakekit Trajectory or Run, got {type(motion).__name__}")
+        if not fps > 0:
+            raise ConfigurationError(f"fps must be > 0 [Hz], got {fps}")
+        count = int(np.ceil(traj.duration * fps - 1e-9)) + 1  # the last frame holds the end pose
+        times = traj.times[0] + np.arange(count) / fps
+        qs = traj.sample(times)
+        anim = Animation(default_framerate=fps)
+        for frame, q in enumerate(qs):
+            frames = joint_frames(q, spec=self.spec)
+            with anim.at_frame(self.vis, frame) as f:
+                for i, link in enumerate(self._links[1:]):
+                    f[f"{ROBOT}/{link}"].set_transform(frames[i])
+        self.vis.set_animation(anim, play=play, repetitions=repetitions)
+        if path:
+            self.draw_path(traj)
+        # Where the arm ends is where later show() calls start from.
+        self.q = np.array(qs[-1])
+        return count
+
+    # --- export ----------------------------------------------------------------------------
+
+    def static_html(self) -> str:
+        """The scene as one self-contained HTML page (meshcat's JavaScript inlined)."""
+        self._check_open()
+        return self.vis.static_html()
+
+    def save_html(self, path) -> Path:
+        """Write :meth:`static_html` to ``path`` (opens offline, e.g. in grading feedback)."""
+        path = Path(path)
+        path.write_text(self.static_html(), encoding="utf-8")
+        return path
