@@ -69,6 +69,10 @@ class FileFormatError(SnakekitError, ValueError):
     """A file could not be read as what it claims to be (truncated, wrong columns...)."""
 
 
+class PacketError(SnakekitError, ValueError):
+    """Bytes that are not one well-formed Dynamixel Protocol 2.0 packet."""
+
+
 class BackendError(SnakekitError):
     """A robot backend could not be made or used (unknown name, closed robot...)."""
 

@@ -150,7 +150,7 @@ class ProfilePlanner:
         n = positions.size
         self.profile_velocity = np.broadcast_to(np.asarray(profile_velocity), (n,)).astype(int)
         self.profile_acceleration = np.broadcast_to(np.asarray(profile_acceleration), (n,)).astype(int)
-        self.profiles = [JointProfile(t, float(p), 0.0, float(p), 0.0, 0.0) for p in positions]
+        self.profiles = [JointProfile(t, float(p), 0.0, float(p), 0.0, 0.0) for p in positions]  # at rest
 
     @property
     def goals(self) -> np.ndarray:
@@ -162,6 +162,13 @@ class ProfilePlanner:
             self.profile_velocity[joint] = velocity
         if acceleration is not None:
             self.profile_acceleration[joint] = acceleration
+
+    def hold(self, t: float, joint: int, position: float) -> None:
+        """From time ``t`` [s], ``joint`` (0-based) rests at ``position`` [rad], whatever it was doing.
+
+        What a servo's reference does when torque comes on where the joint now is.
+        """
+        self.profiles[joint] = JointProfile(t, float(position), 0.0, float(position), 0.0, 0.0)
 
     def set_goal(self, t: float, goals, joints=None):
         """New goal position(s) [rad] at time ``t`` [s]; re-plans from the present reference."""

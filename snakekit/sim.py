@@ -17,10 +17,11 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from mujoco import rollout  # noqa: E402
 
-from .kinematics import as_configuration, check_limits  # noqa: E402
+from .errors import ConfigurationError  # noqa: E402
 from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf  # noqa: E402
 from .robot import JointState, Robot, Run  # noqa: E402
 from .trajectory import Trajectory  # noqa: E402
+from .validate import as_configuration, check_limits  # noqa: E402
 from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner  # noqa: E402
 
 
@@ -164,10 +165,40 @@ class SimRobot(Robot):
 
     def step(self, duration: float) -> None:
         """Let the simulation run for ``duration`` [s] holding the present goals."""
-        if duration < 0:
-            raise ValueError(f"duration must be >= 0 s, got {duration}")
+        if not duration >= 0:
+            raise ConfigurationError(f"duration must be >= 0 s, got {duration}")
         self._check_open()
         self._advance(self._now() + duration)
+
+    # --- the servos' side, for the bus emulator ------------------------------------------------
+
+    @property
+    def time(self) -> float:
+        """The robot clock [s]: simulated time since the simulator was made."""
+        return self._now()
+
+    def advance_to(self, t: float) -> None:
+        """Step the simulation until the robot clock reaches ``t`` [s] (nothing if it has)."""
+        if t > self._now():
+            self._advance(t)
+
+    def set_servo_goals(self, q) -> None:
+        """Goal positions [rad] as the servos' firmware receives them, from now on.
+
+        Unlike :meth:`command`, the joint limits are not checked here: this is the firmware's
+        side of the bus, and the bus emulator's servos apply their own Min/Max Position
+        Limit registers before a goal gets here.
+        """
+        self._send(as_configuration(q, self.spec, "servo goals"))
+
+    def hold_joint(self, joint: int, position: float) -> None:
+        """From now on, the servo of ``joint`` (0-based) holds ``position`` [rad] at rest.
+
+        Its profile restarts there, and so does the position loop's reference (the actuator
+        state), as when a servo's torque comes on where the joint is.
+        """
+        self.planner.hold(self._now(), joint, position)
+        self.data.act[joint] = position
 
     # --- rendering ----------------------------------------------------------------------------
 

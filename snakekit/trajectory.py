@@ -289,8 +289,13 @@ def trapezoidal_time_scaling(T: float, t, *, accel_fraction: float = 0.25):
                     np.where(t <= T - ta, v * (t - ta / 2), 1 - 0.5 * a * (T - t) ** 2))
 
 
-_SCALINGS = {"cubic": (cubic_time_scaling, 1.5), "quintic": (quintic_time_scaling, 1.875),
-             "trapezoidal": (trapezoidal_time_scaling, 4 / 3)}
+# Each scaling with its peak speed, as a multiple of the average speed 1/T (so a move of
+# distance d in time T peaks at factor * d / T):
+#   cubic       s' = 6 r (1 - r) / T, largest at r = 1/2:          6/4   = 1.5
+#   quintic     s' = 30 r^2 (1 - r)^2 / T, largest at r = 1/2:     30/16 = 1.875
+#   trapezoidal cruise speed 1 / (T - ta), with ta = T/4 (default): 1/(1 - 1/4) = 4/3
+_SCALINGS = {"cubic": (cubic_time_scaling, 6 / 4), "quintic": (quintic_time_scaling, 30 / 16),
+             "trapezoidal": (trapezoidal_time_scaling, 1 / (1 - 0.25))}
 
 
 def joint_trajectory(q_start, q_end, duration: float | None = None, *, method: str = "quintic",

@@ -29,7 +29,7 @@ __all__ = ["BusEmulator", "Faults", "Received", "Write", "MujocoMotion", "Profil
 
 def make_emulated_robot(*, motion: str = "mujoco", faults: Faults | None = None, q0=None,
                         timing: bool = False, boot_time: float = 0.05, baudrate: int = 4_000_000,
-                        ids=(1, 2, 3, 4, 5), **robot_options):
+                        ids=None, **robot_options):
     """A :class:`~snakekit.hardware.DynamixelSnake` connected to an emulated bus in a thread.
 
     The bus emulator is started first, on its own pseudo-terminal; closing the robot stops
@@ -42,7 +42,7 @@ def make_emulated_robot(*, motion: str = "mujoco", faults: Faults | None = None,
         timing: emulate the return delay and wire time of each status packet.
         boot_time: how long a rebooted servo stays silent [s].
         baudrate: bus speed [baud].
-        ids: servo ids, base to tip.
+        ids: servo ids, base to tip (default: the spec's).
         **robot_options: keyword options of :class:`~snakekit.hardware.DynamixelSnake`
             (``on_close``, ``retries``, ``profile_velocity``...).
     """

@@ -26,9 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ConfigurationError, InputTypeError
 from ..model import SPEC, SnakeSpec
 from . import protocol as p
-from .control_table import field_at, to_signed
+from .control_table import FIRMWARE_VERSION_ADDRESS, MODEL_NUMBER_ADDRESS, field_at, to_signed
 from .faults import NO_FAULTS, Faults
 from .motion import MOTION_SOURCES, MotionSource
 from .servo import OVERLOAD, EmulatedServo
@@ -93,18 +94,18 @@ class BusEmulator:
         spec: the arm.
     """
 
-    def __init__(self, *, ids=(1, 2, 3, 4, 5), motion: str | MotionSource = "mujoco", q0=None,
+    def __init__(self, *, ids=None, motion: str | MotionSource = "mujoco", q0=None,
                  baudrate: int = 4_000_000, timing: bool = False, boot_time: float = 0.05,
                  faults: Faults = NO_FAULTS, record_limit: int = 200_000, spec: SnakeSpec = SPEC):
-        ids = tuple(int(i) for i in ids)
+        ids = tuple(int(i) for i in (spec.servo_ids if ids is None else ids))
         if len(ids) != spec.n_joints or len(set(ids)) != len(ids) or not all(0 <= i <= p.MAX_ID for i in ids):
-            raise ValueError(f"ids must be {spec.n_joints} distinct servo ids in 0..252, got {ids}")
+            raise ConfigurationError(f"ids must be {spec.n_joints} distinct servo ids in 0..252, got {ids}")
         if baudrate not in BAUD_RATES:
-            raise ValueError(f"an MX-28 runs at one of {', '.join(map(str, BAUD_RATES))} baud, got {baudrate}")
+            raise ConfigurationError(f"an MX-28 runs at one of {', '.join(map(str, BAUD_RATES))} baud, got {baudrate}")
         q0 = spec.home if q0 is None else np.asarray(q0, dtype=float)
         if isinstance(motion, str):
             if motion not in MOTION_SOURCES:
-                raise ValueError(f"unknown motion source '{motion}'; choose one of {', '.join(MOTION_SOURCES)}")
+                raise ConfigurationError(f"unknown motion source '{motion}'; choose one of {', '.join(MOTION_SOURCES)}")
             kw = {"spec": spec} if motion == "mujoco" else {}
             motion = MOTION_SOURCES[motion](q0, **kw)
         self.motion = motion
@@ -113,7 +114,7 @@ class BusEmulator:
         self.timing = timing
         self.boot_time = boot_time
         self.spec = spec
-        self.servos = [EmulatedServo(i, j, motion) for j, i in enumerate(ids)]
+        self.servos = [EmulatedServo(i, j, motion, stall_torque=spec.servo.stall_torque) for j, i in enumerate(ids)]
         self.record: collections.deque[Received] = collections.deque(maxlen=record_limit)
         #: packets whose handling raised (the first traceback is printed), for tests
         self.errors: list[tuple[p.Packet, Exception]] = []
@@ -148,7 +149,7 @@ class BusEmulator:
     @faults.setter
     def faults(self, faults: Faults) -> None:
         if not isinstance(faults, Faults):
-            raise TypeError(f"faults must be a snakekit.emulator.Faults, got {type(faults).__name__}")
+            raise InputTypeError(f"faults must be a snakekit.emulator.Faults, got {type(faults).__name__}")
         with self._lock:
             self._faults = faults
             self._fault_budget = faults.count
@@ -370,7 +371,7 @@ class BusEmulator:
             return [(s, p.status(s.id, s.error_byte(error), data))]
 
         if inst == p.PING:
-            return [(s, p.status(s.id, s.error_byte(), s.memory.data[0:2] + s.memory.data[6:7])) for s in targets]
+            return [(s, p.status(s.id, s.error_byte(), s.memory.read(MODEL_NUMBER_ADDRESS, 2)[1] + s.memory.read(FIRMWARE_VERSION_ADDRESS, 1)[1])) for s in targets]
         if inst in (p.READ, p.WRITE, p.REG_WRITE) and len(params) < (4 if inst == p.READ else 3):
             return [] if broadcast else reply(s, p.DATA_LENGTH_ERROR, level=1)
         if inst == p.READ:

@@ -1,5 +1,9 @@
 """The MX-28(2.0) control table: every field's address, size, access, default and range.
 
+This table is written from the ROBOTIS e-manual independently of the driver's own register
+map (:mod:`snakekit.hardware.registers`), on purpose: the emulator is a test of the driver,
+and a shared table would let one mistake pass in both.
+
 One :class:`Field` a register; :data:`MX28_TABLE` lists them in address order. A
 :class:`Memory` holds one servo's bytes and knows which writes the firmware refuses.
 Indirect addresses (168 and up) are not modelled: reading or writing there is an access
@@ -116,9 +120,16 @@ for _field in MX28_TABLE:
     for _a in range(_field.address, _field.address + _field.size):
         _OWNER[_a] = _field
 
-TORQUE_ENABLE = 64
-HARDWARE_ERROR_STATUS = 70
-GOAL_POSITION = 116
+# Addresses the firmware model reads on every packet, by name (looked up once, here).
+MODEL_NUMBER_ADDRESS = FIELDS["Model Number"].address
+FIRMWARE_VERSION_ADDRESS = FIELDS["Firmware Version"].address
+RETURN_DELAY_TIME = FIELDS["Return Delay Time"].address
+HOMING_OFFSET = FIELDS["Homing Offset"].address
+TORQUE_ENABLE = FIELDS["Torque Enable"].address
+STATUS_RETURN_LEVEL = FIELDS["Status Return Level"].address
+HARDWARE_ERROR_STATUS = FIELDS["Hardware Error Status"].address
+GOAL_POSITION = FIELDS["Goal Position"].address
+REALTIME_TICK = FIELDS["Realtime Tick"].address
 HARDWARE_ERROR_BITS = {0: "input voltage", 2: "overheating", 3: "motor encoder",
                        4: "electrical shock", 5: "overload"}
 VALID_OPERATING_MODES = (1, 3, 4, 16)

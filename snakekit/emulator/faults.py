@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..errors import ConfigurationError
+
 
 @dataclass(frozen=True)
 class Faults:
@@ -40,9 +42,9 @@ class Faults:
         for name in ("drop", "corrupt", "delay"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
-                raise ValueError(f"Faults.{name} is a probability in [0, 1], got {v}")
+                raise ConfigurationError(f"Faults.{name} is a probability in [0, 1], got {v}")
         if self.delay_time < 0 or self.overload_after < 0:
-            raise ValueError("Faults.delay_time and Faults.overload_after are durations >= 0 s")
+            raise ConfigurationError("Faults.delay_time and Faults.overload_after are durations >= 0 s")
         object.__setattr__(self, "missing", tuple(int(i) for i in self.missing))
         object.__setattr__(self, "overload", tuple(int(i) for i in self.overload))
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import SPEC, SnakeSpec
-from ..profile_planner import JointProfile, ProfilePlanner
+from ..profile_planner import ProfilePlanner
 
 
 class MotionSource:
@@ -66,12 +66,11 @@ class ProfileMotion(MotionSource):
         if on == self.torque[joint]:
             return
         if on:
-            p = float(self.limp[joint])
-            self.planner.profiles[joint] = JointProfile(t, p, 0.0, p, 0.0, 0.0)
+            self.planner.hold(t, joint, float(self.limp[joint]))
             self.torque[joint] = True
             self.planner.set_goal(t, [goal], [joint])
         else:
-            self.limp[joint] = self.planner.profiles[joint].at(t)[0]
+            self.limp[joint] = self.planner.at(t)[0][joint]
             self.torque[joint] = False
 
     def state(self, t):
@@ -85,10 +84,11 @@ class ProfileMotion(MotionSource):
 class MujocoMotion(MotionSource):
     """The simulated arm, advanced to the emulator's clock (1 ms steps).
 
-    Only the robot interface of :class:`~snakekit.sim.SimRobot` is used (``_send``,
-    ``_now``, ``_advance``, its ``planner``, ``model`` and ``data``): goals for all joints
-    go in together, a joint's unchanged goal re-plans to the same motion. Torque off sets
-    the joint's actuator gains to zero, so the joint coasts.
+    The simulator is driven through its servo-side methods (:meth:`~snakekit.sim.SimRobot.advance_to`,
+    :meth:`~snakekit.sim.SimRobot.set_servo_goals`, :meth:`~snakekit.sim.SimRobot.hold_joint`):
+    goals for all joints go in together, a joint's unchanged goal re-plans to the same
+    motion. Torque off sets the joint's actuator gains to zero in the MuJoCo model, so the
+    joint coasts.
     """
 
     name = "mujoco"
@@ -115,14 +115,13 @@ class MujocoMotion(MotionSource):
 
     def advance(self, t: float) -> None:
         """Step the simulation up to the emulator's time ``t`` [s]."""
-        if t > self.sim._now():
-            self.sim._advance(t)
+        self.sim.advance_to(t)
 
     def set_goal(self, t, joint, goal):
         self.advance(t)
         self.goals[joint] = goal
         if self.torque[joint]:
-            self.sim._send(self.goals.copy())
+            self.sim.set_servo_goals(self.goals)
 
     def set_profile(self, t, joint, velocity, acceleration):
         self.sim.planner.set_profile(joint, velocity, acceleration)
@@ -132,13 +131,10 @@ class MujocoMotion(MotionSource):
         if on == self.torque[joint]:
             return
         if on:
-            now = self.sim._now()
-            p = float(self.sim.data.qpos[joint])
-            self.sim.planner.profiles[joint] = JointProfile(now, p, 0.0, p, 0.0, 0.0)
-            self.sim.data.act[joint] = p
+            self.sim.hold_joint(joint, float(self.sim.data.qpos[joint]))
             self._actuator(joint, True)
             self.goals[joint] = goal
-            self.sim._send(self.goals.copy())
+            self.sim.set_servo_goals(self.goals)
         else:
             self._actuator(joint, False)
 

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..errors import PacketError
+
 HEADER = b"\xff\xff\xfd\x00"
 BROADCAST_ID = 0xFE
 MAX_ID = 0xFC
@@ -173,10 +175,10 @@ class Parser:
 
 
 def decode(raw: bytes) -> Packet:
-    """Decode exactly one packet from ``raw``; ``ValueError`` if it doesn't hold exactly one."""
+    """Decode exactly one packet from ``raw``; :class:`~snakekit.errors.PacketError` if it doesn't hold exactly one."""
     packets = Parser().feed(raw)
     if len(packets) != 1:
-        raise ValueError(f"expected one packet in {raw.hex(' ')}, found {len(packets)}")
+        raise PacketError(f"expected one packet in {raw.hex(' ')}, found {len(packets)}")
     return packets[0]
 
 

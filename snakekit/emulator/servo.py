@@ -10,16 +10,18 @@ import math
 import struct
 
 from . import protocol as p
-from .control_table import FIELDS, HARDWARE_ERROR_STATUS, Memory
+from ..model import SPEC
+from .control_table import (FIELDS, GOAL_POSITION, HARDWARE_ERROR_STATUS, HOMING_OFFSET, REALTIME_TICK,
+                            RETURN_DELAY_TIME, STATUS_RETURN_LEVEL, TORQUE_ENABLE, Memory)
 
 TICKS_PER_RAD = 4096 / (2 * math.pi)
 VELOCITY_UNIT = 0.229 * 2 * math.pi / 60  # rad/s per Present Velocity unit
-STALL_TORQUE = 2.5  # N m, = 100 % Present Load
-OVERLOAD = 1 << 5
+RETURN_DELAY_UNIT = 2e-6  # s per Return Delay Time unit
+OVERLOAD = 1 << 5  # Hardware Error Status bit
 # Realtime Tick, Moving, Moving Status, Present PWM, Load, Velocity, Position,
 # Velocity Trajectory, Position Trajectory: addresses 120..143, one block
 _PRESENT = struct.Struct("<HBBhhiiii")
-_HOMING_AND_THRESHOLD = struct.Struct("<iI")  # addresses 20 and 24
+_HOMING_AND_THRESHOLD = struct.Struct("<iI")  # Homing Offset (20) and Moving Threshold (24)
 _I32 = struct.Struct("<i")
 
 
@@ -30,10 +32,12 @@ class EmulatedServo:
         servo_id: its id (control-table address 7).
         joint: which joint of the motion source it drives (0-based).
         motion: the shared :class:`~snakekit.emulator.motion.MotionSource`.
+        stall_torque: the torque that reads as 100 % Present Load [N m].
     """
 
-    def __init__(self, servo_id: int, joint: int, motion):
+    def __init__(self, servo_id: int, joint: int, motion, *, stall_torque: float = SPEC.servo.stall_torque):
         self.memory = Memory(servo_id)
+        self.stall_torque = float(stall_torque)
         self.joint = joint
         self.motion = motion
         self.registered: list | None = None  # a REG_WRITE waiting for ACTION
@@ -50,12 +54,12 @@ class EmulatedServo:
 
     @property
     def status_return_level(self) -> int:
-        return self.memory.data[68]
+        return self.memory.data[STATUS_RETURN_LEVEL]
 
     @property
     def return_delay(self) -> float:
         """Return Delay Time [s]."""
-        return self.memory.data[9] * 2e-6
+        return self.memory.data[RETURN_DELAY_TIME] * RETURN_DELAY_UNIT
 
     def error_byte(self, error: int = 0) -> int:
         return error | (p.ALERT if self.hardware_error else 0)
@@ -74,13 +78,13 @@ class EmulatedServo:
     def refresh(self, t: float, q: float, qd: float, tau: float) -> None:
         """Update the read-only present values (addresses 120..143) from the motion at ``t`` [s]."""
         data = self.memory.data
-        homing, threshold = _HOMING_AND_THRESHOLD.unpack_from(data, 20)
+        homing, threshold = _HOMING_AND_THRESHOLD.unpack_from(data, HOMING_OFFSET)
         position = int(round(2048 + q * TICKS_PER_RAD)) + homing
         vel = int(round(qd / VELOCITY_UNIT))
-        load = max(-1000, min(1000, int(round(1000 * tau / STALL_TORQUE))))
+        load = max(-1000, min(1000, int(round(1000 * tau / self.stall_torque))))
         moving = abs(vel) > threshold
-        goal = _I32.unpack_from(data, 116)[0] if data[64] else position
-        _PRESENT.pack_into(data, 120, int(t * 1000) % 32768, int(moving), 2 if moving else 1,
+        goal = _I32.unpack_from(data, GOAL_POSITION)[0] if data[TORQUE_ENABLE] else position
+        _PRESENT.pack_into(data, REALTIME_TICK, int(t * 1000) % 32768, int(moving), 2 if moving else 1,
                            int(load * 885 / 1000), load, vel, position, vel, goal)
 
     # --- writes -----------------------------------------------------------------------------
@@ -131,13 +135,13 @@ class EmulatedServo:
         """Set Hardware Error Status bits; a bit in Shutdown (63) turns torque off."""
         m = self.memory
         m.set("Hardware Error Status", self.hardware_error | bits)
-        if bits & m.get("Shutdown") and m.data[64]:
+        if bits & m.get("Shutdown") and m.data[TORQUE_ENABLE]:
             m.set("Torque Enable", 0)
             self.motion.set_torque(t, self.joint, False, 0.0)
 
     def reboot(self, t: float, boot_time: float) -> None:
         """RAM back to defaults (torque off, errors cleared); silent for ``boot_time`` [s]."""
-        if self.memory.data[64]:
+        if self.memory.data[TORQUE_ENABLE]:
             self.motion.set_torque(t, self.joint, False, 0.0)
         self.memory.reset_ram()
         self.registered = None
