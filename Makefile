@@ -31,5 +31,9 @@ lock:
 generate: setup
 	$(VENV)/bin/snakekit generate
 
+# Fails when a generated file (URDF, MJCF) is out of date with the spec it comes from.
+check-generated: setup
+	$(VENV)/bin/snakekit generate --check
+
 clean:
 	rm -rf $(VENV) .pytest_cache artifacts

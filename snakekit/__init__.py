@@ -14,8 +14,8 @@ _os.environ.setdefault("MUJOCO_GL", "egl")
 
 from .errors import (  # noqa: E402
     BackendError, CommunicationError, ConfigurationError, FileFormatError, HardwareError,
-    InputTypeError, InstructionError, LimitError, NotFiniteError, ServoMismatchError, ShapeError,
-    SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
+    InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError,
+    ServoMismatchError, ShapeError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
 from .model import SPEC, SnakeSpec  # noqa: E402
 
@@ -36,6 +36,7 @@ __all__ = [
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
     "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "BackendError",
     "CommunicationError", "HardwareError", "ServoMismatchError", "InstructionError", "ViewerError",
+    "MissingDependencyError", "PacketError",
 ]
 
 

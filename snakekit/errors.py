@@ -21,6 +21,10 @@ class InputTypeError(SnakekitError, TypeError):
     """An argument is of the wrong kind (a list where a Trajectory is needed...)."""
 
 
+class MissingDependencyError(SnakekitError, ImportError):
+    """A package the kit needs for this part is not installed; the message names the install step."""
+
+
 class ShapeError(SnakekitError, ValueError):
     """An array has the wrong shape, e.g. 4 joint angles for a 5-joint arm."""
 

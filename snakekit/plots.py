@@ -1,10 +1,35 @@
-"""Plots of runs, with matplotlib (no display needed)."""
+"""Plots of runs, with matplotlib (no display needed).
+
+Angles are drawn in degrees, the unit people read at a glance (the API stays in radians);
+every axis says its unit. The figures are not attached to pyplot (no global state, nothing
+to close), and show as a PNG picture when they are the last value of a notebook cell or
+are passed to ``display``, whatever matplotlib backend the kernel has loaded.
+"""
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
+from matplotlib.figure import Figure
 
 from .robot import Run
+
+#: the unit of every angle in a plot or a summary
+ANGLE_UNIT = "deg"
+
+
+class RunFigure(Figure):
+    """A matplotlib Figure that a notebook shows as a PNG picture.
+
+    IPython shows a bare ``Figure`` as text (``<Figure size 1200x990 with 10 Axes>``) until
+    pyplot's inline backend has registered an image formatter; this one brings its own.
+    """
+
+    def _repr_png_(self) -> bytes:
+        buf = io.BytesIO()
+        self.savefig(buf, format="png", dpi=self.dpi)
+        return buf.getvalue()
 
 
 def plot_run(run: Run, *, title: str | None = None, zoom: float = 3.0):
@@ -14,10 +39,8 @@ def plot_run(run: Run, *, title: str | None = None, zoom: float = 3.0):
     (where a fast motion can be seen). Joint limits are drawn when the motion comes near them.
     Returns the matplotlib Figure (save it with ``fig.savefig(path)``).
     """
-    from matplotlib.figure import Figure  # no pyplot: no global state, no display
-
     n = run.measured.n_joints
-    fig = Figure(figsize=(12, 1.8 * n + 0.9), layout="constrained")
+    fig = RunFigure(figsize=(12, 1.8 * n + 0.9), layout="constrained")
     axes = fig.subplots(n, 2, sharex="col", sharey="row", width_ratios=[3, 1], squeeze=False)
     err = run.tracking_error()
     cmd_t, cmd_q = run.commanded.times, np.degrees(run.commanded.positions)
@@ -35,7 +58,7 @@ def plot_run(run: Run, *, title: str | None = None, zoom: float = 3.0):
                 if abs(bound - (lo + hi) / 2) < span:
                     ax.axhline(bound, color="tab:red", lw=0.8, ls="--", label="joint limit")
             ax.grid(alpha=0.3)
-        axes[j, 0].set_ylabel(f"joint {j + 1}\nangle [deg]")
+        axes[j, 0].set_ylabel(f"joint {j + 1}\nangle [{ANGLE_UNIT}]")
         axes[j, 0].text(0.995, 0.04, f"max tracking error {np.degrees(err[j]):.2f} deg",
                         transform=axes[j, 0].transAxes, ha="right", va="bottom", fontsize=8,
                         bbox=dict(facecolor="white", alpha=0.7, lw=0))
@@ -52,26 +75,23 @@ def plot_run(run: Run, *, title: str | None = None, zoom: float = 3.0):
 
 
 def plot_move(run: Run, *, title: str | None = None):
-    """Commanded (dashed) and measured (solid) angle of every joint against time.
+    """Commanded (dashed) and measured (solid) angle [deg] of every joint against time.
 
-    Returns a matplotlib figure that is not attached to pyplot (nothing to close, no
-    backend needed); a notebook displays it as an image. All joints share one panel: made
-    for the short moves of the control panel (see :func:`plot_run` for long runs).
+    All joints share one panel: made for the short moves of the control panel (see
+    :func:`plot_run` for long runs). Returns the figure (a notebook shows it as a picture).
     """
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(7.5, 3.2), layout="constrained")
+    fig = RunFigure(figsize=(7.5, 3.2), layout="constrained")
     ax = fig.add_subplot()
     colors = [f"C{j}" for j in range(run.commanded.n_joints)]
     for j, c in enumerate(colors):
-        ax.plot(run.measured.times, run.measured.positions[:, j], color=c, lw=1.6, label=f"joint {j + 1}")
-        ax.plot(run.commanded.times, run.commanded.positions[:, j], color=c, lw=1.0, ls="--")
+        ax.plot(run.measured.times, np.degrees(run.measured.positions[:, j]), color=c, lw=1.6, label=f"joint {j + 1}")
+        ax.plot(run.commanded.times, np.degrees(run.commanded.positions[:, j]), color=c, lw=1.0, ls="--")
     ax.plot([], [], color="k", lw=1.0, ls="--", label="commanded")
     ax.plot([], [], color="k", lw=1.6, label="measured")
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("joint angle [rad]")
+    ax.set_ylabel(f"joint angle [{ANGLE_UNIT}]")
     ax.set_title(title or f"commanded vs measured ({run.backend}); "
-                          f"largest tracking error {np.max(run.tracking_error()):.3f} rad")
+                          f"largest tracking error {np.degrees(np.max(run.tracking_error())):.2f} {ANGLE_UNIT}")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8, frameon=False)
     return fig

@@ -103,7 +103,10 @@ class Run:
         return float(np.linalg.norm(a - b))
 
     def summary(self) -> str:
-        """A few lines for a person: times, tracking error per joint, limits, end pose."""
+        """A few lines for a person: times, tracking error per joint, limits, end pose.
+
+        Angles are in degrees (as in the plots), lengths in millimetres.
+        """
         err = self.tracking_error()
         lines = [
             f"backend:            {self.backend}{' (real time)' if self.realtime else ' (as fast as possible)'}",
@@ -112,7 +115,7 @@ class Run:
             f"wall time:          {self.wall_time:.2f} s ({self.robot_time / max(self.wall_time, 1e-9):.1f}x real time)",
             "max tracking error: " + "  ".join(f"j{j + 1} {np.degrees(e):.2f} deg" for j, e in enumerate(err)),
             f"limits held:        {'yes' if self.limits_held() else 'NO'}",
-            f"final joint angles: " + " ".join(f"{q:+.4f}" for q in self.measured.positions[-1]) + " rad",
+            "final joint angles: " + " ".join(f"{q:+.2f}" for q in np.degrees(self.measured.positions[-1])) + " deg",
             f"final distance from home (tool): {1000 * self.final_distance_from_home():.2f} mm",
         ]
         return "\n".join(lines)

@@ -225,6 +225,19 @@ def test_a_few_lost_packets_are_retried(robot):
     assert torques(bus) == [1] * 5
 
 
+def test_a_lost_ping_is_retried_and_counted(robot):
+    """PING goes through the same retry loop as every other request, and is counted."""
+    bus = robot.emulator
+    bus.clear_record()
+    before = robot.retried
+    bus.faults = Faults(drop=1.0, count=2)
+    info = robot.ping(3)
+    pings = bus.received("PING")
+    assert info.model_number == 30 and info.id == 3
+    assert [r.fault for r in pings[:2]] == ["dropped", "dropped"]
+    assert robot.retried - before == len(pings) - 1 >= 2
+
+
 def test_a_servo_lost_mid_run_stops_the_arm(robot):
     bus = robot.emulator
     bus.faults = Faults(missing=(3,))

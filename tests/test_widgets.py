@@ -152,11 +152,11 @@ def test_plot_shows_commanded_and_measured_with_units(sim):
     panel.set_joints([0.5, -0.3, 0.2, 0.0, 0.1])
     run = panel.execute()
     ax = panel.last_figure.axes[0]
-    assert ax.get_xlabel() == "time [s]" and ax.get_ylabel() == "joint angle [rad]"
+    assert ax.get_xlabel() == "time [s]" and ax.get_ylabel() == "joint angle [deg]"
     lines = [ln for ln in ax.get_lines() if len(ln.get_xdata())]
     assert len(lines) == 10  # measured and commanded, per joint
     measured = lines[0]
-    assert measured.get_ydata() == pytest.approx(run.measured.positions[:, 0])
+    assert measured.get_ydata() == pytest.approx(np.degrees(run.measured.positions[:, 0]))
     assert lines[1].get_linestyle() == "--"
     assert plot_move(run).axes[0].get_legend() is not None
 

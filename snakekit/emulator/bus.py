@@ -182,7 +182,7 @@ class BusEmulator:
         try:
             return self._by_id[servo_id]
         except KeyError:
-            raise KeyError(f"no emulated servo with id {servo_id}; ids: {sorted(self._by_id)}") from None
+            raise ConfigurationError(f"no emulated servo with id {servo_id}; ids: {sorted(self._by_id)}") from None
 
     def servo(self, servo_id: int) -> EmulatedServo:
         """The emulated servo with id ``servo_id`` (to inspect its control table)."""

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..errors import ConfigurationError
+
 from . import protocol as p
 
 MODEL_NUMBER = 30
@@ -139,7 +141,7 @@ def field_at(address: int) -> Field:
     """The field that starts at ``address`` (``KeyError`` if none does)."""
     f = _OWNER[address] if 0 <= address < TABLE_SIZE else None
     if f is None or f.address != address:
-        raise KeyError(f"no MX-28 control-table field starts at address {address}")
+        raise ConfigurationError(f"no MX-28 control-table field starts at address {address}")
     return f
 
 

@@ -13,32 +13,34 @@ With torque off a joint is limp: it stays where it is (profile) or coasts (MuJoC
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import numpy as np
 
 from ..model import SPEC, SnakeSpec
 from ..profile_planner import ProfilePlanner
 
 
-class MotionSource:
+class MotionSource(ABC):
     """What the bus emulator needs from a physical model of the arm."""
 
     name = "motion"
 
+    @abstractmethod
     def set_goal(self, t: float, joint: int, goal: float) -> None:
         """A new goal [rad] for ``joint`` (0-based) at time ``t`` [s]."""
-        raise NotImplementedError
 
+    @abstractmethod
     def set_profile(self, t: float, joint: int, velocity: int, acceleration: int) -> None:
         """Profile Velocity / Acceleration register values of ``joint``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def set_torque(self, t: float, joint: int, on: bool, goal: float) -> None:
         """Torque on or off; on, the joint moves from where it is towards ``goal`` [rad]."""
-        raise NotImplementedError
 
+    @abstractmethod
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions [rad], velocities [rad/s] and torques [N m] of every joint at ``t`` [s]."""
-        raise NotImplementedError
 
     def close(self) -> None:
         """Free the model."""

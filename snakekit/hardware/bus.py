@@ -13,12 +13,13 @@ import time
 from contextlib import contextmanager
 from typing import Callable
 
-from ..errors import BackendError
+from ..errors import BackendError, MissingDependencyError
 
 try:
     import dynamixel_sdk as sdk
 except ImportError as e:  # pragma: no cover - the kit's environment has it
-    raise BackendError("the hardware backend needs dynamixel-sdk: pip install dynamixel-sdk") from e
+    raise MissingDependencyError("the hardware backend needs dynamixel-sdk: install the kit's environment "
+                                 "with tools/setup (or `pip install dynamixel-sdk`)") from e
 
 COMM_RESULTS = {
     sdk.COMM_PORT_BUSY: "port busy", sdk.COMM_TX_FAIL: "could not send the packet",

@@ -25,7 +25,7 @@ import time
 import warnings
 import weakref
 
-from ..errors import ViewerError
+from ..errors import MissingDependencyError, ViewerError
 
 try:
     import zmq
@@ -34,7 +34,7 @@ try:
         warnings.simplefilter("ignore", DeprecationWarning)
         from meshcat.visualizer import ViewerWindow
 except ImportError as _e:  # pragma: no cover - the kit's environment has meshcat
-    raise ImportError(f"snakekit.viewer needs meshcat ({_e}); install the kit's environment "
+    raise MissingDependencyError(f"snakekit.viewer needs meshcat ({_e}); install the kit's environment "
                       "with tools/setup (or `pip install meshcat`)") from _e
 
 
