@@ -24,6 +24,7 @@ import numpy as np
 
 from .errors import BackendError, ConfigurationError, FileFormatError, InputTypeError, LimitError, ShapeError
 from .model import SPEC, SnakeSpec
+from .progress import LONG_RUN, TextProgress
 from .trajectory import Trajectory, joint_trajectory
 from .validate import check_limits, frozen
 
@@ -203,7 +204,8 @@ class Robot(ABC):
         self._check_open()
         self._send(check_limits(q, self.spec, "commanded q"))
 
-    def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5) -> Run:
+    def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5,
+            progress: bool | None = None) -> Run:
         """Send each point of ``trajectory`` at its time and record the motion.
 
         The whole trajectory is checked against the position and velocity limits first,
@@ -214,6 +216,8 @@ class Robot(ABC):
             trajectory: the goals to send; time 0 of the run is ``trajectory.times[0]``.
             record_rate: how often the state is recorded [Hz].
             settle: how long to keep recording after the last goal [s].
+            progress: show a progress line while it runs (default: when the run is paced
+                by the wall clock and longer than :data:`snakekit.progress.LONG_RUN`).
         """
         self._check_trajectory(trajectory)
         times = trajectory.times - trajectory.times[0]
@@ -227,21 +231,32 @@ class Robot(ABC):
         rec_e = np.empty_like(rec_p)
         sent_t = np.empty(n_goals)
 
+        if progress is None:
+            progress = self.realtime and record_at[-1] > LONG_RUN
+        bar = TextProgress(record_at[-1], f"running on the {self.backend} robot") if progress else None
         wall0 = time.perf_counter()
         t0 = self._now()
         k = r = 0
-        while k < n_goals or r < n_rec:
-            t_goal = times[k] if k < n_goals else np.inf
-            t_rec = record_at[r] if r < n_rec else np.inf
-            self._advance(t0 + min(t_goal, t_rec))
-            if k < n_goals and t_goal <= t_rec:
-                self._send(goals[k])
-                sent_t[k] = self._now() - t0
-                k += 1
-            else:
-                t, rec_p[r], rec_v[r], rec_e[r] = self._record()
-                rec_t[r] = t - t0
-                r += 1
+        complete = False
+        try:
+            while k < n_goals or r < n_rec:
+                t_goal = times[k] if k < n_goals else np.inf
+                t_rec = record_at[r] if r < n_rec else np.inf
+                self._advance(t0 + min(t_goal, t_rec))
+                if k < n_goals and t_goal <= t_rec:
+                    self._send(goals[k])
+                    sent_t[k] = self._now() - t0
+                    k += 1
+                    if bar is not None:
+                        bar.update(t_goal)
+                else:
+                    t, rec_p[r], rec_v[r], rec_e[r] = self._record()
+                    rec_t[r] = t - t0
+                    r += 1
+            complete = True
+        finally:
+            if bar is not None:
+                bar.close(complete=complete)
         wall = time.perf_counter() - wall0
         offset = trajectory.times[0]
         return Run(Trajectory(sent_t + offset, goals, n_joints=self.spec.n_joints),

@@ -114,7 +114,8 @@ class SimRobot(Robot):
             if delay > 0:
                 time.sleep(delay)
 
-    def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5) -> Run:
+    def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5,
+            progress: bool | None = None) -> Run:
         """Send each point of ``trajectory`` at its time and record the motion.
 
         In real time this is :meth:`Robot.run`. As fast as possible, the controls for the
@@ -122,7 +123,7 @@ class SimRobot(Robot):
         same motion, with the same checks before anything moves.
         """
         if self.realtime:
-            return super().run(trajectory, record_rate=record_rate, settle=settle)
+            return super().run(trajectory, record_rate=record_rate, settle=settle, progress=progress)
         self._check_trajectory(trajectory)
         wall0 = time.perf_counter()
         m, d, dt, n = self.model, self.data, self.dt, self.spec.n_joints

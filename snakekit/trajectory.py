@@ -21,9 +21,19 @@ from .validate import check_limits, frozen
 
 @dataclass(frozen=True)
 class Violation:
-    """One limit violation: ``joint`` (1-based) at ``time`` [s] has ``value`` beyond ``bound``.
+    """One stretch of a trajectory where a joint is beyond a limit.
 
-    ``kind`` is ``"position"`` [rad] or ``"velocity"`` [rad/s].
+    Attributes:
+        joint: the joint, counted from 1.
+        kind: ``"position"`` [rad]; ``"velocity"`` [rad/s], the speed between consecutive
+            points (what a servo given these goals must move at); or ``"stored velocity"``
+            [rad/s], the trajectory's own ``velocities`` array.
+        time: when the worst value happens [s] (a speed between points is stamped at the
+            later point).
+        value: the worst value in the stretch.
+        bound: the limit it crosses (signed).
+        start, end: first and last time of the stretch [s].
+        points: how many samples the stretch holds.
     """
 
     joint: int
@@ -31,10 +41,34 @@ class Violation:
     kind: str
     value: float
     bound: float
+    start: float = 0.0
+    end: float = 0.0
+    points: int = 1
 
     def __str__(self) -> str:
         unit = "rad" if self.kind == "position" else "rad/s"
-        return f"joint {self.joint} at t={self.time:.3f} s: {self.kind} {self.value:+.4f} {unit} (limit {self.bound:+.4f})"
+        text = (f"joint {self.joint} at t={self.time:.3f} s: {self.kind} {self.value:+.4f} {unit} "
+                f"(limit {self.bound:+.4f})")
+        if self.points > 1:
+            text += f", beyond it from t={self.start:.3f} to {self.end:.3f} s ({self.points} points)"
+        return text
+
+
+def _stretches(values: np.ndarray, times: np.ndarray, lower: float, upper: float, kind: str) -> list[Violation]:
+    """The stretches of ``values`` (samples x joints) outside ``[lower, upper]``, one per joint,
+    side and contiguous run."""
+    out = []
+    for side, bad_all in ((1, values > upper), (-1, values < lower)):
+        bound = upper if side > 0 else lower
+        for j in np.flatnonzero(bad_all.any(axis=0)):
+            bad = bad_all[:, j]
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(np.int8), [0]])))
+            for first, stop in zip(edges[::2], edges[1::2]):
+                seg = values[first:stop, j]
+                worst = first + int(np.argmax(side * seg))
+                out.append(Violation(int(j) + 1, float(times[worst]), kind, float(values[worst, j]), float(bound),
+                                     float(times[first]), float(times[stop - 1]), int(stop - first)))
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -124,36 +158,40 @@ class Trajectory:
     # --- limits -----------------------------------------------------------------------
 
     def limit_violations(self, spec: SnakeSpec = SPEC, *, velocity: bool = True) -> list[Violation]:
-        """Every point beyond the position limits, and every step faster than the velocity limit.
+        """Where the trajectory is beyond the limits: one :class:`Violation` per stretch.
 
-        Velocities are checked on the finite differences between points (what a servo that
-        receives these goals must do), and on ``velocities`` when given.
+        A stretch is a run of consecutive samples where one joint is beyond one limit, on one
+        side; its worst value is reported. Positions are checked against the joint limits;
+        speeds between consecutive points (``"velocity"``: what a servo given these goals
+        must do) and the stored ``velocities``, when given (``"stored velocity"``), against
+        the velocity limit.
         """
-        out = []
-        p = self.positions
-        for i, j in zip(*np.nonzero((p < spec.lower) | (p > spec.upper))):
-            bound = spec.lower if p[i, j] < spec.lower else spec.upper
-            out.append(Violation(int(j) + 1, float(self.times[i]), "position", float(p[i, j]), bound))
+        out = _stretches(self.positions, self.times, spec.lower, spec.upper, "position")
         if velocity:
             vmax = spec.velocity_limit * (1 + 1e-9)
-            rates = [(self.finite_difference_velocities(), self.times[1:])]
+            out += _stretches(self.finite_difference_velocities(), self.times[1:], -vmax, vmax, "velocity")
             if self.velocities is not None:
-                rates.append((self.velocities, self.times))
-            for v, t in rates:
-                for i, j in zip(*np.nonzero(np.abs(v) > vmax)):
-                    out.append(Violation(int(j) + 1, float(t[i]), "velocity", float(v[i, j]),
-                                         float(np.copysign(spec.velocity_limit, v[i, j]))))
-        return sorted(set(out), key=lambda x: (x.time, x.joint, x.kind))
+                out += _stretches(self.velocities, self.times, -vmax, vmax, "stored velocity")
+        out = [v if v.kind == "position" else
+               Violation(v.joint, v.time, v.kind, v.value, float(np.copysign(spec.velocity_limit, v.value)),
+                         v.start, v.end, v.points) for v in out]
+        return sorted(out, key=lambda x: (x.start, x.joint, x.kind))
 
     def check_limits(self, spec: SnakeSpec = SPEC, *, velocity: bool = True) -> "Trajectory":
-        """Return ``self`` if it respects the limits, else raise :class:`LimitError`."""
+        """Return ``self`` if it respects the limits, else raise :class:`LimitError`.
+
+        The error lists the first stretches beyond a limit (see :meth:`limit_violations`);
+        its ``violations`` hold them all.
+        """
         bad = self.limit_violations(spec, velocity=velocity)
         if bad:
             shown = "\n  ".join(str(v) for v in bad[:5])
             more = f"\n  ... and {len(bad) - 5} more" if len(bad) > 5 else ""
+            points = sum(v.points for v in bad)
             raise LimitError(
                 f"trajectory breaks the arm's limits ({spec.lower}..{spec.upper} rad, "
-                f"{spec.velocity_limit} rad/s) at {len(bad)} point(s):\n  {shown}{more}\n"
+                f"{spec.velocity_limit} rad/s) in {len(bad)} stretch(es), {points} sample(s) in all:\n  "
+                f"{shown}{more}\n"
                 "Nothing was sent to the robot. Slow the motion down (longer times) or keep the "
                 "angles inside the limits.", bad)
         return self

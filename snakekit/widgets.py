@@ -27,7 +27,7 @@ import ipywidgets as w
 import numpy as np
 from matplotlib.figure import Figure
 
-from .errors import InputTypeError, SnakekitError, UnreachableTargetError
+from .errors import InputTypeError, SnakekitError, UnreachableTargetError, ViewerError
 from .kinematics import closest_reachable_point, inverse_kinematics, tool_pose_2d
 from .plots import plot_move
 from .robot import Robot, Run
@@ -74,6 +74,7 @@ class ControlPanel:
         self.closest: tuple[float, float] | None = None
         self.runs: list[Run] = []
         self.message = ""
+        self._note = ""  # said once with the next message (the view was lost)
         self._syncing = False
         self._sent = [collections.deque(maxlen=64) for _ in range(robot.spec.n_joints)]  # see _is_echo
         spec = self.spec
@@ -115,8 +116,8 @@ class ControlPanel:
         parts = []
         if viewer is not None:
             parts.append(w.HTML(viewer.iframe()))
-            viewer.show(present)
-            viewer.show_goal(self.goal)
+            self._view("show", present)
+            self._view("show_goal", self.goal)
         joints = w.VBox([w.HTML("<b>Joint goal</b>"), *self.sliders, self.home_button])
         target = w.VBox([w.HTML("<b>Tool target</b>"), self.target_x, self.target_y,
                          self.target_heading, self.use_heading])
@@ -129,7 +130,20 @@ class ControlPanel:
     def _repr_mimebundle_(self, **kwargs):
         return self.widget._repr_mimebundle_(**kwargs)
 
+    def _view(self, method: str, *args, **kwargs) -> None:
+        """Call a viewer method; a closed or broken view is dropped, politely, not raised."""
+        if self.viewer is None:
+            return
+        try:
+            getattr(self.viewer, method)(*args, **kwargs)
+        except ViewerError:
+            self.viewer = None
+            self._note = (" The 3D view is closed, so it no longer follows the arm; make a new "
+                          "Viewer and ControlPanel to see it again.")
+
     def _say(self, text: str, *, ok: bool) -> None:
+        text += self._note
+        self._note = ""
         self.message = text
         color = _OK if ok else _BAD
         self.status.value = f'<span style="color:{color}">{html.escape(text)}</span>'
@@ -150,8 +164,7 @@ class ControlPanel:
         self._set_goal(self.slider_values, move_sliders=False)
         x, y, h = tool_pose_2d(self.goal, spec=self.spec)
         self._sync_target(x, y, h)
-        if self.viewer is not None:
-            self.viewer.clear("target")
+        self._view("clear", "target")
         self._say(f"Goal: tool at ({x:.3f}, {y:.3f}) m, heading {h:.2f} rad. Press Execute to move.", ok=True)
         return self.goal
 
@@ -185,13 +198,11 @@ class ControlPanel:
                           + (f" with heading {heading:.2f} rad" if heading is not None else "")
                           + f" is out of reach. Closest reachable tool point: ({cx:.3f}, {cy:.3f}) m. "
                           "Move the target inside the grey boundary.", ok=False)
-            if self.viewer is not None:
-                self.viewer.draw_target(x, y, heading, closest=(cx, cy))
+            self._view("draw_target", x, y, heading, closest=(cx, cy))
             return None
         self.last_error = self.closest = None
         self._set_goal(q, move_sliders=True)
-        if self.viewer is not None:
-            self.viewer.draw_target(x, y, heading)
+        self._view("draw_target", x, y, heading)
         what = f"({x:.3f}, {y:.3f}) m" + (f", heading {heading:.2f} rad" if heading is not None else "")
         self._say(f"Target {what} reachable. Press Execute to move.", ok=True)
         return self.goal
@@ -215,8 +226,7 @@ class ControlPanel:
             self.execute_button.disabled = False
         self.last_run = run
         self.runs.append(run)
-        if self.viewer is not None:
-            self.viewer.animate(run)
+        self._view("animate", run)
         if self.show_plot:
             fig = plot_move(run, title=f"move {len(self.runs)}: commanded vs measured ({run.backend})")
             self.last_figure = fig
@@ -281,8 +291,7 @@ class ControlPanel:
                     s.value = float(v)
             finally:
                 self._syncing = False
-        if self.viewer is not None:
-            self.viewer.show_goal(self.goal)
+        self._view("show_goal", self.goal)
 
     def _sync_target(self, x, y, heading) -> None:
         """Show the target in its controls without solving IK again."""

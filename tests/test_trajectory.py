@@ -169,3 +169,34 @@ def test_side_sweep_is_the_studys_task_2():
     assert np.sum((q[:-1] < 0) & (q[1:] >= 0)) == 50
     assert tr.limit_violations() == []
     assert tr.positions.max() > 0.19 and tr.positions.min() < -0.19
+
+
+def test_a_too_fast_move_is_reported_as_one_stretch_per_joint_and_kind():
+    """Not one entry per sample: 51 points moving 5 joints too fast make 10 stretches."""
+    fast = joint_trajectory(np.zeros(5), np.full(5, 1.5), 0.5, rate=100)  # peaks at 5.6 rad/s
+    bad = fast.limit_violations()
+    assert len(fast) == 51
+    assert sorted({(v.joint, v.kind) for v in bad}) == [(j, k) for j in range(1, 6)
+                                                         for k in ("stored velocity", "velocity")]
+    assert len(bad) == 10
+    between = np.diff(fast.positions[:, 0]) / np.diff(fast.times)
+    v1 = next(v for v in bad if v.joint == 1 and v.kind == "velocity")
+    assert v1.value == pytest.approx(between.max())  # the worst of the stretch
+    assert v1.points == int((between > 1.5).sum())
+    assert v1.start == pytest.approx(fast.times[1:][between > 1.5][0])
+    with pytest.raises(snakekit.LimitError) as e:
+        fast.check_limits()
+    text = str(e.value)
+    assert "in 10 stretch(es)" in text and "... and 5 more" in text
+    assert "stored velocity +5.6" in text
+
+
+def test_the_study_sweep_made_too_big_names_each_stretch_once():
+    """One time is never listed twice for the same joint and kind."""
+    t = np.arange(500) / 10.0
+    q = np.repeat((0.4 * np.sin(2 * np.pi * t / (49.9 / 50)))[:, None], 5, 1)
+    bad = Trajectory(t, q).limit_violations()
+    keys = [(v.joint, v.kind, v.time) for v in bad]
+    assert len(keys) == len(set(keys))
+    assert all(v.kind == "velocity" for v in bad)
+    assert all(abs(v.value) > 1.5 and v.bound == pytest.approx(np.copysign(1.5, v.value)) for v in bad)

@@ -276,3 +276,29 @@ def test_server_never_outlives_its_process(how):
     assert proc.returncode == (-signal.SIGKILL if how == "kill" else 0), proc.stderr
     pid, port = map(int, proc.stdout.split())
     assert wait_gone(pid, port, 5.0), f"meshcat server {pid} outlived its parent ({how})"
+
+
+def test_running_the_viewer_cell_twice_in_a_kernel_leaves_one_server(tmp_path):
+    """In a notebook, a new Viewer replaces the one made before: no server is left behind."""
+    nbformat = need("nbformat")
+    nbclient = need("nbclient")
+    cell = "from snakekit.viewer import Viewer\nviewer = Viewer()\nviewer"
+    nb = nbformat.v4.new_notebook(cells=[
+        nbformat.v4.new_code_cell(cell),
+        nbformat.v4.new_code_cell("first = viewer.server_pid, viewer.port"),
+        nbformat.v4.new_code_cell(cell),  # the same cell, run again
+        nbformat.v4.new_code_cell("import os\nprint(first[0], first[1], viewer.server_pid, os.getpid())"),
+    ])
+    client = nbclient.NotebookClient(nb, timeout=60, kernel_name="python3",
+                                     resources={"metadata": {"path": str(tmp_path)}})
+    with client.setup_kernel():
+        client.execute_cell(nb.cells[0], 0)
+        client.execute_cell(nb.cells[1], 1)
+        client.execute_cell(nb.cells[2], 2)
+        client.execute_cell(nb.cells[3], 3)
+        old_pid, old_port, new_pid, kernel_pid = map(int, nb.cells[3].outputs[0]["text"].split())
+        assert new_pid != old_pid
+        assert wait_gone(old_pid, old_port), "the first viewer's server is still running"
+        assert psutil.pid_exists(new_pid)
+        servers = [p for p in psutil.Process(kernel_pid).children() if p.pid in (old_pid, new_pid)]
+        assert [p.pid for p in servers] == [new_pid]

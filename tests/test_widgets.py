@@ -210,3 +210,17 @@ def test_a_late_echo_from_the_browser_does_not_overwrite_the_goal(sim):
     assert panel.sliders[2].value == pytest.approx(0.8, abs=1e-12)
     panel.sliders[2].value = 0.55  # a student's drag still moves the goal
     assert panel.goal[2] == 0.55
+
+
+def test_a_closed_view_gets_a_polite_message_not_an_error(sim):
+    with Viewer() as view:
+        panel = ControlPanel(sim, view)
+        panel.set_joints([0.3, 0.0, 0.0, 0.0, 0.0])
+    # the view is closed now (its cell was run again, or the kernel tidied up)
+    run = panel.execute()
+    assert run is not None and sim.read().positions[0] == pytest.approx(0.3, abs=0.01)
+    assert panel.message.startswith("Move 1 done")
+    assert "The 3D view is closed, so it no longer follows the arm" in panel.message
+    assert panel.viewer is None
+    panel.set_joints([0.0, 0.2, 0.0, 0.0, 0.0])  # and the panel goes on working
+    assert "3D view is closed" not in panel.message

@@ -70,6 +70,18 @@ def _points3(points) -> np.ndarray:
     return p
 
 
+def _in_kernel() -> bool:
+    """Whether this runs inside an IPython kernel or shell (a notebook)."""
+    import sys
+
+    shell = sys.modules.get("IPython.core.interactiveshell")
+    return bool(shell and shell.InteractiveShell.initialized())
+
+
+#: the longest wait for the server process to start and report its address [s]
+STARTUP_TIMEOUT = 10.0
+
+
 # --- the viewer ---------------------------------------------------------------------------
 
 ROBOT = "snake/robot"
@@ -87,21 +99,31 @@ class Viewer:
         url_host: host name the browser uses to reach the server (default: ``host``, or
             ``localhost`` when listening on every interface).
         height: height of the view in a notebook cell [px].
-        timeout: longest wait for the server to start or to answer a request [s].
+        timeout: longest wait for the server to answer a request [s]; starting it may take
+            up to ``max(timeout, STARTUP_TIMEOUT)`` (a busy machine can be slow to start a process).
         spec: the arm to draw.
+        replace: close the viewers made before in this process first. The default is yes
+            inside a notebook kernel, so running a cell again replaces its view instead of
+            leaving another server behind, and no elsewhere (scripts, tests).
 
     Raises:
         ViewerError: the server could not start (port in use, meshcat missing).
     """
 
     def __init__(self, *, host: str = "127.0.0.1", port: int | None = None, url_host: str | None = None,
-                 height: int = 420, timeout: float = 10.0, spec: SnakeSpec = SPEC):
+                 height: int = 420, timeout: float = 10.0, spec: SnakeSpec = SPEC,
+                 replace: bool | None = None):
         if port is not None and not (isinstance(port, int) and 0 <= port < 65536):
             raise ConfigurationError(f"port must be an integer in 0..65535 (or None for any free port), got {port!r}")
+        if replace is None:
+            replace = _in_kernel()
+        if replace:
+            for old in list(LIVE):
+                old.close()
         self.spec = spec
         self.host = host
         self.height = int(height)
-        self._proc, zmq_url, self.port = start_server(host, port or 0, timeout)
+        self._proc, zmq_url, self.port = start_server(host, port or 0, max(timeout, STARTUP_TIMEOUT))
         shown = url_host or ("localhost" if host in ("0.0.0.0", "", "::") else host)
         if ":" in shown and not shown.startswith("["):
             shown = f"[{shown}]"
@@ -168,14 +190,18 @@ class Viewer:
         v = self.vis
         v["/Background"].set_property("visible", False)  # plain white
         v["/Axes"].set_property("visible", False)
-        # meshcat's grid is 20 m in 0.5 m squares: make it 1 m in 25 mm squares, under the base.
+        # Frame the workspace: meshcat's grid is 20 m in 0.5 m squares; scale it to the arm's
+        # reach (a square of side 2 x reach, squares of reach/10, under the base), and look
+        # at the arm from above and in front, close enough that the reach fills the view.
+        reach = float(self.spec.reach)
         floor = min(b.origin[2] - b.size[2] / 2 for b in self._boxes)
-        grid = np.diag([0.05, 0.05, 0.05, 1.0])
+        k = 2 * reach / 20
+        grid = np.diag([k, k, k, 1.0])
         grid[2, 3] = floor
         v["/Grid"].set_transform(grid)
-        # The default camera sits 3 m away; bring it to the 0.33 m arm. Camera coordinates
-        # are meshcat's y-up frame: (x, y, z)_camera = (x, z, -y)_world.
-        v["/Cameras/default/rotated/<object>"].set_property("position", [-0.05, 0.32, 0.30])
+        # Camera coordinates are meshcat's y-up frame: (x, y, z)_camera = (x, z, -y)_world;
+        # the camera looks at the world origin (joint 1).
+        v["/Cameras/default/rotated/<object>"].set_property("position", [0.0, 1.45 * reach, 0.85 * reach])
         self._draw_arm(ROBOT, opacity=1.0)
 
     def _draw_arm(self, root: str, *, opacity: float) -> None:
