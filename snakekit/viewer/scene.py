@@ -191,11 +191,11 @@ class Viewer:
         v["/Background"].set_property("visible", False)  # plain white
         v["/Axes"].set_property("visible", False)
         # Frame the workspace: meshcat's grid is 20 m in 0.5 m squares; scale it to the arm's
-        # reach (a square of side 2 x reach, squares of reach/10, under the base), and look
+        # reach (a square of side 2.4 x reach, under the base, so the reach circle sits on it), and look
         # at the arm from above and in front, close enough that the reach fills the view.
         reach = float(self.spec.reach)
         floor = min(b.origin[2] - b.size[2] / 2 for b in self._boxes)
-        k = 2 * reach / 20
+        k = 2.4 * reach / 20
         grid = np.diag([k, k, k, 1.0])
         grid[2, 3] = floor
         v["/Grid"].set_transform(grid)
