@@ -378,7 +378,7 @@ def yours_or(fn, library_fn, exercise: str):
             return fn(*args, **kwargs)
         except NotImplementedError:
             if not said:
-                print(f"(exercise {exercise} is not done yet: this cell uses the library's version instead)")
+                print(f"(exercise {exercise} is not done yet: this cell uses a ready-made version instead)")
                 said.append(True)
             return library_fn(*args, **kwargs)
 
