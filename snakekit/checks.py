@@ -405,3 +405,60 @@ class waiting_for(contextlib.AbstractContextManager):
                   "cell again.")
             return True
         return False
+
+
+# --- a lesson's checks from a terminal (`snakekit check`) ------------------------------------
+
+
+def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
+    """Run a lesson notebook top to bottom and report each exercise's check.
+
+    Prints one row per graded cell (grade id, points, passed or failed, the first line of
+    the message) and a total; returns 0 when every check passed, 1 otherwise. The notebook
+    runs in its own folder, as in JupyterLab; the file itself is not changed.
+    """
+    import nbclient
+    import nbformat
+
+    out = out or sys.stdout
+    path = Path(path)
+    nb = nbformat.read(path, as_version=4)
+    graded = [c for c in nb.cells if c.cell_type == "code" and c.metadata.get("nbgrader", {}).get("grade")]
+    if not graded:
+        print(f"{path}: no graded exercise in this notebook (a lesson from notebooks/ has them)", file=out)
+        return 1
+    client = nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3", allow_errors=True,
+                                     resources={"metadata": {"path": str(path.resolve().parent)}})
+    client.execute()
+    rows, got, total, failed = [], 0, 0, 0
+    others = []
+    for index, cell in enumerate(nb.cells):
+        if cell.cell_type != "code":
+            continue
+        errors = [o for o in cell.outputs if o.output_type == "error"]
+        meta = cell.metadata.get("nbgrader", {})
+        if meta.get("grade"):
+            points = meta.get("points", 0)
+            total += points
+            if errors:
+                failed += 1
+                e = errors[0]
+                text = str(e.get("evalue", "")).strip().splitlines()
+                first = text[0] if text else ""
+                message = first if e.ename in ("CheckFailed", "ShortcutError") else f"{e.ename}: {first}"
+                rows.append((meta["grade_id"], points, "FAILED", message))
+            else:
+                got += points
+                rows.append((meta["grade_id"], points, "passed", ""))
+        elif errors and not meta.get("solution"):
+            others.append(f"cell {index + 1}: {errors[0].ename}: {str(errors[0].evalue).strip()[:120]}")
+        elif errors:
+            others.append(f"answer cell {meta.get('grade_id')}: {errors[0].ename}: {str(errors[0].evalue).strip()[:120]}")
+    width = max(len(r[0]) for r in rows)
+    print(f"{path.name}", file=out)
+    for grade_id, points, status, message in rows:
+        print(f"  {grade_id:<{width}}  {points:>2} pt  {status:<6}  {message}".rstrip(), file=out)
+    print(f"  {len(rows) - failed} of {len(rows)} exercises passed, {got} of {total} points", file=out)
+    for line in others:
+        print(f"  also failed: {line}", file=out)
+    return 0 if failed == 0 else 1
