@@ -3,6 +3,7 @@
     snakekit sweep [--backend sim] [--realtime] [--out run.npz] [--plot sweep.png]
     snakekit emulator [...]          (an emulated MX-28 bus on a pseudo-terminal)
     snakekit generate [--check]      (the URDF and MJCF from the robot spec)
+    snakekit check LESSON.ipynb      (run a lesson's exercise checks: one row per exercise)
 
 Exit codes: 0 success, 1 the robot or a file failed, 2 bad arguments.
 """
@@ -82,6 +83,17 @@ def _generate(args, out) -> int:
     return model.main(["--check"] if args.check else [])
 
 
+def _check(args, out) -> int:
+    from .checks import check_notebook
+
+    path = Path(args.notebook)
+    if path.suffix != ".ipynb" or not path.is_file():
+        print(f"snakekit check: {path} is not a notebook file (give a lesson, e.g. "
+              "notebooks/03_inverse_kinematics.ipynb)", file=sys.stderr)
+        return 2
+    return check_notebook(path, out=out, timeout=args.timeout)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="snakekit", description="snakekit: the 5-joint MX-28 snake arm kit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -97,6 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("generate", help="write the URDF and MJCF from the robot spec")
     p.add_argument("--check", action="store_true", help="only check that the committed files are current")
     p.set_defaults(func=_generate)
+    p = sub.add_parser("check", help="run a lesson's exercise checks: one row per exercise, exit 1 on a failure")
+    p.add_argument("notebook", help="the lesson notebook, e.g. notebooks/03_inverse_kinematics.ipynb")
+    p.add_argument("--timeout", type=float, default=300.0, help="seconds a cell may run (default: 300)")
+    p.set_defaults(func=_check)
     return parser
 
 
