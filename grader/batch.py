@@ -344,6 +344,20 @@ class Grader:
         (course / "submitted" / student).mkdir(parents=True)
         shutil.copytree(src, course / "submitted" / student / a.name, symlinks=True,
                         ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
+        for name, nb in nbs.items():
+            if any(why.startswith("duplicated") for why in tampered.values()):
+                # nbgrader refuses a notebook with a grade id twice: run it with the first copy only
+                # (the duplicated cells score 0 anyway), so the other exercises are still graded
+                seen, cells = set(), []
+                for cell in nb.cells:
+                    gid = cell.get("metadata", {}).get("nbgrader", {}).get("grade_id")
+                    if gid not in seen:
+                        cells.append(cell)
+                    if gid:
+                        seen.add(gid)
+                dst = course / "submitted" / student / a.name / f"{name}.ipynb"
+                dst.unlink()
+                nbformat.write(nbformat.from_dict({**nb, "cells": cells}), dst)
         for f in a.source_files:
             dst = course / "source" / a.name / f.relative_to(self.course / "source" / a.name)
             dst.parent.mkdir(parents=True, exist_ok=True)
@@ -432,12 +446,16 @@ class Grader:
             status, detail = "timeout", f"the notebook ran longer than {self.timeout:g} s and was stopped"
         elif "MemoryError" in errors or "MemoryError" in log:
             status, detail = "memory limit", f"the notebook used more than {self.limits.memory >> 20} MB"
-        elif "DeadKernelError" in log or "Kernel died" in log or "kernel died" in log.lower() \
-                or (not executed and outcome.returncode not in (0, None)):
+        elif "DeadKernelError" in log or "kernel died" in log.lower():
             status, detail = "kernel died", "the Python kernel stopped while the notebook ran"
         elif tampered:
             status = "tests tampered"
             detail = "; ".join(f"{g}: {why}" for g, why in sorted(tampered.items()))
+        elif not executed:
+            last = (str(worker.get("error", "")).strip().splitlines() or ["no result"])[-1][:300]
+            status = "kernel died" if outcome.returncode not in (0, 3) else "autograde failed"
+            detail = (f"nbgrader stopped (exit {outcome.returncode}): {last}" if status == "autograde failed"
+                      else "the notebook's processes stopped before it finished")
         elif problems:
             status, detail = "missing notebook", "; ".join(problems)
         else:

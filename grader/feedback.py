@@ -140,8 +140,10 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
             + "".join(f"| `{e.grade_id}` | {e.score:g} / {e.max_score:g} | {'ok' if e.score >= e.max_score else 'see below'} |\n"
                       for e in result.exercises))
     out = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(head)] + cells)
-    out.metadata = {"kernelspec": nb.get("metadata", {}).get("kernelspec", {}),
-                    "language_info": {"name": "python"}}
+    out.metadata = {"language_info": {"name": "python"}}
+    kernelspec = nb.get("metadata", {}).get("kernelspec")
+    if isinstance(kernelspec, dict) and {"name", "display_name"} <= set(kernelspec):
+        out.metadata["kernelspec"] = kernelspec
     return out
 
 
