@@ -1,0 +1,407 @@
+"""Checks that teach: the helpers the course's test cells call.
+
+A failed check raises :class:`CheckFailed` (an ``AssertionError``) whose message says what
+was wrong, where, and by how much, in this shape::
+
+    exercise 1.1 planar_fk: tool y at q=[0.4, -0.3, 0.5, 0.2, -0.6] is 0.1178 m, expected 0.0632 m:
+    off by 54.6 mm (tolerance 6.3e-08 mm: exact math, 1e-9 relative).
+    Hint: a joint angle is not accumulated: use q_1 + ... + q_i, not q_i.
+
+In a notebook the student sees the message only, never a stack of frames from this module:
+the exceptions render themselves (IPython's ``_render_traceback_``), showing at most the
+frames of the student's own code.
+
+Four things the grader relies on (see ``course/README.md``, "For the grader"):
+
+* :func:`hand_in` writes ``<SNAKEKIT_HANDIN_DIR>/<grade_id>.npz`` when that variable is set
+  (and does nothing otherwise);
+* :func:`rng` gives the same seeded inputs in the instructor's run and the student's;
+* :func:`forbid` makes library functions raise :class:`ShortcutError` while the student's
+  code runs, so an exercise can't be passed by calling the function it asks to write;
+* :func:`quick` is the one switch that shortens long runs under test
+  (``SNAKEKIT_QUICK=1``; the test suite's ``SNAKEKIT_TEST=1`` counts too).
+
+>>> import numpy as np
+>>> ex = Exercise("9.9", "double")
+>>> ex.close(ex(lambda x: 2 * x, 0.5), 1.0, what="result", where="x=0.5", unit="m")
+>>> try:
+...     ex.close(500.0, 0.5, what="result", where="x=0.25", unit="m")
+... except CheckFailed as e:
+...     print(e)
+exercise 9.9 double: result at x=0.25 is 500 m, expected 0.5 m: off by 4.995e+05 mm (tolerance 5e-07 mm: exact math, 1e-9 relative).
+Hint: this looks like millimetres where metres were asked: divide by 1000.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import sys
+import traceback
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SnakekitError
+
+__all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "hand_in", "outputs", "rng", "quick",
+           "yours_or", "waiting_for"]
+
+_HERE = os.path.abspath(__file__)
+_RED, _BOLD, _RESET = "\x1b[31m", "\x1b[1m", "\x1b[0m"
+
+
+def quick() -> bool:
+    """True when long runs should shrink: ``SNAKEKIT_QUICK=1`` (or the suite's ``SNAKEKIT_TEST=1``)."""
+    return any(os.environ.get(v, "").lower() not in ("", "0", "false", "no")
+               for v in ("SNAKEKIT_QUICK", "SNAKEKIT_TEST"))
+
+
+class CheckFailed(AssertionError):
+    """A check failed. The message says what, where and by how much.
+
+    Attributes:
+        student_frames: the part of a traceback that lies in the student's own code (may be
+            empty); shown under the message, never frames from this module.
+    """
+
+    def __init__(self, message: str, student_frames: str = ""):
+        super().__init__(message)
+        self.student_frames = student_frames
+
+    def __str__(self) -> str:
+        return self.args[0] if self.args else ""
+
+    def _render_traceback_(self) -> list[str]:
+        """What IPython shows instead of a traceback: the message (and the student's frames)."""
+        title = "Check failed" if not isinstance(self, ShortcutError) else "Shortcut"
+        lines = [f"{_RED}{_BOLD}{title}{_RESET}: {str(self)}"]
+        if self.student_frames:
+            lines += ["", "Where, in your code:", self.student_frames.rstrip()]
+        return lines
+
+
+class ShortcutError(SnakekitError, CheckFailed):
+    """A library function was called inside an exercise that asks the student to write it."""
+
+
+def _shorten(exc: BaseException) -> BaseException:
+    """``exc`` without the frames of this module (so plain Python shows no checks frames)."""
+    return exc.with_traceback(None)
+
+
+def _student_frames(tb) -> str:
+    """The frames of ``tb`` outside this module, formatted (the student's code, mostly)."""
+    frames = [f for f in traceback.extract_tb(tb) if os.path.abspath(f.filename) != _HERE]
+    return "".join(traceback.format_list(frames))
+
+
+# --- numbers in messages -----------------------------------------------------------------
+
+# How a difference is shown: metres as millimetres, radians also in degrees.
+def _fmt(v: float, unit: str) -> str:
+    s = f"{v:.4g}" if abs(v) >= 1e-3 or v == 0 else f"{v:.3g}"
+    return f"{s} {unit}".rstrip()
+
+
+def _fmt_diff(d: float, unit: str) -> str:
+    if unit == "m":
+        return f"{d * 1000:.4g} mm"
+    if unit == "rad":
+        return f"{d:.4g} rad ({np.degrees(d):.3g} deg)"
+    return _fmt(d, unit)
+
+
+def _fmt_array(a) -> str:
+    a = np.asarray(a, dtype=float)
+    if a.ndim == 0:
+        return f"{float(a):.4g}"
+    if a.size <= 8:
+        return "[" + ", ".join(f"{float(x):.4g}" for x in a.ravel()) + "]"
+    return f"array of shape {a.shape}"
+
+
+def _where(where) -> str:
+    if where is None or where == "":
+        return ""
+    if isinstance(where, str):
+        return f" at {where}"
+    return f" at {_fmt_array(where)}"
+
+
+# --- the exercise object ---------------------------------------------------------------
+
+
+class Exercise:
+    """The checks of one exercise: every message starts with its number and name.
+
+    Args:
+        number: the exercise number as the lesson shows it, e.g. ``"1.1"``.
+        name: the name of what the student writes, e.g. ``"planar_fk"``.
+    """
+
+    def __init__(self, number: str, name: str):
+        self.number, self.name = number, name
+        self.checked = 0
+
+    @property
+    def prefix(self) -> str:
+        return f"exercise {self.number} {self.name}"
+
+    def fail(self, message: str, hint: str = "", student_frames: str = ""):
+        """Raise :class:`CheckFailed` with ``message`` (and a hint line)."""
+        text = f"{self.prefix}: {message}" + (f"\nHint: {hint}" if hint else "")
+        raise _shorten(CheckFailed(text, student_frames)) from None
+
+    def __call__(self, fn, *args, where=None, **kwargs):
+        """Run the student's ``fn(*args, **kwargs)``; turn a stub or a crash into a clear message."""
+        if not callable(fn):
+            self.fail(f"`{self.name}` should be a function, got {type(fn).__name__}; "
+                      "run the answer cell above (it defines it), then this check")
+        try:
+            return fn(*args, **kwargs)
+        except NotImplementedError as e:
+            self.fail(f"`{self.name}` is not written yet (it raises NotImplementedError"
+                      f"{': ' + str(e) if str(e) else ''}). Write it in the answer cell above, run that cell, "
+                      "then run this check again.")
+        except CheckFailed as e:
+            raise _shorten(e) from None
+        except Exception as e:
+            call = where if where is not None else ", ".join(_fmt_array(a) if isinstance(a, (np.ndarray, list, tuple))
+                                                          else repr(a) for a in args)
+            self.fail(f"`{self.name}` raised {type(e).__name__} when called with {call}: {e}",
+                      student_frames=_student_frames(e.__traceback__))
+
+    def true(self, condition, message: str, hint: str = "") -> None:
+        """Fail with ``message`` unless ``condition`` holds."""
+        if not bool(condition):
+            self.fail(message, hint)
+        self.checked += 1
+
+    def close(self, got, expected, *, what: str, where=None, unit: str | tuple = "", tol: float = 0.0,
+              rtol: float = 1e-9, why: str | None = None, labels=None, mistakes: dict | None = None) -> None:
+        """Check that ``got`` equals ``expected`` within ``tol + rtol * |expected|``.
+
+        Args:
+            got: what the student's code returned.
+            expected: the right answer (computed independently).
+            what: what the value is, in the lesson's words ("tool pose").
+            where: the inputs, as text or an array ("q=[...]").
+            unit: the unit of every entry, or one per entry of a 1-D value ("m", "rad", "s").
+            tol: absolute tolerance [unit]; rtol: relative tolerance.
+            why: the reason for the tolerance; default "exact math" when ``tol`` is 0.
+            labels: names of the entries of a 1-D value ("x", "y", "heading").
+            mistakes: ``{hint: value}``: answers a known mistake would give; when ``got``
+                matches one, its hint is shown.
+        """
+        exp = np.asarray(expected, dtype=float)
+        try:
+            arr = np.asarray(got, dtype=float)
+        except (TypeError, ValueError):
+            self.fail(f"{what}{_where(where)} should be numbers of shape {exp.shape}, got {type(got).__name__}: "
+                      f"{str(got)[:80]}")
+        if arr.shape != exp.shape:
+            self.fail(f"{what}{_where(where)} has shape {arr.shape}, expected shape {exp.shape}.",
+                      _shape_hint(arr, exp))
+        if not np.isfinite(arr).all():
+            idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+            self.fail(f"{what}{_where(where)} holds {arr[idx]} at index {idx}; every value must be finite.")
+        bound = tol + rtol * np.abs(exp)
+        diff = np.abs(arr - exp)
+        if (diff <= bound).all():
+            self.checked += 1
+            return
+        i = np.unravel_index(int(np.argmax(diff - bound)), diff.shape)
+        units = unit if isinstance(unit, (tuple, list)) else None
+        u = units[i[-1]] if units is not None and arr.ndim >= 1 else unit
+        name = what
+        if labels is not None and arr.ndim == 1:
+            name = f"{what} {labels[i[0]]}"
+        elif arr.ndim >= 1:
+            name = f"{what}[{', '.join(str(int(k)) for k in i)}]"
+        reason = why or ("exact math" if tol == 0 else "")
+        tol_text = f"{_fmt_diff(float(bound[i]), u)}"
+        tol_text += f": {reason}" if reason else ""
+        if tol == 0:
+            tol_text += ", " + f"{rtol:g}".replace("e-0", "e-") + " relative"
+        hint = _mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()) * 10 + 1e-9)
+        self.fail(f"{name}{_where(where)} is {_fmt(float(arr[i]), u)}, expected {_fmt(float(exp[i]), u)}: "
+                  f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
+
+    def done(self, note: str = "") -> None:
+        """Print that the checks passed (the last line of a test cell)."""
+        print(f"exercise {self.number} {self.name}: {self.checked} check(s) passed" + (f"; {note}" if note else ""))
+
+
+def _shape_hint(arr: np.ndarray, exp: np.ndarray) -> str:
+    if arr.ndim == 2 and arr.T.shape == exp.shape:
+        return "this is the transpose of the expected shape: swap rows and columns (or build it the other way)."
+    if arr.size == exp.size and arr.ndim != exp.ndim:
+        return (f"the right number of values, arranged wrongly (a flattened or reshaped array): "
+                f"return shape {exp.shape}.")
+    return f"return an array of shape {exp.shape}."
+
+
+def _mistake_hint(arr, exp, unit, mistakes, *, tol: float) -> str:
+    def near(a, b):
+        b = np.asarray(b, dtype=float)
+        return b.shape == a.shape and bool(np.allclose(a, b, rtol=1e-6, atol=tol))
+
+    for hint, value in (mistakes or {}).items():
+        if near(arr, value):
+            return hint
+    units = set(unit) if isinstance(unit, (tuple, list)) else {unit}
+    if np.abs(exp).max() > 1e-6:
+        if "rad" in units and near(arr, np.degrees(exp)):
+            return "this looks like degrees where radians were asked: use radians (np.radians / np.deg2rad)."
+        if "rad" in units and near(arr, np.radians(exp)):
+            return "these numbers are the right ones converted to radians once too often: they are radians already."
+        if "m" in units and near(arr, 1000 * exp):
+            return "this looks like millimetres where metres were asked: divide by 1000."
+        if "m" in units and near(arr, exp / 1000):
+            return "this looks like metres divided by 1000 again: the link lengths are already in metres."
+    return ""
+
+
+# --- what the grader relies on -------------------------------------------------------------
+
+
+def rng(grade_id: str) -> np.random.Generator:
+    """A random generator seeded by ``grade_id``: the same hidden inputs in every run."""
+    return np.random.default_rng(zlib.crc32(grade_id.encode()))
+
+
+def outputs(fn, inputs, *, forbid_names: tuple = (), what: str = "") -> np.ndarray | None:
+    """``fn`` applied to each row of ``inputs``, stacked; None if it fails or takes a shortcut."""
+    try:
+        with forbid(*forbid_names, what=what or "this"):
+            return np.array([np.asarray(fn(x), dtype=float) for x in inputs])
+    except Exception:
+        return None
+
+
+def hand_in(grade_id: str, **values) -> Path | None:
+    """Save ``values`` as arrays for the grader, if ``SNAKEKIT_HANDIN_DIR`` is set.
+
+    Writes ``<SNAKEKIT_HANDIN_DIR>/<grade_id>.npz`` (``np.savez``, no pickles; an existing
+    file is replaced). Values that are None are left out (the student's code failed).
+    Without the variable this does nothing and returns None.
+    """
+    folder = os.environ.get("SNAKEKIT_HANDIN_DIR")
+    if not folder:
+        return None
+    arrays = {}
+    for k, v in values.items():
+        if v is None:
+            continue
+        a = np.asarray(v)
+        if a.dtype == object:
+            continue  # ragged or not numbers: nothing the grader could score
+        arrays[k] = a
+    path = Path(folder) / f"{grade_id}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, **arrays)
+    return path
+
+
+def _resolve(name: str):
+    """The object named ``name`` ("snakekit.jacobian", "snakekit.Trajectory.check_limits")."""
+    parts = name.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        for p in parts[i:]:
+            obj = getattr(obj, p)
+        return obj
+    raise ValueError(f"nothing is called {name}")
+
+
+@contextlib.contextmanager
+def forbid(*names: str, what: str):
+    """Make the named library functions raise :class:`ShortcutError` inside the block.
+
+    Every place a student could reach a function from is patched: the ``snakekit`` package,
+    every loaded ``snakekit.*`` module that holds it, the notebook's own namespace
+    (``from snakekit import forward_kinematics``) and, for methods, their class. Everything
+    is restored afterwards, also after an error.
+
+    Args:
+        names: dotted names, e.g. ``"snakekit.forward_kinematics"``.
+        what: what the exercise asks to write, e.g. ``"planar FK"``.
+    """
+    patched = []
+    called = []
+    for name in names:
+        original = _resolve(name)
+
+        def guard(*args, _name=name, **kwargs):
+            called.append(_name)
+            raise _shorten(ShortcutError(
+                f"this exercise asks you to write {what} yourself; `{_name}` was called. "
+                f"Use only numpy and what the lesson taught so far (the library's version is for "
+                f"after the exercise)."))
+
+        holders = [m for k, m in list(sys.modules.items()) if m is not None and
+                   (k == "snakekit" or k.startswith("snakekit.") or k == "__main__")]
+        for holder in holders:
+            for attr, value in list(vars(holder).items()):
+                if value is original:
+                    patched.append((holder, attr, value))
+                    setattr(holder, attr, guard)
+        owner, _, attr = name.rpartition(".")
+        cls = _resolve(owner) if owner else None
+        if isinstance(cls, type) and cls.__dict__.get(attr) is not None:
+            value = cls.__dict__[attr]
+            patched.append((cls, attr, value))
+            setattr(cls, attr, property(lambda self, _g=guard: _g()) if isinstance(value, property) else guard)
+    try:
+        yield called
+    finally:
+        for holder, attr, value in reversed(patched):
+            setattr(holder, attr, value)
+
+
+def yours_or(fn, library_fn, exercise: str):
+    """The student's ``fn``, or ``library_fn`` (with a note) while ``fn`` is still a stub.
+
+    Demonstrations after an exercise use it, so they run before the exercise is done and
+    say which exercise they wait for.
+    """
+    said = []
+
+    def use(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except NotImplementedError:
+            if not said:
+                print(f"(exercise {exercise} is not done yet: this cell uses a ready-made version instead)")
+                said.append(True)
+            return library_fn(*args, **kwargs)
+
+    return use
+
+
+class waiting_for(contextlib.AbstractContextManager):
+    """A demonstration that needs an exercise: until it is written, say so and skip the rest.
+
+    >>> def task2_sweep():
+    ...     raise NotImplementedError("exercise 6.3: task2_sweep")
+    >>> with waiting_for("6.3"):
+    ...     sweep = task2_sweep()
+    This cell waits for exercise 6.3: write it, run it, then run this cell again.
+    """
+
+    def __init__(self, exercise: str):
+        self.exercise = exercise
+
+    def __exit__(self, kind, value, tb):
+        if kind is NotImplementedError or (kind is NameError and getattr(value, "name", None)):
+            what = "" if kind is NotImplementedError else f" (`{value.name}` is not defined yet)"
+            print(f"This cell waits for exercise {self.exercise}{what}: write it, run it, then run this "
+                  "cell again.")
+            return True
+        return False

@@ -1,0 +1,158 @@
+"""The nbgrader course: instructor versions earn full marks, student versions fail only in
+their exercises' checks (with a clear message), and notebooks/ is generated from course/.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import need
+
+ROOT = Path(__file__).resolve().parents[1]
+COURSE = ROOT / "course"
+ASSIGNMENTS = ["00_meet_the_arm", "01_forward_kinematics", "02_jacobian", "03_inverse_kinematics",
+               "04_trajectories", "05_simulation", "06_coded_sweep", "07_real_robot"]
+SOURCES = [a for a in ASSIGNMENTS if (COURSE / "source" / a / f"{a}.ipynb").exists()]
+ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def venv_env(**extra) -> dict:
+    """The environment nbgrader needs (the venv's bin/ on PATH: it calls alembic by name)."""
+    env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
+               SNAKEKIT_TEST="1", MPLBACKEND="module://matplotlib_inline.backend_inline")
+    env.update(extra)
+    return env
+
+
+def graded_cells(nb) -> dict[str, dict]:
+    """grade_id -> nbgrader metadata of every cell that carries points."""
+    return {c.metadata["nbgrader"]["grade_id"]: c.metadata["nbgrader"] for c in nb.cells
+            if c.metadata.get("nbgrader", {}).get("grade")}
+
+
+def read(path: Path):
+    nbformat = need("nbformat")
+    return nbformat.read(path, as_version=4)
+
+
+# --- structure ------------------------------------------------------------------------------
+
+
+def test_every_lesson_is_in_the_course():
+    assert SOURCES == ASSIGNMENTS, f"missing instructor notebooks: {sorted(set(ASSIGNMENTS) - set(SOURCES))}"
+
+
+@pytest.mark.parametrize("name", SOURCES)
+def test_exercises_follow_the_contract(name):
+    """Every answer cell has a test cell <id>_test with points; the lesson states its total."""
+    nb = read(COURSE / "source" / name / f"{name}.ipynb")
+    answers = [c.metadata["nbgrader"]["grade_id"] for c in nb.cells
+               if c.metadata.get("nbgrader", {}).get("solution") and c.cell_type == "code"]
+    tests = graded_cells(nb)
+    assert answers, f"{name} has no exercise"
+    assert sorted(tests) == sorted(f"{a}_test" for a in answers)
+    for a in answers:
+        assert re.fullmatch(rf"ex{name[:2]}_\d+_[a-z0-9_]+", a), a
+        t = tests[f"{a}_test"]
+        assert t["points"] >= 1 and t["locked"]
+    text = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
+    total = sum(t["points"] for t in tests.values())
+    assert f"Total: {total} points" in text, f"{name} should state 'Total: {total} points'"
+    assert "Objectives" in text and "What it assumes" in text and "Predict, then run" in text
+    assert "<!-- BEGIN ANSWER -->" in text, f"{name}: the instructor version holds the predicted answers"
+
+
+def test_course_size():
+    counts = {}
+    for name in SOURCES:
+        counts[name] = len(graded_cells(read(COURSE / "source" / name / f"{name}.ipynb")))
+    assert sum(counts.values()) >= 24, counts
+    for name, n in counts.items():
+        assert n >= (1 if name[:2] in ("00", "07") else 3), (name, n)
+
+
+def test_student_notebooks_are_current():
+    """notebooks/ is what tools/generate_student makes from course/source/ (run `make student`)."""
+    need("nbgrader")
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "generate_student"), "--check"],
+                          capture_output=True, text=True, env=venv_env(), timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+@pytest.mark.parametrize("name", SOURCES)
+def test_student_version_hides_solutions_and_hidden_tests(name):
+    text = (ROOT / "notebooks" / f"{name}.ipynb").read_text()
+    for secret in ("BEGIN SOLUTION", "BEGIN HIDDEN TESTS", "BEGIN ANSWER", "checks.hand_in", "SNAKEKIT_TEST",
+                   "SNAKEKIT_QUICK", "os.environ"):
+        assert secret not in text, f"notebooks/{name}.ipynb shows {secret!r} to the student"
+    nb = read(ROOT / "notebooks" / f"{name}.ipynb")
+    for cell in nb.cells:
+        meta = cell.metadata.get("nbgrader", {})
+        if meta.get("solution") and cell.cell_type == "code":
+            m = re.match(r"ex(\d+)_(\d+)_", meta["grade_id"])
+            assert f'NotImplementedError("exercise {int(m.group(1))}.{m.group(2)}' in cell.source, cell.source
+
+
+# --- autograding: the instructor versions earn full marks ------------------------------------
+
+
+@pytest.fixture(scope="module")
+def autograded(tmp_path_factory):
+    """Autograde every instructor notebook as a submission, in a temporary copy of the course."""
+    need("nbgrader")
+    tmp = tmp_path_factory.mktemp("course")
+    course = tmp / "course"
+    shutil.copytree(COURSE, course, ignore=shutil.ignore_patterns(
+        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".ipynb_checkpoints"))
+    handin = tmp / "handin"
+    env = venv_env(SNAKEKIT_HANDIN_DIR=str(handin))
+    nbgrader = [sys.executable, "-m", "nbgrader"]
+    timings = {}
+    for name in SOURCES:
+        subprocess.run(nbgrader + ["generate_assignment", name, "--force"], cwd=course, env=env, check=True,
+                       capture_output=True)
+        sub = course / "submitted" / "instructor" / name
+        sub.mkdir(parents=True)
+        shutil.copy(course / "source" / name / f"{name}.ipynb", sub)
+        t0 = time.monotonic()
+        proc = subprocess.run(nbgrader + ["autograde", name, "--student", "instructor", "--force"], cwd=course,
+                              env=env, capture_output=True, text=True)
+        timings[name] = time.monotonic() - t0
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+    from nbgrader.api import Gradebook
+
+    scores = {}
+    with Gradebook(f"sqlite:///{course / 'gradebook.db'}") as gb:
+        for name in SOURCES:
+            sub = gb.find_submission(name, "instructor")
+            scores[name] = (sub.score, sub.max_score, [(g.name, g.score, g.max_score) for n in sub.notebooks
+                                                       for g in n.grades])
+    return {"course": course, "scores": scores, "handin": handin, "timings": timings}
+
+
+@pytest.mark.parametrize("name", SOURCES)
+def test_instructor_version_earns_full_marks(autograded, name):
+    score, max_score, grades = autograded["scores"][name]
+    assert max_score > 0
+    assert score == max_score, [g for g in grades if g[1] != g[2]]
+
+
+@pytest.mark.parametrize("name", SOURCES)
+def test_every_exercise_hands_in_for_the_grader(autograded, name):
+    """With SNAKEKIT_HANDIN_DIR set, each test cell writes <grade_id>.npz (no pickles)."""
+    np = need("numpy")
+    nb = read(COURSE / "source" / name / f"{name}.ipynb")
+    for gid in graded_cells(nb):
+        path = autograded["handin"] / f"{gid}.npz"
+        assert path.exists(), f"{gid} handed nothing in"
+        with np.load(path, allow_pickle=False) as z:
+            assert z.files, f"{gid} handed in an empty file"
