@@ -150,10 +150,20 @@ def ensure_released(course: Path, assignment: str) -> None:
     print(f"snakekit grade: '{assignment}' is not in the gradebook yet; running nbgrader generate_assignment",
           file=sys.stderr)
     cfg = Config()
-    cfg.CourseDirectory.root = str(course)
-    cfg.CourseDirectory.course_id = _course_id(course)
-    api = NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
-    out = api.generate_assignment(assignment, force=True, create=True)
+    if (course / "nbgrader_config.py").exists():  # the course's own preprocessors and ids
+        from traitlets.config.loader import PyFileConfigLoader
+
+        cfg = PyFileConfigLoader("nbgrader_config.py", path=str(course)).load_config()
+    cfg.merge(Config({"CourseDirectory": {"root": str(course), "course_id": _course_id(course),
+                                          "db_url": _db_url(course)}}))
+    os.environ["PATH"] = f"{Path(os.path.abspath(sys.executable)).parent}{os.pathsep}{os.environ.get('PATH', '')}"
+    cwd = os.getcwd()
+    os.chdir(course)  # nbgrader resolves some paths from the working folder
+    try:
+        api = NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
+        out = api.generate_assignment(assignment, force=True, create=True)
+    finally:
+        os.chdir(cwd)
     if not out.get("success"):
         raise GradingError(f"nbgrader generate_assignment {assignment} failed:\n{out.get('error') or out.get('log')}")
 

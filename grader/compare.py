@@ -172,9 +172,14 @@ def limits(traj: Trajectory, spec: SnakeSpec = SPEC, *, weight: float = 1.0) -> 
                                     f"{spec.velocity_limit} rad/s.", weight)
     points = {v.time for v in bad}
     f = 1.0 - len(points) / len(traj)
-    worst = max(bad, key=lambda v: abs(v.value) - abs(v.bound))
-    return Check("limits", f, f"limits: {len(bad)} violation(s) at {len(points)} of {len(traj)} points; worst: "
-                              f"{worst} (by {abs(worst.value) - abs(worst.bound):.4g}).", weight)
+    worst = []
+    for kind in ("position", "velocity"):
+        some = [v for v in bad if v.kind == kind]
+        if some:
+            w = max(some, key=lambda v: abs(v.value) - abs(v.bound))
+            worst.append(f"worst {kind}: {w} (by {abs(w.value) - abs(w.bound):.4g})")
+    return Check("limits", f, f"limits: {len(bad)} violation(s) at {len(points)} of {len(traj)} points; "
+                              + "; ".join(worst) + ".", weight)
 
 
 def count_sweeps(positions: np.ndarray, *, hysteresis: float = 0.02) -> float:
@@ -273,8 +278,12 @@ def values(got: np.ndarray, expected: np.ndarray, *, rtol: float, atol: float, w
     k = int(np.argmax(bad_case))
     g, e = got[k].ravel(), expected[k].ravel()
     m = int(np.argmax(np.where(np.isfinite(g), np.abs(g - e), np.inf)))
-    where = f" at input {np.array2string(np.asarray(inputs[k]), precision=3, separator=', ')}" \
-        if inputs is not None and len(inputs) == n else f" in case {k + 1}"
+    if inputs is not None and len(inputs) == n:
+        x = np.asarray(inputs[k])
+        where = f" at input {float(x):.6g}" if x.ndim == 0 else \
+            f" at input {np.array2string(x, precision=4, separator=', ', suppress_small=True)}"
+    else:
+        where = f" in case {k + 1}"
     u = f" {unit}" if unit else ""
     tol = atol + rtol * abs(e[m])
     diff = g[m] - e[m]
