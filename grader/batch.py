@@ -470,6 +470,12 @@ class Grader:
             status, detail = "missing notebook", "; ".join(problems)
         else:
             status, detail = "graded", ""
+        dest = self.course / "autograded" / student / a.name
+        if executed:  # for the TA (formgrader): the notebook as it ran, hidden tests included
+            shutil.rmtree(dest, ignore_errors=True)
+            dest.mkdir(parents=True)
+            for name, nb in executed.items():
+                nbformat.write(nb, dest / f"{name}.ipynb")
         score = round(sum(s.score for s in scores), 4)
         result = SubmissionResult(student, a.name, score, a.max_score, status, detail, tuple(scores),
                                   time.monotonic() - t0)
