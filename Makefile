@@ -8,7 +8,7 @@ LAB_IP  ?= 127.0.0.1
 export PATH := $(abspath $(VENV))/bin:$(PATH)
 export MUJOCO_GL ?= egl
 
-.PHONY: setup lab test bench lock generate check-generated clean
+.PHONY: setup lab test bench lock generate check-generated clean references
 
 setup:
 	@tools/setup
@@ -30,6 +30,9 @@ lock:
 
 generate: setup
 	$(VENV)/bin/snakekit generate
+
+references: setup
+	$(PY) -m grader.references
 
 clean:
 	rm -rf $(VENV) .pytest_cache artifacts

@@ -262,3 +262,12 @@ def test_grader_depends_only_on_trajectory_model_and_run():
     for banned in ("snakekit.viewer", "snakekit.sim", "snakekit.hardware", "snakekit.emulator", "snakekit.widgets",
                    "snakekit.servo"):
         assert f"'{banned}'" not in mods
+
+
+@pytest.mark.parametrize("name", ["grader.compare", "grader.feedback"])
+def test_docstring_examples(name):
+    import doctest
+    import importlib
+
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+    assert result.failed == 0 and result.attempted > 0
