@@ -8,7 +8,7 @@ LAB_IP  ?= 127.0.0.1
 export PATH := $(abspath $(VENV))/bin:$(PATH)
 export MUJOCO_GL ?= egl
 
-.PHONY: setup lab test bench lock generate check-generated clean
+.PHONY: setup lab test bench lock generate check-generated clean references
 
 setup:
 	@tools/setup
@@ -34,6 +34,9 @@ generate: setup
 # Fails when a generated file (URDF, MJCF) is out of date with the spec it comes from.
 check-generated: setup
 	$(VENV)/bin/snakekit generate --check
+
+references: setup
+	$(PY) -m grader.references
 
 clean:
 	rm -rf $(VENV) .pytest_cache artifacts

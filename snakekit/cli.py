@@ -4,6 +4,7 @@
     snakekit emulator [...]          (an emulated MX-28 bus on a pseudo-terminal)
     snakekit generate [--check]      (the URDF and MJCF from the robot spec)
     snakekit check LESSON.ipynb      (run a lesson's exercise checks: one row per exercise)
+    snakekit grade ASSIGNMENT [...]  (grade a class's submissions; see grader/README.md)
 
 Exit codes: 0 success, 1 the robot or a file failed, 2 bad arguments.
 """
@@ -106,6 +107,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_sweep)
     sub.add_parser("emulator", help="emulate the arm's MX-28 bus on a pseudo-terminal "
                                     "(snakekit emulator --help for its options)", add_help=False)
+    sub.add_parser("grade", help="grade a class's submissions of an assignment "
+                                 "(snakekit grade --help for its options)", add_help=False)
     p = sub.add_parser("generate", help="write the URDF and MJCF from the robot spec")
     p.add_argument("--check", action="store_true", help="only check that the committed files are current")
     p.set_defaults(func=_generate)
@@ -123,6 +126,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
         from . import emulator
 
         return emulator.cli(argv[1:])
+    if argv[:1] == ["grade"]:  # the grader lives in its own package, with its own options
+        from grader.cli import main as grade
+
+        return grade(argv[1:], out)
     args = build_parser().parse_args(argv)
     try:
         return args.func(args, out)

@@ -1,0 +1,171 @@
+"""Grading throughput: `snakekit grade` against plain serial `nbgrader autograde` and bare nbclient.
+
+60 synthetic submissions of lesson 06 (good ones, ones that fail hidden tests, untouched
+stubs, an exception at import, a kernel that exits, a notebook that is not JSON) are graded
+three ways, side by side in one run:
+
+* ``snakekit grade 06_coded_sweep`` (sandboxed, parallel, scored against the references, with feedback);
+* ``nbgrader autograde 06_coded_sweep``, as nbgrader runs it: one submission at a time;
+* bare nbclient: each notebook executed once, serially and in parallel (one process per
+  core), with nothing else: the lower bound.
+
+Targets (the grader issue): at least 2x plain nbgrader on 2 cores; within 1.5x of the bare
+parallel bound. Prints medians over ``--repeats`` rounds; exits 1 if a target is missed.
+
+    python bench/grading.py [--submissions 60] [--repeats 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import nbformat
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import table  # noqa: E402
+
+REPO = Path(__file__).resolve().parent.parent
+LESSON = "06_coded_sweep"
+
+
+def _solutions():
+    nb = nbformat.read(REPO / "course" / "source" / LESSON / f"{LESSON}.ipynb", as_version=4)
+    return {c.metadata["nbgrader"]["grade_id"]: c.source for c in nb.cells if c.metadata.get("nbgrader", {}).get("solution")}
+
+
+def make_submissions(course: Path, n: int) -> dict[str, str]:
+    """``n`` submissions: 70 % right, then hidden failures, stubs and broken ones."""
+    sol = _solutions()
+    kinds = {
+        "good": sol,
+        "hidden_fail": {**sol, "ex06_1_sweep_times": "def sweep_times(points, rate):\n    return np.arange(points) / 10.0"},
+        "stub": {},
+        "import_error": {**sol, "ex06_1_sweep_times": "import no_such_module\n" + sol["ex06_1_sweep_times"]},
+        "kernel_exit": {**sol, "ex06_3_task2": "import os\nos._exit(1)"},
+        "not_json": None,
+    }
+    plan = (["good"] * 7 + ["hidden_fail", "stub", "import_error"]) * (n // 10) + ["kernel_exit", "not_json"]
+    plan = plan[:n - 2] + ["kernel_exit", "not_json"]
+    out = {}
+    for i, kind in enumerate(plan):
+        student = f"s{i:03d}_{kind}"
+        folder = course / "submitted" / student / LESSON
+        folder.mkdir(parents=True)
+        if kinds[kind] is None:
+            (folder / f"{LESSON}.ipynb").write_text('{"cells": [ broken')
+        else:
+            nb = nbformat.read(REPO / "notebooks" / f"{LESSON}.ipynb", as_version=4)
+            for c in nb.cells:
+                gid = c.metadata.get("nbgrader", {}).get("grade_id")
+                if gid in kinds[kind]:
+                    c.source = kinds[kind][gid]
+            nbformat.write(nb, folder / f"{LESSON}.ipynb")
+        out[student] = kind
+    return out
+
+
+def fresh_course(tmp: Path, n: int) -> Path:
+    course = tmp / "course"
+    shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
+        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log"))
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}
+    subprocess.run([sys.executable, "-m", "nbgrader", "generate_assignment", LESSON, "--force"], cwd=course,
+                   env=env, check=True, capture_output=True)
+    make_submissions(course, n)
+    return course
+
+
+def time_snakekit(course: Path, jobs: int) -> float:
+    t0 = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", LESSON, "--course", str(course),
+                        "--jobs", str(jobs)], capture_output=True, text=True, cwd=REPO)
+    dt = time.perf_counter() - t0
+    if r.returncode != 0:
+        raise SystemExit(f"snakekit grade failed:\n{r.stderr[-3000:]}")
+    return dt
+
+
+def time_nbgrader(course: Path) -> float:
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "nbgrader", "autograde", LESSON, "--create", "--force"], cwd=course,
+                   env=env, capture_output=True, text=True)
+    return time.perf_counter() - t0  # nbgrader exits 1 when some submission failed: expected here
+
+
+def _execute(path: str) -> None:
+    import nbclient
+
+    try:
+        nb = nbformat.read(path, as_version=4)
+    except Exception:  # noqa: BLE001 - the broken notebook: nothing to run
+        return
+    client = nbclient.NotebookClient(nb, timeout=120, kernel_name="python3", allow_errors=True,
+                                     resources={"metadata": {"path": str(Path(path).parent)}})
+    try:
+        client.execute()
+    except Exception:  # noqa: BLE001 - a dead kernel ends that notebook
+        pass
+
+
+def time_bare(course: Path, jobs: int) -> float:
+    paths = sorted(str(p) for p in (course / "submitted").glob(f"*/{LESSON}/{LESSON}.ipynb"))
+    t0 = time.perf_counter()
+    if jobs == 1:
+        for p in paths:
+            _execute(p)
+    else:
+        with ProcessPoolExecutor(jobs) as pool:
+            list(pool.map(_execute, paths))
+    return time.perf_counter() - t0
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--submissions", type=int, default=60)
+    p.add_argument("--repeats", type=int, default=1)
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    args = p.parse_args(argv)
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    times: dict[str, list[float]] = {k: [] for k in ("snakekit", "nbgrader", "bare1", "bareN")}
+    for _ in range(args.repeats):
+        for key, fn in (("snakekit", lambda c: time_snakekit(c, args.jobs)), ("nbgrader", time_nbgrader),
+                        ("bare1", lambda c: time_bare(c, 1)), ("bareN", lambda c: time_bare(c, args.jobs))):
+            with tempfile.TemporaryDirectory(prefix="snakekit-bench-") as tmp:
+                course = fresh_course(Path(tmp), args.submissions)
+                times[key].append(fn(course))
+    n = args.submissions
+    med = {k: statistics.median(v) for k, v in times.items()}
+    rows = [
+        [f"snakekit grade (--jobs {args.jobs}, sandboxed, scored, feedback)", f"{med['snakekit']:.1f}",
+         f"{n / med['snakekit'] * 60:.1f}", f"{med['snakekit'] / n:.2f}"],
+        ["nbgrader autograde (serial)", f"{med['nbgrader']:.1f}", f"{n / med['nbgrader'] * 60:.1f}",
+         f"{med['nbgrader'] / n:.2f}"],
+        ["bare nbclient, serial", f"{med['bare1']:.1f}", f"{n / med['bare1'] * 60:.1f}", f"{med['bare1'] / n:.2f}"],
+        [f"bare nbclient, {args.jobs} processes (bound)", f"{med['bareN']:.1f}", f"{n / med['bareN'] * 60:.1f}",
+         f"{med['bareN'] / n:.2f}"],
+    ]
+    print(f"{n} submissions of {LESSON}, {args.repeats} round(s), medians; {os.cpu_count()} cores (shared machine)")
+    print(table(rows, ["method", "wall [s]", "submissions/min", "s/submission"]))
+    speedup = med["nbgrader"] / med["snakekit"]
+    vs_bound = med["snakekit"] / med["bareN"]
+    vs_serial = med["snakekit"] / med["bare1"]
+    print(f"\nspeed-up over plain nbgrader: {speedup:.2f}x (target >= 2x)")
+    print(f"snakekit grade / bare parallel bound: {vs_bound:.2f}x (target <= 1.5x); / bare serial: {vs_serial:.2f}x")
+    missed = [m for m, ok in (("speed-up over nbgrader", speedup >= 2), ("vs the bare bound", vs_bound <= 1.5)) if not ok]
+    if missed:
+        print("MISSED: " + ", ".join(missed))
+    return 1 if missed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

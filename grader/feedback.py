@@ -1,0 +1,163 @@
+"""Per-student feedback: the student's notebook as HTML, with the grader's verdict per exercise.
+
+What the student must not see is taken out here, not trusted to nbgrader (whose feedback
+keeps the hidden tests, its issue #917): every autograded test cell shows only its visible
+part (the released source) and none of the output of running it; the grader's message and,
+for trajectories, a plot of the student's run against the reference take its place. Any other
+output that repeats a line of hidden test code is removed too.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import re
+from pathlib import Path
+
+import nbformat
+import numpy as np
+
+HIDDEN = re.compile(r"^[ \t]*#+[ \t]*BEGIN HIDDEN TESTS.*?^[ \t]*#+[ \t]*END HIDDEN TESTS[^\n]*\n?",
+                    re.MULTILINE | re.DOTALL | re.IGNORECASE)
+REMOVED = "[output removed by the grader: it showed hidden test code]"
+
+
+def visible_part(source: str) -> str:
+    """A test cell's source without its hidden-test region(s) (what the released notebook shows).
+
+    >>> print(visible_part("check(f)\\n### BEGIN HIDDEN TESTS\\nsecret(f)\\n### END HIDDEN TESTS\\n"))
+    check(f)
+    <BLANKLINE>
+    """
+    return HIDDEN.sub("", source)
+
+
+def hidden_lines(sources) -> set[str]:
+    """The non-trivial lines of the hidden regions of ``sources`` (to spot them in outputs)."""
+    out = set()
+    for s in sources:
+        for block in HIDDEN.findall(s):
+            for line in block.splitlines()[1:-1]:
+                line = line.strip()
+                if len(line) >= 12 and not line.startswith("#"):
+                    out.add(line)
+    return out
+
+
+def plot_png(curves: dict, title: str) -> bytes:
+    """The student's run against the reference, one panel per joint, as PNG bytes."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    n = next(iter(curves.values()))[1].shape[1]
+    fig = Figure(figsize=(8, 1.5 * n + 0.6), dpi=72)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(n, 1, sharex=True)
+    styles = {"reference measured": dict(color="0.6", lw=2.5), "reference commanded": dict(color="0.3", lw=1, ls=":"),
+              "measured": dict(color="C1", lw=1), "commanded": dict(color="C0", lw=1, ls="--")}
+    for name, (t, q) in curves.items():
+        t0 = t[0]
+        for j, ax in enumerate(np.atleast_1d(axes)):
+            ax.plot(t - t0, q[:, j], label=name if j == 0 else None, **styles.get(name, {}))
+    for j, ax in enumerate(np.atleast_1d(axes)):
+        ax.set_ylabel(f"joint {j + 1} [rad]", fontsize=8)
+        ax.grid(alpha=0.3)
+    np.atleast_1d(axes)[-1].set_xlabel("time from the first point [s]")
+    fig.legend(loc="upper right", fontsize=8, ncols=4)
+    fig.suptitle(title, fontsize=10, x=0.02, ha="left")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return buf.getvalue()
+
+
+def _verdict_cell(ex, label: str):
+    png = plot_png(ex.curves, f"{label}: your run (colour) and the reference (grey)") if ex.curves else None
+    rows = "".join(f"<tr><td>{html.escape(c.name)}</td><td>{c.fraction * c.weight:.2f} / {c.weight:g}</td>"
+                   f"<td>{html.escape(c.message)}</td></tr>" for c in ex.checks) if ex.curves else ""
+    body = (f"<div class='grader-verdict' style='border-left:4px solid {'#2a2' if ex.score >= ex.max_score else '#c33'};"
+            f"padding:4px 10px;margin:6px 0'><b>Grader: {html.escape(label)}: {ex.score:g} / {ex.max_score:g} points"
+            f"</b><br>{html.escape(ex.message)}"
+            + (f"<table style='font-size:90%'>{rows}</table>" if rows else "") + "</div>")
+    outputs = [nbformat.v4.new_output("display_data", data={"text/html": body})]
+    if png:
+        outputs.append(nbformat.v4.new_output("display_data", data={"image/png": base64.b64encode(png).decode()}))
+    cell = nbformat.v4.new_code_cell("", metadata={"tags": ["grader-verdict"]})
+    cell.outputs = outputs
+    return cell
+
+
+def _scrub(cell, secret: set[str]) -> None:
+    if cell.cell_type != "code":
+        return
+    keep = []
+    for out in cell.get("outputs", []):
+        text = "".join(out.get("text", "")) + "".join(out.get("traceback", []))
+        for v in out.get("data", {}).values():
+            text += v if isinstance(v, str) else "".join(v) if isinstance(v, list) else ""
+        if any(line in text for line in secret):
+            keep.append(nbformat.v4.new_output("stream", name="stdout", text=REMOVED + "\n"))
+        else:
+            keep.append(out)
+    cell.outputs = keep
+
+
+def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, str]):
+    """The feedback notebook: ``nb`` (executed or as submitted) made safe, with verdicts.
+
+    ``test_sources`` maps each test cell's grade id to its instructor source (with hidden tests).
+    """
+    secret = hidden_lines(test_sources.values())
+    by_id = {ex.grade_id: ex for ex in result.exercises}
+    seen = set()
+    cells = []
+    for cell in nb.cells:
+        meta = cell.get("metadata", {}).get("nbgrader", {})
+        gid = meta.get("grade_id")
+        if gid in test_sources:
+            if gid in seen:
+                continue  # a duplicated test cell is shown once
+            seen.add(gid)
+            cell = nbformat.v4.new_code_cell(visible_part(test_sources[gid]))
+            cells.append(cell)
+            if gid in by_id:
+                cells.append(_verdict_cell(by_id[gid], gid))
+            continue
+        cell = nbformat.from_dict(dict(cell))
+        if cell.cell_type == "code":
+            cell.outputs = list(cell.get("outputs", []))
+            _scrub(cell, secret)
+            cell.metadata = {k: v for k, v in cell.metadata.items() if k in ("tags",)}
+        cells.append(cell)
+    for gid, ex in by_id.items():
+        if gid not in seen:
+            cells.append(nbformat.v4.new_markdown_cell(f"**Test cell `{gid}` was missing from your notebook.**"))
+            cells.append(_verdict_cell(ex, gid))
+    head = (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{result.score:g} / {result.max_score:g}**"
+            + (f" ({result.status})" if result.status != "graded" else "") + "\n\n"
+            + (f"{result.detail}\n\n" if result.detail else "")
+            + "| exercise | points | |\n|---|---|---|\n"
+            + "".join(f"| `{e.grade_id}` | {e.score:g} / {e.max_score:g} | {'ok' if e.score >= e.max_score else 'see below'} |\n"
+                      for e in result.exercises))
+    out = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(head)] + cells)
+    out.metadata = {"language_info": {"name": "python"}}
+    kernelspec = nb.get("metadata", {}).get("kernelspec")
+    if isinstance(kernelspec, dict) and {"name", "display_name"} <= set(kernelspec):
+        out.metadata["kernelspec"] = kernelspec
+    return out
+
+
+def write_html(nb, path: Path) -> Path:
+    """Render the feedback notebook to one self-contained HTML file (images inline)."""
+    from nbconvert import HTMLExporter
+    from traitlets.config import Config
+
+    c = Config()
+    c.TagRemovePreprocessor.remove_input_tags = {"grader-verdict"}
+    c.TagRemovePreprocessor.enabled = True
+    c.HTMLExporter.exclude_input_prompt = True
+    c.HTMLExporter.exclude_output_prompt = True
+    body, _ = HTMLExporter(config=c).from_notebook_node(nb)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(body, encoding="utf-8")
+    return path

@@ -1,0 +1,125 @@
+"""The adversarial corpus: bad and malicious submissions of the test course, with the verdict due.
+
+Each :class:`Case` makes one student's submission and states what the grader must report:
+the CSV status, the score (out of 7: exercise 1 is 2 points, exercise 2 is 4, exercise 3 is 1)
+and a phrase of the reason. ``tests/test_grader_adversarial.py`` grades them all in one batch.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Callable
+
+from grader_helpers import GOOD, submit
+
+#: a marker the host-side checks look for (a file that must never appear, a port that must stay silent)
+PWNED = "snakekit-grader-pwned"
+
+
+@dataclass(frozen=True)
+class Case:
+    kind: str
+    student: str
+    make: Callable  # (course, student, ctx) -> None
+    status: str
+    score: float
+    reason: str = ""  # a phrase of the CSV detail or of an exercise's message
+
+
+def answers(**cells):
+    return lambda course, student, ctx: submit(course, student, {k: v.format(**ctx) for k, v in cells.items()})
+
+
+def edit(fn):
+    return lambda course, student, ctx: submit(course, student, edit=fn)
+
+
+def _cell(nb, gid):
+    return next(c for c in nb.cells if c.get("metadata", {}).get("nbgrader", {}).get("grade_id") == gid)
+
+
+def _delete(nb):
+    nb.cells.remove(_cell(nb, "ex1_tool_xy_test"))
+
+
+def _edit(nb):
+    _cell(nb, "ex2_sweep_test").source = "sweep = my_sweep()  # the check is gone"
+
+
+def _duplicate(nb):
+    c = _cell(nb, "ex1_tool_xy_test")
+    nb.cells.insert(nb.cells.index(c) + 1, copy.deepcopy(c))
+
+
+GOOD_XY = GOOD["ex1_tool_xy"]
+#: right at q = 0, so the visible check passes and the hidden cases reach the grader
+AT_ZERO = "def tool_xy(q):\n    if not np.any(q):\n        return np.array([0.3315, 0.0])\n"
+
+CASES = [
+    Case("a good submission", "good", answers(), "graded", 7.0),
+    Case("an infinite loop", "loop", answers(ex3_peak_speed="while True:\n    pass"), "timeout", 6.0, "longer than"),
+    Case("a sleep that never ends", "sleep", answers(ex1_tool_xy="import time\ntime.sleep(10**6)"), "timeout", 5.0,
+         "longer than"),
+    Case("an exception at import", "import_error", answers(ex1_tool_xy="import snakekit_solutions_please\n" + GOOD_XY),
+         "graded", 5.0, "nothing was handed in"),
+    Case("sys.exit", "sys_exit", answers(ex1_tool_xy="import sys\nsys.exit(3)"), "graded", 5.0, "nothing was handed in"),
+    Case("os._exit", "os_exit", answers(ex2_sweep="import os\nos._exit(0)"), "kernel died", 2.0, "kernel stopped"),
+    Case("a kernel crash (segfault)", "segfault", answers(ex2_sweep="import ctypes\nctypes.string_at(0)"),
+         "kernel died", 2.0, "kernel stopped"),
+    Case("killing the kernel's parent", "kill_parent",
+         answers(ex3_peak_speed="import os, signal\nos.kill(os.getppid(), signal.SIGKILL)\n" + GOOD["ex3_peak_speed"]),
+         "graded", 7.0),
+    Case("a memory hog", "memory_hog", answers(ex3_peak_speed="hog = np.ones((3 << 30) // 8)"), "memory limit", 6.0,
+         "more than"),
+    Case("megabytes of output", "big_output",
+         answers(ex3_peak_speed="for i in range(100000):\n    print('spam ' * 40)\n" + GOOD["ex3_peak_speed"]),
+         "graded", 7.0),
+    Case("a deleted test cell", "deleted_test", edit(_delete), "tests tampered", 5.0, "deleted"),
+    Case("an edited test cell", "edited_test", edit(_edit), "tests tampered", 3.0, "edited"),
+    Case("a duplicated test cell", "duplicated_test", edit(_duplicate), "tests tampered", 5.0, "duplicated"),
+    Case("a renamed function", "renamed", answers(ex1_tool_xy=GOOD_XY.replace("def tool_xy", "def tool_position")),
+         "graded", 5.0, "nothing was handed in"),
+    Case("wrong shapes", "wrong_shape", answers(ex1_tool_xy=AT_ZERO + "    return np.zeros(3)"), "graded", 5.0,
+         "shape (8, 3), expected (8, 2)"),
+    Case("NaN", "nan", answers(ex1_tool_xy=AT_ZERO + "    return np.array([np.nan, 0.0])"), "graded", 5.0,
+         "holds NaN or infinity"),
+    Case("monkeypatching numpy", "patch_numpy",
+         answers(ex1_tool_xy="np.allclose = lambda *a, **k: True\ndef tool_xy(q):\n    return np.array([0.3315, 0.0])"),
+         "graded", 5.0, "8 of 8 hidden cases wrong"),
+    Case("monkeypatching the checks (hand_in)", "patch_checks",
+         answers(ex1_tool_xy=GOOD_XY + "\n_real = hand_in\n"
+                 "def hand_in(grade_id, **v):\n    v = {{k: np.zeros_like(a) for k, a in v.items() if a is not None}}\n"
+                 "    _real(grade_id, **v)"),
+         "graded", 1.0, "not the one the test gave"),
+    Case("reading the references and the hidden tests", "read_secrets",
+         answers(ex1_tool_xy="import glob, os\nfound = []\n"
+                 "for pattern in {secrets!r}:\n"
+                 "    for p in glob.glob(pattern, recursive=True):\n"
+                 "        try:\n            open(p, 'rb').read(1); found.append(p)\n"
+                 "        except OSError:\n            pass\n"
+                 "print('found', found)\n"
+                 "def tool_xy(q):\n    return np.array([0.3315, 0.0]) if not found else np.array([0.0, 0.0])"),
+         "graded", 5.0, "8 of 8 hidden cases wrong"),
+    Case("writing outside its folder and into the gradebook", "write_outside",
+         answers(ex3_peak_speed="import glob, os, sqlite3\nwritten = []\n"
+                 "for p in {targets!r}:\n"
+                 "    try:\n        open(p, 'a').write('x'); written.append(p)\n    except OSError:\n        pass\n"
+                 "for db in glob.glob({gradebook!r}):\n"
+                 "    try:\n        sqlite3.connect(db).execute('DROP TABLE grade'); written.append(db)\n"
+                 "    except Exception:\n        pass\n"
+                 "print('written', written)\n" + GOOD["ex3_peak_speed"]),
+         "graded", 7.0),
+    Case("network access", "network",
+         answers(ex3_peak_speed="import socket\nreached = []\n"
+                 "for host, port in [('127.0.0.1', {port}), ({host_ip!r}, {port}), ('1.1.1.1', 53)]:\n"
+                 "    try:\n        socket.create_connection((host, port), timeout=2).sendall(b'{pwned}'); "
+                 "reached.append(host)\n"
+                 "    except OSError:\n        pass\n"
+                 "print('reached', reached)\n" + GOOD["ex3_peak_speed"]),
+         "graded", 7.0),
+    Case("a notebook that is not valid JSON", "not_json",
+         lambda course, student, ctx: submit(course, student, raw='{"cells": [ this is not JSON'),
+         "invalid notebook", 0.0, "not a valid notebook"),
+]
+

@@ -1,0 +1,84 @@
+"""Helpers for the grader's tests: a copy of the test course, and submissions made from its release."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import nbformat
+
+HERE = Path(__file__).resolve().parent
+FIXTURE = HERE / "grader_course"
+ASSIGNMENT = "t1_sweep"
+REFERENCES = FIXTURE / "references"
+
+#: The instructor's answers, as a student would type them.
+GOOD = {
+    "ex1_tool_xy": '''def tool_xy(q):
+    phi = np.cumsum(q)
+    lengths = np.array([0.071, 0.071, 0.071, 0.071, 0.0475])
+    return np.array([np.sum(lengths * np.cos(phi)), np.sum(lengths * np.sin(phi))])''',
+    "ex2_sweep": '''def my_sweep():
+    t = np.arange(500) / 10.0
+    angle = 0.2 * np.sin(2 * np.pi * t / (t[-1] / 50))
+    angle[-1] = 0.0
+    return snakekit.Trajectory(t, np.repeat(angle[:, None], 5, axis=1))''',
+    "ex3_peak_speed": "peak_speed = float(np.abs(my_sweep().finite_difference_velocities()).max())",
+}
+
+
+def make_course(tmp: Path) -> Path:
+    """A fresh copy of the test course, released (``nbgrader generate_assignment``)."""
+    from grader.batch import ensure_released
+
+    course = tmp / "course"
+    shutil.copytree(FIXTURE, course, ignore=shutil.ignore_patterns("references"))
+    ensure_released(course, ASSIGNMENT)
+    return course
+
+
+def release_notebook(course: Path):
+    return nbformat.read(course / "release" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
+
+
+def submit(course: Path, student: str, answers: dict | None = None, *, edit=None, raw: str | bytes | None = None,
+           extra_files: dict | None = None) -> Path:
+    """Write ``submitted/<student>/t1_sweep/t1_sweep.ipynb`` from the release notebook.
+
+    ``answers`` replaces answer cells by grade id (default: the good ones, others from GOOD);
+    ``edit(nb)`` may change the notebook further; ``raw`` writes these bytes instead.
+    """
+    folder = course / "submitted" / student / ASSIGNMENT
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{ASSIGNMENT}.ipynb"
+    for name, content in (extra_files or {}).items():
+        (folder / name).write_text(content)
+    if raw is not None:
+        path.write_bytes(raw.encode() if isinstance(raw, str) else raw)
+        return path
+    nb = release_notebook(course)
+    chosen = {**GOOD, **(answers or {})}
+    for cell in nb.cells:
+        gid = cell.get("metadata", {}).get("nbgrader", {}).get("grade_id")
+        if gid in chosen and cell.metadata.nbgrader.get("solution"):
+            cell.source = chosen[gid]
+    if edit is not None:
+        edit(nb)
+    nbformat.write(nb, path)
+    return path
+
+
+def grade_ids(nb) -> list[str]:
+    return [c.metadata.get("nbgrader", {}).get("grade_id") for c in nb.cells]
+
+
+def read_csv(path: Path) -> dict[str, dict]:
+    import csv
+
+    with open(path) as f:
+        return {row["student"]: row for row in csv.DictReader(f)}
+
+
+def dump(obj) -> str:
+    return json.dumps(obj, indent=1, default=str)

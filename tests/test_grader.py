@@ -1,0 +1,273 @@
+"""The grader's parts: trajectory checks, reference files, scoring of hand-ins, and a batch on the test course."""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import need_program
+from grader import compare
+from grader.references import REFERENCES as COURSE_REFERENCES
+from grader.references import Reference, differences, main as references_main, record, spec_hash
+from grader.score import score_exercise
+from grader_helpers import ASSIGNMENT, FIXTURE, REFERENCES, make_course, read_csv, submit
+from snakekit.trajectory import Trajectory, side_sweep
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+# --- grader.compare -----------------------------------------------------------------------------
+
+
+def test_task2_sweep_passes_every_check():
+    ref = side_sweep()
+    checks = [compare.point_count(ref, 500), compare.rate(ref, 10.0), compare.limits(ref), compare.sweep_count(ref, 50),
+              compare.home(ref), compare.smoothness(ref, ref),
+              compare.tracking(ref, ref, max_tol=1e-6, rms_tol=1e-6)]
+    assert [c.fraction for c in checks] == [1.0] * 7
+
+
+def test_tracking_error_names_joint_time_and_amount():
+    ref = side_sweep()
+    p = ref.positions.copy()
+    p[200, 2] += 0.05  # joint 3 at t = 20 s
+    c = compare.tracking(Trajectory(ref.times, p), ref, max_tol=0.01, rms_tol=0.01)
+    assert "joint 3 at t=20.00 s is +0.05 rad" in c.message and "tolerance 0.01 rad" in c.message
+    # max error 0.05 = 5x tol -> falloff (0.05-0.01)/(0.1-0.01) -> 0.556 on max, RMS 0.05/sqrt(500) within tol
+    assert c.fraction == pytest.approx((4 + 0.5 * (1 - 0.04 / 0.09) + 0.5) / 5)
+
+
+def test_time_alignment_ignores_a_start_offset():
+    ref = side_sweep()
+    late = Trajectory(ref.times + 3.0, ref.positions)
+    assert compare.tracking(late, ref, max_tol=1e-9, rms_tol=1e-9).fraction == 1.0
+
+
+def test_rate_recognises_100_hz_and_a_start_at_1():
+    ref = side_sweep()
+    fast = compare.rate(Trajectory(ref.times / 10, ref.positions), 10.0)
+    assert fast.fraction == 0.5 and "100 Hz where 10 Hz was asked" in fast.message
+    late = compare.rate(Trajectory(ref.times + 1.0, ref.positions), 10.0)
+    assert late.fraction == 0.75 and "starts at 1 instead of 0" in late.message
+
+
+def test_sweeps_and_home_count_like_a_person():
+    short = side_sweep(points=500, sweeps=40)
+    assert compare.count_sweeps(short.positions) == 40
+    c = compare.sweep_count(short, 50)
+    assert c.fraction == pytest.approx(0.8) and "sweeps: 40, expected 50" in c.message
+    t = np.arange(500) / 10
+    not_home = Trajectory(t, np.repeat((0.2 * np.sin(2 * np.pi * t / 10))[:, None], 5, 1))
+    h = compare.home(not_home)
+    assert h.fraction == 0.5 and "does not return home" in h.message
+
+
+def test_limits_and_smoothness_give_partial_credit_with_numbers():
+    ref = side_sweep()
+    p = ref.positions.copy()
+    p[100:105, 0] = 1.6  # beyond +1.57 rad, and a jump
+    bad = Trajectory(ref.times, p)
+    lim = compare.limits(bad)
+    assert lim.fraction == pytest.approx(1 - 6 / 500)  # 5 points beyond, and the step down after them
+    assert "worst position: joint 1 at t=10.000 s: position +1.6000 rad (limit +1.5700) (by 0.03)" in lim.message
+    sm = compare.smoothness(bad, ref)
+    assert sm.fraction == 0.0 and "joint 1 at t=" in sm.message
+
+
+def test_values_partial_credit_per_case():
+    expected = np.arange(10.0).reshape(5, 2)
+    got = expected.copy()
+    got[3, 1] += 1e-3
+    c = compare.values(got, expected, rtol=1e-9, atol=1e-12, what="xy", inputs=np.arange(5.0))
+    assert c.fraction == pytest.approx(0.8)
+    assert "1 of 5 hidden cases wrong; first at input 3: entry 1 is 7.001, expected 7" in c.message
+    assert compare.values(got.T, expected, rtol=0, atol=1, what="xy").message.endswith("transpose?")
+
+
+# --- references ------------------------------------------------------------------------------
+
+
+def test_reference_file_round_trip_keeps_header_and_arrays(tmp_path):
+    ref = Reference.load(REFERENCES / f"{ASSIGNMENT}.npz")
+    assert ref.meta["spec_hash"] == spec_hash() and ref.meta["assignment"] == ASSIGNMENT
+    assert ref.exercises["ex2_sweep_test"]["kind"] == "run"
+    assert ref.exercises["ex1_tool_xy_test"]["inputs"] == ["in_q"]
+    again = Reference.load(ref.save(tmp_path / "r.npz"))
+    assert again.meta == ref.meta and differences(ref, again) == []
+    with np.load(tmp_path / "r.npz", allow_pickle=False) as z:  # plain arrays, no pickles
+        assert set(z.files) >= {"__meta__", "ex1_tool_xy_test/in_q", "ex2_sweep_test/measured_positions"}
+
+
+def test_fixture_reference_is_current():
+    assert references_main([ASSIGNMENT, "--course", str(FIXTURE), "--out", str(REFERENCES), "--check"]) == 0
+
+
+@pytest.mark.parametrize("path", sorted(COURSE_REFERENCES.glob("*.npz")), ids=lambda p: p.stem)
+def test_course_references_are_current(path):
+    assert references_main([path.stem, "--check"]) == 0
+
+
+def test_stale_reference_is_reported(tmp_path, capsys):
+    ref = Reference.load(REFERENCES / f"{ASSIGNMENT}.npz")
+    arrays = {g: dict(d) for g, d in ref.arrays.items()}
+    arrays["ex1_tool_xy_test"]["xy"] = arrays["ex1_tool_xy_test"]["xy"] + 1e-6
+    Reference(ref.assignment, ref.meta, arrays).save(tmp_path / f"{ASSIGNMENT}.npz")
+    assert references_main([ASSIGNMENT, "--course", str(FIXTURE), "--out", str(tmp_path), "--check"]) == 1
+    assert "ex1_tool_xy_test/xy: values moved by up to 1e-06" in capsys.readouterr().err
+
+
+# --- scoring a hand-in ----------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def ref():
+    return Reference.load(REFERENCES / f"{ASSIGNMENT}.npz")
+
+
+def test_inputs_other_than_the_hidden_ones_score_zero(ref):
+    h = {k: v.copy() for k, v in ref.arrays["ex1_tool_xy_test"].items()}
+    h["in_q"][0, 0] += 0.5
+    s = score_exercise("ex1_tool_xy_test", h, ref, 2.0)
+    assert (s.score, s.status) == (0.0, "inconsistent") and "hidden input 'in_q'" in s.message
+
+
+def test_nan_and_missing_handins_score_zero_with_a_reason(ref):
+    h = {k: v.copy() for k, v in ref.arrays["ex1_tool_xy_test"].items()}
+    h["xy"][2, 1] = np.nan
+    s = score_exercise("ex1_tool_xy_test", h, ref, 2.0)
+    assert s.score == 0 and "NaN or infinity (first at index (2, 1))" in s.message
+    assert score_exercise("ex1_tool_xy_test", None, ref, 2.0).status == "missing"
+
+
+def test_run_scored_from_its_checks(ref):
+    good = ref.arrays["ex2_sweep_test"]
+    assert score_exercise("ex2_sweep_test", dict(good), ref, 4.0).score == 4.0
+    late = dict(good, measured_positions=good["measured_positions"] + 0.01)  # 0.01 rad = 6.5 ticks off
+    s = score_exercise("ex2_sweep_test", late, ref, 4.0)
+    # 8 of 10 weight pass; the run check: max and RMS 0.01 rad vs 0.00153 / 0.00077 tolerances
+    f = 0.5 * compare.falloff(0.01, 0.00153398, 0.0153398) + 0.5 * compare.falloff(0.01, 0.00076699, 0.0076699)
+    assert s.score == pytest.approx(4.0 * (8 + 2 * f) / 10, abs=1e-3)
+    assert "run vs reference: largest measured angle error joint 1" in s.message
+
+
+# --- a batch on the test course ----------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def graded(tmp_path_factory):
+    need_program("unshare")
+    tmp = tmp_path_factory.mktemp("batch")
+    course = make_course(tmp)
+    submit(course, "alice")
+    submit(course, "bob", {"ex1_tool_xy": "def tool_xy(q):\n    return np.array([0.3315, 0.0]) + 0 * q[:2]",
+                           "ex2_sweep": "def my_sweep():\n    t = np.arange(500) / 100\n"
+                                        "    a = 0.2 * np.sin(2 * np.pi * t / (t[-1] / 50))\n"
+                                        "    return snakekit.Trajectory(t, np.repeat(a[:, None], 5, 1))"})
+
+    def grade():
+        return subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
+                               "--references", str(REFERENCES), "--timeout", "60"],
+                              capture_output=True, text=True, timeout=600, cwd=REPO)
+
+    first = grade()
+    csv1 = (course / f"grades-{ASSIGNMENT}.csv").read_text()
+    second = grade()
+    return {"course": course, "first": first, "second": second, "csv1": csv1}
+
+
+def test_batch_writes_csv_with_scores(graded):
+    assert graded["first"].returncode == 0, graded["first"].stderr[-3000:]
+    rows = read_csv(graded["course"] / f"grades-{ASSIGNMENT}.csv")
+    assert list(next(iter(rows.values())))[:5] == ["student", "assignment", "score", "max_score", "status"]
+    assert (rows["alice"]["score"], rows["alice"]["status"]) == ("7", "graded")
+    # bob: ex1 0 (every hidden case wrong); ex3 fails in the kernel (100 Hz is too fast);
+    # ex2 0.25 * 4 = 1 for... computed from the checks below
+    assert rows["bob"]["status"] == "graded" and 0 < float(rows["bob"]["score"]) < 3
+
+
+def test_same_submission_graded_twice_gets_the_same_score(graded):
+    assert graded["second"].returncode == 0
+    assert (graded["course"] / f"grades-{ASSIGNMENT}.csv").read_text() == graded["csv1"]
+
+
+def test_scores_land_in_nbgraders_gradebook(graded):
+    from nbgrader.api import Gradebook
+
+    with Gradebook(f"sqlite:///{graded['course'] / 'gradebook.db'}", "snakekit-test-course") as gb:
+        assert gb.find_submission(ASSIGNMENT, "alice").score == 7.0
+        bob = gb.find_submission(ASSIGNMENT, "bob")
+        assert bob.score == float(read_csv(graded["course"] / f"grades-{ASSIGNMENT}.csv")["bob"]["score"])
+        assert gb.find_grade("ex1_tool_xy_test", ASSIGNMENT, ASSIGNMENT, "bob").auto_score == 0.0
+    con = sqlite3.connect(graded["course"] / "gradebook.db")
+    assert con.execute("SELECT COUNT(*) FROM submitted_assignment").fetchone()[0] == 2  # twice, not duplicated
+
+
+def test_progress_shows_done_left_failed(graded):
+    err = graded["first"].stderr
+    assert "0/2: done 0, left 2, failed 0" in err and "2/2: done 2, left 0, failed 0" in err
+
+
+def test_feedback_has_verdicts_and_plots_but_no_hidden_tests(graded):
+    import nbformat
+
+    from grader.feedback import hidden_lines
+
+    html = (graded["course"] / "feedback" / "bob" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
+    assert "Grader: ex1_tool_xy_test: 0 / 2 points" in html
+    assert "8 of 8 hidden cases wrong" in html
+    assert "100 Hz where 10 Hz was asked" in html
+    plots = html.count('alt="No description has been provided for this image" class="" src="data:image/png;base64,')
+    assert plots == 1  # bob's sweep against the reference
+    src = nbformat.read(FIXTURE / "source" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
+    secret = hidden_lines(c.source for c in src.cells)
+    assert secret and not [line for line in secret if line in html]
+    assert "hidden tool_xy cases differ" not in html  # the hidden assertion's message
+    assert "Traceback" not in html
+
+
+def test_exit_code_2_for_bad_arguments(tmp_path):
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", *args], capture_output=True, text=True,
+                              cwd=REPO, timeout=120)
+
+    r = run("t1_sweep", "--course", str(tmp_path / "nowhere"))
+    assert r.returncode == 2 and "no course folder" in r.stderr
+    r = run("no_such_lesson", "--course", str(FIXTURE))
+    assert r.returncode == 2 and "available: t1_sweep" in r.stderr
+    r = run("t1_sweep", "--course", str(FIXTURE), "--jobs", "0")
+    assert r.returncode == 2 and "--jobs must be at least 1" in r.stderr
+
+
+def test_exit_code_1_when_the_grader_fails(tmp_path):
+    course = make_course(tmp_path)
+    submit(course, "alice")
+    refs = tmp_path / "refs"
+    refs.mkdir()
+    (refs / f"{ASSIGNMENT}.npz").write_bytes(b"not a zip")
+    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
+                        "--references", str(refs)], capture_output=True, text=True, cwd=REPO, timeout=300)
+    assert r.returncode == 1 and "not a readable reference file" in r.stderr
+
+
+def test_grader_depends_only_on_trajectory_model_and_run():
+    code = ("import sys, grader.batch, grader.cli, grader.score, grader.feedback, grader.references; "
+            "print(sorted(m for m in sys.modules if m.startswith('snakekit')))")
+    mods = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True).stdout
+    for banned in ("snakekit.viewer", "snakekit.sim", "snakekit.hardware", "snakekit.emulator", "snakekit.widgets",
+                   "snakekit.servo"):
+        assert f"'{banned}'" not in mods
+
+
+@pytest.mark.parametrize("name", ["grader.compare", "grader.feedback"])
+def test_docstring_examples(name):
+    import doctest
+    import importlib
+
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+    assert result.failed == 0 and result.attempted > 0

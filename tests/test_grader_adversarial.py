@@ -1,0 +1,154 @@
+"""The adversarial corpus, graded in one batch: every kind gets its stated verdict, none stops the batch.
+
+The host-side facts are checked here too: nothing was written outside the submissions' copies,
+the gradebook survived, no connection reached the host, the feedback carries no hidden test.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import sqlite3
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from conftest import need_program
+from grader_corpus import CASES, PWNED
+from grader_helpers import ASSIGNMENT, REFERENCES, make_course, read_csv
+
+REPO = Path(__file__).resolve().parent.parent
+TIMEOUT = 20
+
+
+def _host_ip() -> str:
+    out = subprocess.run(["ip", "-4", "-o", "addr", "show", "scope", "global"], capture_output=True, text=True).stdout
+    for line in out.splitlines():
+        return line.split()[3].split("/")[0]
+    return "127.0.0.1"
+
+
+class _Listener:
+    """A TCP server on every host interface that records who connected."""
+
+    def __init__(self):
+        self.sock = socket.socket()
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self.sock.bind(("0.0.0.0", 0))
+        self.sock.listen()
+        self.sock.settimeout(0.2)
+        self.port = self.sock.getsockname()[1]
+        self.seen: list = []
+        self.stop = False
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self):
+        while not self.stop:
+            try:
+                conn, addr = self.sock.accept()
+            except OSError:
+                continue
+            self.seen.append(addr)
+            conn.close()
+
+    def close(self):
+        self.stop = True
+        self.thread.join()
+        self.sock.close()
+
+
+@pytest.fixture(scope="module")
+def batch(tmp_path_factory):
+    need_program("unshare")
+    if os.geteuid() != 0:
+        pytest.skip("the full sandbox (separate user) is tested as root, as in CI")
+    tmp = tmp_path_factory.mktemp("adversarial")
+    course = make_course(tmp)
+    work = tmp / "work"
+    work.mkdir()
+    listener = _Listener()
+    ctx = {
+        "secrets": [f"{course}/gradebook.db", f"{course}/source/**/*.ipynb", f"{course}/submitted/good/**/*.ipynb",
+                    f"{REFERENCES}/*.npz", f"{REPO}/grader/references/*.npz", f"{REPO}/tests/grader_course/**/*.ipynb",
+                    f"{work}/*/*/course/autograded/good/**/*.ipynb", "/root/**/*.ipynb"],
+        "targets": [f"/tmp/{PWNED}", f"{course}/{PWNED}", f"{REPO}/{PWNED}", f"{work}/{PWNED}", f"{tmp}/{PWNED}"],
+        "gradebook": str(course / "gradebook.db"),
+        "port": listener.port, "host_ip": _host_ip(), "pwned": PWNED,
+    }
+    for case in CASES:
+        case.make(course, case.student, ctx)
+    csv = tmp / "grades.csv"
+    r = subprocess.run([sys.executable, "-m", "grader.cli", ASSIGNMENT, "--course", str(course), "--jobs", "2",
+                        "--timeout", str(TIMEOUT), "--memory", "1536", "--csv", str(csv),
+                        "--references", str(REFERENCES)],
+                       capture_output=True, text=True, timeout=900, cwd=REPO,
+                       env={**os.environ, "TMPDIR": str(work)})
+    listener.close()
+    yield {"course": course, "run": r, "rows": read_csv(csv) if csv.exists() else {}, "ctx": ctx,
+           "listener": listener, "tmp": tmp}
+    for t in ctx["targets"]:
+        Path(t).unlink(missing_ok=True)
+
+
+def test_the_batch_completes_with_exit_code_0(batch):
+    r = batch["run"]
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert set(batch["rows"]) == {c.student for c in CASES}
+    assert f"done {len(CASES)}, left 0" in r.stderr
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.student for c in CASES])
+def test_each_kind_gets_its_verdict(batch, case):
+    row = batch["rows"][case.student]
+    assert (row["status"], float(row["score"]), float(row["max_score"])) == (case.status, case.score, 7.0), row
+    if case.reason:
+        html = (batch["course"] / "feedback" / case.student / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
+        assert case.reason in row["detail"] or case.reason in html, (row, case.reason)
+
+
+def test_nothing_was_written_outside_the_copies(batch):
+    for t in batch["ctx"]["targets"]:
+        assert not Path(t).exists(), t
+    con = sqlite3.connect(batch["course"] / "gradebook.db")
+    assert con.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+    students = {s for (s,) in con.execute("SELECT student_id FROM submitted_assignment")}
+    assert students == {c.student for c in CASES}
+    graded = con.execute("SELECT COUNT(*) FROM grade WHERE auto_score IS NOT NULL").fetchone()[0]
+    assert graded == 3 * len(CASES)
+
+
+def test_no_connection_reached_the_host(batch):
+    assert batch["listener"].seen == []
+
+
+def test_secrets_were_not_readable(batch):
+    """The student printed what it could open; the feedback shows the empty list."""
+    html = (batch["course"] / "feedback" / "read_secrets" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
+    assert "found []" in html
+    html = (batch["course"] / "feedback" / "network" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
+    assert "reached []" in html
+    html = (batch["course"] / "feedback" / "write_outside" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
+    assert f"written ['/tmp/{PWNED}']" in html  # only its private /tmp, gone with the sandbox
+
+
+def test_no_feedback_shows_hidden_tests(batch):
+    from grader.feedback import hidden_lines
+
+    import nbformat
+
+    src = nbformat.read(batch["course"] / "source" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
+    secret = hidden_lines(c.source for c in src.cells)
+    assert len(secret) >= 8
+    for case in CASES:
+        html = (batch["course"] / "feedback" / case.student / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
+        assert not [line for line in secret if line in html], case.student
+        assert "BEGIN HIDDEN TESTS" not in html
+
+
+def test_megabytes_of_output_stay_bounded(batch):
+    html = batch["course"] / "feedback" / "big_output" / ASSIGNMENT / f"{ASSIGNMENT}.html"
+    assert html.stat().st_size < 5_000_000
