@@ -11,6 +11,9 @@ and leaves the server running when the kernel is killed. Here:
 
 * the web server binds ``127.0.0.1`` unless told otherwise (``host="0.0.0.0"`` inside a
   container whose port is published), and the ZeroMQ socket always binds ``127.0.0.1``;
+* the environment may set the defaults: ``SNAKEKIT_VIEWER_HOST`` (the interface) and
+  ``SNAKEKIT_VIEWER_PORTS`` (a range such as ``7000-7009``: the first free port in it is
+  used). The container image sets both, so the view is reachable on its published ports;
 * the page and its JavaScript come from the meshcat package itself: nothing is fetched from
   the internet;
 * the server stops with :meth:`Viewer.close`, at the end of a ``with`` block, when the
@@ -31,6 +34,7 @@ import atexit
 import html
 import os
 import selectors
+import socket
 import subprocess
 import sys
 import time
@@ -182,6 +186,30 @@ def _start_server(host: str, port: int, timeout: float) -> tuple[subprocess.Pope
                 "Check that meshcat is installed in this environment (tools/setup).")
         raise ViewerError(f"the meshcat server could not start on {host}:{port or 'any port'}: {why}. {hint}")
     return proc, lines["zmq_url"], int(lines["web_port"])
+
+
+def _start_in_range(host: str, ports: str, timeout: float) -> tuple[subprocess.Popen, str, int]:
+    """Start the server on the first free port of a range ``"LOW-HIGH"`` (or one port)."""
+    low, _, high = ports.partition("-")
+    try:
+        low, high = int(low), int(high or low)
+    except ValueError:
+        raise ViewerError(f"SNAKEKIT_VIEWER_PORTS must be a port range such as 7000-7009, got {ports!r}") from None
+    if not 0 < low <= high < 65536:
+        raise ViewerError(f"SNAKEKIT_VIEWER_PORTS must be a port range such as 7000-7009, got {ports!r}")
+    for candidate in range(low, high + 1):
+        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+            try:
+                s.bind((host, candidate))
+            except OSError:
+                continue  # taken (another viewer): try the next one
+        try:
+            return _start_server(host, candidate, timeout)
+        except ViewerError as e:
+            if "in use" not in str(e):
+                raise
+    raise ViewerError(f"every viewer port in {low}-{high} (SNAKEKIT_VIEWER_PORTS) is in use: close a viewer "
+                      "(viewer.close(), or restart its kernel) and make a new one")
 
 
 class _Window(ViewerWindow):
@@ -371,7 +399,9 @@ class Viewer:
     Args:
         host: interface the web server listens on. Keep ``"127.0.0.1"`` unless the browser
             runs on another machine (``"0.0.0.0"`` inside a container with a published port).
-        port: web server port (default: any free port).
+            Default: ``$SNAKEKIT_VIEWER_HOST``, else ``"127.0.0.1"``.
+        port: web server port (default: the first free one in ``$SNAKEKIT_VIEWER_PORTS``,
+            e.g. ``7000-7009``, else any free port).
         url_host: host name the browser uses to reach the server (default: ``host``, or
             ``localhost`` when listening on every interface).
         height: height of the view in a notebook cell [px].
@@ -382,14 +412,19 @@ class Viewer:
         ViewerError: the server could not start (port in use, meshcat missing).
     """
 
-    def __init__(self, *, host: str = "127.0.0.1", port: int | None = None, url_host: str | None = None,
+    def __init__(self, *, host: str | None = None, port: int | None = None, url_host: str | None = None,
                  height: int = 420, timeout: float = 10.0, spec: SnakeSpec = SPEC):
         if port is not None and not (isinstance(port, int) and 0 <= port < 65536):
             raise ValueError(f"port must be an integer in 0..65535 (or None for any free port), got {port!r}")
         self.spec = spec
+        if host is None:
+            host = os.environ.get("SNAKEKIT_VIEWER_HOST") or "127.0.0.1"
         self.host = host
         self.height = int(height)
-        self._proc, zmq_url, self.port = _start_server(host, port or 0, timeout)
+        if port is None and os.environ.get("SNAKEKIT_VIEWER_PORTS"):
+            self._proc, zmq_url, self.port = _start_in_range(host, os.environ["SNAKEKIT_VIEWER_PORTS"], timeout)
+        else:
+            self._proc, zmq_url, self.port = _start_server(host, port or 0, timeout)
         shown = url_host or ("localhost" if host in ("0.0.0.0", "", "::") else host)
         if ":" in shown and not shown.startswith("["):
             shown = f"[{shown}]"
