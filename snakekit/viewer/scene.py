@@ -9,6 +9,9 @@ meshcat's viewer is a web page (three.js) fed by a small server process over a w
 
 * the web server binds ``127.0.0.1`` unless told otherwise (``host="0.0.0.0"`` inside a
   container whose port is published), and the ZeroMQ socket always binds ``127.0.0.1``;
+* the environment may set the defaults: ``SNAKEKIT_VIEWER_HOST`` (the interface) and
+  ``SNAKEKIT_VIEWER_PORTS`` (a range such as ``7000-7009``: the first free port in it is
+  used). The container image sets both, so the view is reachable on its published ports;
 * the page and its JavaScript come from the meshcat package itself: nothing is fetched from
   the internet;
 * the server stops with :meth:`Viewer.close`, at the end of a ``with`` block, when the
@@ -26,6 +29,7 @@ meshcat's viewer is a web page (three.js) fed by a small server process over a w
 from __future__ import annotations
 
 import html
+import os
 import warnings
 import weakref
 from pathlib import Path
@@ -38,7 +42,7 @@ from ..model import SPEC, SnakeSpec, urdf
 from ..robot import Run
 from ..trajectory import Trajectory
 from ..validate import as_configuration
-from .server import LIVE, Window, start_server, stop_server
+from .server import LIVE, Window, start_in_range, start_server, stop_server
 from .urdf_visuals import visual_boxes
 
 with warnings.catch_warnings():  # meshcat 0.3 imports a pyzmq module deprecated since 17
@@ -95,7 +99,9 @@ class Viewer:
     Args:
         host: interface the web server listens on. Keep ``"127.0.0.1"`` unless the browser
             runs on another machine (``"0.0.0.0"`` inside a container with a published port).
-        port: web server port (default: any free port).
+            Default: ``$SNAKEKIT_VIEWER_HOST``, else ``"127.0.0.1"``.
+        port: web server port (default: the first free one in ``$SNAKEKIT_VIEWER_PORTS``,
+            e.g. ``7000-7009``, else any free port).
         url_host: host name the browser uses to reach the server (default: ``host``, or
             ``localhost`` when listening on every interface).
         height: height of the view in a notebook cell [px].
@@ -110,7 +116,7 @@ class Viewer:
         ViewerError: the server could not start (port in use, meshcat missing).
     """
 
-    def __init__(self, *, host: str = "127.0.0.1", port: int | None = None, url_host: str | None = None,
+    def __init__(self, *, host: str | None = None, port: int | None = None, url_host: str | None = None,
                  height: int = 420, timeout: float = 10.0, spec: SnakeSpec = SPEC,
                  replace: bool | None = None):
         if port is not None and not (isinstance(port, int) and 0 <= port < 65536):
@@ -121,9 +127,15 @@ class Viewer:
             for old in list(LIVE):
                 old.close()
         self.spec = spec
+        if host is None:
+            host = os.environ.get("SNAKEKIT_VIEWER_HOST") or "127.0.0.1"
         self.host = host
         self.height = int(height)
-        self._proc, zmq_url, self.port = start_server(host, port or 0, max(timeout, STARTUP_TIMEOUT))
+        if port is None and os.environ.get("SNAKEKIT_VIEWER_PORTS"):
+            self._proc, zmq_url, self.port = start_in_range(host, os.environ["SNAKEKIT_VIEWER_PORTS"],
+                                                            max(timeout, STARTUP_TIMEOUT))
+        else:
+            self._proc, zmq_url, self.port = start_server(host, port or 0, max(timeout, STARTUP_TIMEOUT))
         shown = url_host or ("localhost" if host in ("0.0.0.0", "", "::") else host)
         if ":" in shown and not shown.startswith("["):
             shown = f"[{shown}]"

