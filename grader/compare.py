@@ -170,15 +170,20 @@ def limits(traj: Trajectory, spec: SnakeSpec = SPEC, *, weight: float = 1.0) -> 
     if not bad:
         return Check("limits", 1.0, f"limits: every point within {spec.lower}..{spec.upper} rad and "
                                     f"{spec.velocity_limit} rad/s.", weight)
-    points = {v.time for v in bad}
-    f = 1.0 - len(points) / len(traj)
+    t = traj.times
+    beyond = np.zeros(len(t), dtype=bool)
+    for v in bad:  # one violation per stretch: every sample from its start to its end
+        beyond |= (t >= v.start - 1e-12) & (t <= v.end + 1e-12)
+    points = int(beyond.sum())
+    f = 1.0 - points / len(traj)
     worst = []
     for kind in ("position", "velocity"):
         some = [v for v in bad if v.kind == kind]
         if some:
             w = max(some, key=lambda v: abs(v.value) - abs(v.bound))
-            worst.append(f"worst {kind}: {w} (by {abs(w.value) - abs(w.bound):.4g})")
-    return Check("limits", f, f"limits: {len(bad)} violation(s) at {len(points)} of {len(traj)} points; "
+            unit = "rad" if kind == "position" else "rad/s"
+            worst.append(f"worst {kind}: {w}; {abs(w.value) - abs(w.bound):.4g} {unit} over")
+    return Check("limits", f, f"limits: {len(bad)} stretch(es) beyond a limit, at {points} of {len(traj)} points; "
                               + "; ".join(worst) + ".", weight)
 
 

@@ -75,7 +75,10 @@ def test_limits_and_smoothness_give_partial_credit_with_numbers():
     bad = Trajectory(ref.times, p)
     lim = compare.limits(bad)
     assert lim.fraction == pytest.approx(1 - 6 / 500)  # 5 points beyond, and the step down after them
-    assert "worst position: joint 1 at t=10.000 s: position +1.6000 rad (limit +1.5700) (by 0.03)" in lim.message
+    assert lim.message.startswith("limits: 3 stretch(es) beyond a limit, at 6 of 500 points; ")
+    assert ("worst position: joint 1 at t=10.000 s: position +1.6000 rad (limit +1.5700), beyond it from "
+            "t=10.000 to 10.400 s (5 points); 0.03 rad over") in lim.message
+    assert "worst velocity: joint 1 at t=10.000 s: velocity +16.9653 rad/s (limit +1.5000); 15.47 rad/s over" in lim.message
     sm = compare.smoothness(bad, ref)
     assert sm.fraction == 0.0 and "joint 1 at t=" in sm.message
 
