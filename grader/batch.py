@@ -17,6 +17,7 @@ For each ``<course>/submitted/<student>/<assignment>/`` the grader
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import secrets
@@ -449,7 +450,11 @@ class Grader:
                 except ValueError as e:
                     scores.append(ExerciseScore(gid, 0.0, cell.max_score, "inconsistent", f"hand-in unreadable: {e}."))
                     continue
-                scores.append(score_exercise(gid, handin, a.reference, cell.max_score))
+                sc = score_exercise(gid, handin, a.reference, cell.max_score)
+                if sc.status == "missing" and handin is None:
+                    sc = dataclasses.replace(sc, message=_why_missing(_find_cell(executed.get(cell.notebook), gid),
+                                                                      sc.message))
+                scores.append(sc)
             else:
                 scores.append(self._kernel_score(gid, cell, executed.get(cell.notebook)))
         if outcome.timed_out or "CellTimeoutError" in errors:
@@ -483,17 +488,26 @@ class Grader:
 
     @staticmethod
     def _kernel_score(gid, cell, nb) -> ExerciseScore:
-        """No reference: nbgrader's own verdict (the cell ran without an error)."""
+        """No reference: nbgrader's own verdict (the cell ran without an error).
+
+        The error's message is shown only if a visible check raised it; a hidden test's
+        message (its inputs, its expected values) stays hidden.
+        """
         if nb is None:
             return ExerciseScore(gid, 0.0, cell.max_score, "missing", "the notebook did not finish running.")
-        for c in nb.cells:
-            if c.get("metadata", {}).get("nbgrader", {}).get("grade_id") == gid:
-                errs = [o for o in c.get("outputs", []) if o.get("output_type") == "error"]
-                if errs:
-                    return ExerciseScore(gid, 0.0, cell.max_score, "scored",
-                                         f"the test cell failed: {errs[0].get('ename')}: {str(errs[0].get('evalue'))[:300]}")
-                return ExerciseScore(gid, cell.max_score, cell.max_score, "scored", "the test cell passed.")
-        return ExerciseScore(gid, 0.0, cell.max_score, "missing", "the test cell is missing.")
+        c = _find_cell(nb, gid)
+        if c is None:
+            return ExerciseScore(gid, 0.0, cell.max_score, "missing", "the test cell is missing.")
+        err = feedback.cell_error(c)
+        if err is None:
+            return ExerciseScore(gid, cell.max_score, cell.max_score, "scored", "the test cell passed.")
+        ename, evalue, where = err
+        if where == "visible":
+            msg = f"a visible check failed: {ename}: {evalue}"
+        else:
+            msg = (f"a hidden test failed ({ename}). Test your code on more cases than the visible checks use: "
+                   "other inputs, edge cases.")
+        return ExerciseScore(gid, 0.0, cell.max_score, "scored", msg)
 
     def _zero(self, student, status, detail, t0) -> SubmissionResult:
         scores = tuple(ExerciseScore(g, 0.0, c.max_score, "missing", detail) for g, c in self.a.tests.items())
@@ -540,6 +554,29 @@ class Grader:
                         grade.auto_score = by_id[grade.name].score
                         grade.needs_manual_grade = False
             gb.db.commit()
+
+
+def _find_cell(nb, gid):
+    if nb is None:
+        return None
+    return next((c for c in nb.cells if c.get("metadata", {}).get("nbgrader", {}).get("grade_id") == gid), None)
+
+
+def _why_missing(cell, message: str) -> str:
+    """The reason a test cell handed nothing in, from how it stopped (never a hidden test's words).
+
+    The course's test cells hand in at the start of their hidden part, so a cell that handed
+    nothing in stopped before it: in its visible checks, whose message the student would see
+    by running the cell. A traceback that points into the hidden part keeps its message.
+    """
+    err = feedback.cell_error(cell) if cell is not None else None
+    if err is None:
+        return message
+    ename, evalue, where = err
+    if where == "hidden":
+        return f"nothing was handed in: the test cell stopped in its hidden tests with {ename}."
+    return (f"nothing was handed in: the test cell stopped at a visible check, before the hidden tests ran. "
+            f"It said: {ename}: {evalue}")
 
 
 class _bytes_io:  # np.load wants a file; a tiny read-only one over bytes

@@ -286,7 +286,7 @@ def values(got: np.ndarray, expected: np.ndarray, *, rtol: float, atol: float, w
     if inputs is not None and len(inputs) == n:
         x = np.asarray(inputs[k])
         where = f" at input {float(x):.6g}" if x.ndim == 0 else \
-            f" at input {np.array2string(x, precision=4, separator=', ', suppress_small=True)}"
+            " at input (" + ", ".join(f"{float(v):.6g}" for v in x.ravel()[:12]) + (", ..." if x.size > 12 else "") + ")"
     else:
         where = f" in case {k + 1}"
     u = f" {unit}" if unit else ""

@@ -33,6 +33,43 @@ def visible_part(source: str) -> str:
     return HIDDEN.sub("", source)
 
 
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+_BEGIN = re.compile(r"^[ \t]*#+[ \t]*BEGIN HIDDEN TESTS", re.IGNORECASE)
+
+
+def cell_error(cell) -> tuple[str, str, str] | None:
+    """How an executed test cell failed: ``(exception name, message, where)``; None if it did not.
+
+    ``where`` is ``"visible"`` when the traceback shows the statement that raised standing
+    before the cell's hidden tests (a visible check, which the student can run in their own
+    notebook), ``"hidden"`` when it stands in or after them, ``"unknown"`` when the traceback
+    names no line of the cell (the course's checks print a one-line message, no traceback).
+
+    >>> from nbformat.v4 import new_code_cell, new_output
+    >>> c = new_code_cell("check(f)\\n### BEGIN HIDDEN TESTS\\nsecret(f)\\n### END HIDDEN TESTS\\n", execution_count=7)
+    >>> c.outputs = [new_output("error", ename="CheckFailed", evalue="f is not written yet",
+    ...                         traceback=["Cell In[7], line 1", "..."])]
+    >>> cell_error(c)
+    ('CheckFailed', 'f is not written yet', 'visible')
+    >>> c.outputs[0]["traceback"] = ["Cell In[7], line 3", "..."]
+    >>> cell_error(c)[2], cell_error(new_code_cell("x = 1")) is None
+    ('hidden', True)
+    """
+    err = next((o for o in cell.get("outputs", []) if o.get("output_type") == "error"), None)
+    if err is None:
+        return None
+    ename = str(err.get("ename", "an error"))[:80]
+    evalue = _ANSI.sub("", str(err.get("evalue", "")))[:600]
+    lines = str(cell.get("source", "")).splitlines()
+    first_hidden = next((i + 1 for i, line in enumerate(lines) if _BEGIN.match(line)), len(lines) + 1)
+    tb = _ANSI.sub("", "\n".join(map(str, err.get("traceback", []))))
+    count = cell.get("execution_count")
+    m = re.search(rf"Cell In\[{count}\], line (\d+)", tb) if count else None
+    if not m:
+        return ename, evalue, "unknown"
+    return ename, evalue, "visible" if int(m.group(1)) < first_hidden else "hidden"
+
+
 def hidden_lines(sources) -> set[str]:
     """The non-trivial lines of the hidden regions of ``sources`` (to spot them in outputs)."""
     out = set()
@@ -46,26 +83,53 @@ def hidden_lines(sources) -> set[str]:
 
 
 def plot_png(curves: dict, title: str) -> bytes:
-    """The student's run against the reference, one panel per joint, as PNG bytes."""
+    """The student's run against the reference, one row per joint, as PNG bytes.
+
+    Left: the whole run. Right: 5 s around the largest difference between the student's
+    curve and the reference (or the start, when they agree), where one can see it. The
+    reference is drawn wide and grey underneath, the student's curves in colour on top.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     n = next(iter(curves.values()))[1].shape[1]
-    fig = Figure(figsize=(8, 1.5 * n + 0.6), dpi=72)
+    fig = Figure(figsize=(10, 1.45 * n + 1.0), dpi=72, layout="constrained")
     FigureCanvasAgg(fig)
-    axes = fig.subplots(n, 1, sharex=True)
-    styles = {"reference measured": dict(color="0.6", lw=2.5), "reference commanded": dict(color="0.3", lw=1, ls=":"),
-              "measured": dict(color="C1", lw=1), "commanded": dict(color="C0", lw=1, ls="--")}
-    for name, (t, q) in curves.items():
-        t0 = t[0]
-        for j, ax in enumerate(np.atleast_1d(axes)):
-            ax.plot(t - t0, q[:, j], label=name if j == 0 else None, **styles.get(name, {}))
-    for j, ax in enumerate(np.atleast_1d(axes)):
-        ax.set_ylabel(f"joint {j + 1} [rad]", fontsize=8)
-        ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[-1].set_xlabel("time from the first point [s]")
-    fig.legend(loc="upper right", fontsize=8, ncols=4)
-    fig.suptitle(title, fontsize=10, x=0.02, ha="left")
+    axes = np.atleast_2d(fig.subplots(n, 2, sharey="row", width_ratios=(2, 1)))
+    styles = {"reference measured": dict(color="0.7", lw=3.5, zorder=1),
+              "reference commanded": dict(color="0.35", lw=1, ls=":", zorder=2),
+              "commanded": dict(color="C0", lw=1, ls="--", zorder=3),
+              "measured": dict(color="C1", lw=1.2, zorder=4)}
+    centre, worst = 0.0, ""
+    for mine, ref in (("measured", "reference measured"), ("commanded", "reference commanded")):
+        if mine in curves and ref in curves:
+            (ts, qs), (tr, qr) = curves[mine], curves[ref]
+            ts, tr = ts - ts[0], tr - tr[0]
+            grid = ts[(ts >= 0) & (ts <= tr[-1])]
+            if len(grid):
+                diff = np.abs(qs[: len(grid)] - np.column_stack([np.interp(grid, tr, qr[:, j]) for j in range(n)]))
+                if diff.max() > 1e-9:
+                    i, j = np.unravel_index(int(np.argmax(diff)), diff.shape)
+                    centre, worst = float(grid[i]), f"largest difference: {mine} joint {j + 1} at t={grid[i]:.1f} s"
+                    break
+    lo = max(centre - 2.5, 0.0)
+    for name in sorted(curves, key=lambda k: styles.get(k, {}).get("zorder", 5)):
+        t, q = curves[name]
+        t = t - t[0]
+        for j in range(n):
+            for col, keep in ((0, slice(None)), (1, (t >= lo) & (t <= lo + 5))):
+                axes[j, col].plot(t[keep], q[keep, j], label=name if (j, col) == (0, 0) else None,
+                                  **styles.get(name, {}))
+    for j in range(n):
+        axes[j, 0].set_ylabel(f"joint {j + 1} [rad]", fontsize=8)
+        for col in (0, 1):
+            axes[j, col].grid(alpha=0.3)
+            axes[j, col].tick_params(labelsize=7)
+    axes[-1, 0].set_xlabel("time from the first point [s]", fontsize=8)
+    axes[-1, 1].set_xlabel(f"zoom: {lo:.1f} to {lo + 5:.1f} s", fontsize=8)
+    axes[0, 1].set_title(worst or "your curves match the reference", fontsize=8)
+    fig.legend(loc="outside upper right", fontsize=8, ncols=4)
+    fig.suptitle(title, fontsize=10, x=0.01, ha="left")
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     return buf.getvalue()

@@ -95,10 +95,21 @@ def _score_values(gid, handin, ex, ref, max_score) -> ExerciseScore:
                          f"no '{name}' was handed in: your function raised an error (or called the library "
                          "function the exercise asks you to write) on the hidden inputs.")
         checks.append(compare.values(handin[name], ref[name], rtol=tol["rtol"], atol=tol["atol"],
-                                     what=name, inputs=inputs))
+                                     what=_label(gid) if name == "outputs" else name, inputs=inputs))
     fraction = float(np.mean([c.fraction for c in checks])) if checks else 1.0
     msg = " ".join(c.message for c in checks if not c.passed) or "all hidden cases within tolerance."
     return ExerciseScore(gid, round(fraction * max_score, 4), max_score, "scored", msg, tuple(checks))
+
+
+def _label(grade_id: str) -> str:
+    """What a student calls an exercise's results: ``ex06_1_sweep_times_test`` -> ``sweep_times``.
+
+    >>> _label("ex06_1_sweep_times_test"), _label("ex1_tool_xy_test"), _label("odd")
+    ('sweep_times', 'tool_xy', 'odd')
+    """
+    import re
+
+    return re.sub(r"^ex\d+(?:_\d+)?_|_test$", "", grade_id) or grade_id
 
 
 def _trajectory(handin, times, positions, what) -> Trajectory:

@@ -267,10 +267,34 @@ def test_grader_depends_only_on_trajectory_model_and_run():
         assert f"'{banned}'" not in mods
 
 
-@pytest.mark.parametrize("name", ["grader.compare", "grader.feedback"])
+@pytest.mark.parametrize("name", ["grader.compare", "grader.feedback", "grader.score"])
 def test_docstring_examples(name):
     import doctest
     import importlib
 
     result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
     assert result.failed == 0 and result.attempted > 0
+
+
+def test_kernel_verdict_hides_a_hidden_tests_message():
+    """A test cell without a reference keeps nbgrader's verdict, but only a visible check's words."""
+    from nbformat.v4 import new_code_cell, new_notebook, new_output
+
+    from grader.batch import Grader, _Cell
+
+    src = "check(f)\n### BEGIN HIDDEN TESTS\nassert f(7) == 49, 'f(7) should be 49'\n### END HIDDEN TESTS\n"
+    cell = new_code_cell(src, execution_count=5, metadata={"nbgrader": {"grade_id": "t", "grade": True}})
+    nb = new_notebook(cells=[cell])
+    info = _Cell("t", "nb", 2.0, src, "code")
+
+    def fails_at(line):
+        cell.outputs = [new_output("error", ename="AssertionError", evalue="f(7) should be 49",
+                                   traceback=[f"\x1b[36mCell In[5], line {line}\x1b[0m", "AssertionError"])]
+        return Grader._kernel_score("t", info, nb)
+
+    hidden = fails_at(3)
+    assert (hidden.score, hidden.max_score) == (0.0, 2.0)
+    assert hidden.message.startswith("a hidden test failed (AssertionError).") and "49" not in hidden.message
+    assert fails_at(1).message == "a visible check failed: AssertionError: f(7) should be 49"
+    cell.outputs = []
+    assert Grader._kernel_score("t", info, nb).score == 2.0

@@ -68,12 +68,23 @@ def test_failed_hidden_test_feedback_says_what_and_where_without_the_test(graded
     course, _ = graded
     html = (course / "feedback" / "dan" / LESSON / f"{LESSON}.html").read_text()
     assert "Grader: ex06_1_sweep_times_test: 0 / 2 points" in html
-    assert "6 of 6 hidden cases wrong; first at input [" in html
+    assert "sweep_times: 6 of 6 hidden cases wrong; first at input (485, 60.8922): entry 1 is 0.1, expected 0.0164225" in html
     src = nbformat.read(course / "source" / LESSON / f"{LESSON}.ipynb", as_version=4)
     from grader.feedback import hidden_lines
 
     secret = hidden_lines(c.source for c in src.cells)
     assert secret and not [line for line in secret if line in html]
+    # the hidden test's own failure message (printed in the kernel) does not reach the student
+    ran = (course / "autograded" / "dan" / LESSON / f"{LESSON}.ipynb").read_text()
+    assert "send times[484] at points=485" in ran and "send times[484]" not in html
+
+
+def test_stopped_at_a_visible_check_feedback_repeats_that_check(graded):
+    course, _ = graded
+    html = (course / "feedback" / "eve" / LESSON / f"{LESSON}.html").read_text()
+    assert ("Grader: ex06_1_sweep_times_test: 0 / 2 points</b><br/>nothing was handed in: the test cell stopped at a "
+            "visible check, before the hidden tests ran. It said: CheckFailed: exercise 6.1 sweep_times: `sweep_times` "
+            "is not written yet") in html
 
 
 def test_task2_feedback_plots_the_run_against_the_reference(graded):
