@@ -293,6 +293,11 @@ class Grader:
 
     def run(self, students: list[str] | None = None) -> list[SubmissionResult]:
         students = self.students() if students is None else students
+        from nbformat.warnings import DuplicateCellId, MissingIDFieldWarning
+
+        # a submission's duplicated or missing cell ids are repaired on reading; nothing for the TA to do
+        warnings.filterwarnings("ignore", category=DuplicateCellId)
+        warnings.filterwarnings("ignore", category=MissingIDFieldWarning)
         self.a = load_assignment(self.course, self.assignment, self.references)
         if self.use_sandbox:
             sandbox.check_available()

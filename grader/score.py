@@ -127,7 +127,7 @@ def _score_motion(gid, handin, ex, ref, max_score) -> ExerciseScore:
     try:
         cmd = _trajectory(handin, *names, "commanded trajectory")
     except ValueError as e:
-        return _zero(gid, max_score, "inconsistent" if "valid" in str(e) else "missing", str(e) + ".")
+        return _zero(gid, max_score, "inconsistent" if "valid" in str(e) else "missing", str(e).rstrip(".") + ".")
     ref_cmd = Trajectory(ref[names[0]], ref[names[1]])
     points = tol.get("points", len(ref_cmd))
     hz = tol.get("rate", 1.0 / float(np.median(np.diff(ref_cmd.times))))
@@ -148,7 +148,7 @@ def _score_motion(gid, handin, ex, ref, max_score) -> ExerciseScore:
         try:
             meas = _trajectory(handin, "measured_times", "measured_positions", "recorded run")
         except ValueError as e:
-            checks.append(compare.Check("run vs reference", 0.0, str(e) + ".", 2.0))
+            checks.append(compare.Check("run vs reference", 0.0, str(e).rstrip(".") + ".", 2.0))
         else:
             ref_meas = Trajectory(ref["measured_times"], ref["measured_positions"])
             checks.append(compare.tracking(meas, ref_meas, max_tol=tol["max"], rms_tol=tol["rms"],

@@ -49,7 +49,9 @@ def _edit(nb):
 
 def _duplicate(nb):
     c = _cell(nb, "ex1_tool_xy_test")
-    nb.cells.insert(nb.cells.index(c) + 1, copy.deepcopy(c))
+    twin = copy.deepcopy(c)
+    twin["id"] = "twin-of-" + c["id"][:20]  # Jupyter gives a pasted copy an id of its own
+    nb.cells.insert(nb.cells.index(c) + 1, twin)
 
 
 GOOD_XY = GOOD["ex1_tool_xy"]
@@ -108,7 +110,11 @@ CASES = [
                  "for db in glob.glob({gradebook!r}):\n"
                  "    try:\n        sqlite3.connect(db).execute('DROP TABLE grade'); written.append(db)\n"
                  "    except Exception:\n        pass\n"
-                 "print('written', written)\n" + GOOD["ex3_peak_speed"]),
+                 "print('written', written)\n"
+                 "import resource\nstatus = open('/proc/self/status').read()\n"
+                 "print('who', os.getuid(), os.geteuid(), 'nonewprivs', status.split('NoNewPrivs:')[1].split()[0], "
+                 "'memory', resource.getrlimit(resource.RLIMIT_AS)[0] >> 20, "
+                 "'cpu', resource.getrlimit(resource.RLIMIT_CPU)[0])\n" + GOOD["ex3_peak_speed"]),
          "graded", 7.0),
     Case("network access", "network",
          answers(ex3_peak_speed="import socket\nreached = []\n"

@@ -135,6 +135,17 @@ def test_secrets_were_not_readable(batch):
     assert f"written ['/tmp/{PWNED}']" in html  # only its private /tmp, gone with the sandbox
 
 
+def test_the_kernel_ran_as_the_sandbox_user_with_its_limits(batch):
+    """As root, the grader runs each submission as `snakekit-grader`, no_new_privs, with rlimits."""
+    import pwd
+
+    uid = pwd.getpwnam("snakekit-grader").pw_uid
+    assert uid != 0
+    html = (batch["course"] / "feedback" / "write_outside" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
+    # --memory 1536 (MB); CPU seconds: 2 x the 20 s timeout + 30
+    assert f"who {uid} {uid} nonewprivs 1 memory 1536 cpu {2 * TIMEOUT + 30}" in html
+
+
 def test_no_feedback_shows_hidden_tests(batch):
     from grader.feedback import hidden_lines
 
