@@ -18,6 +18,9 @@ def main(argv: list[str]) -> int:
     result_path = course.parent / "result.json"
     result = {"success": False, "error": "", "log": ""}
     result_path.write_text(json.dumps(result))  # replaced below; its presence means the worker started
+    # jsonschema (under nbformat) imports rfc3987_syntax when installed, which builds a parser
+    # at import: about 1 s per sandbox, for an "iri" string format no notebook schema uses.
+    sys.modules.setdefault("rfc3987_syntax", None)
     try:
         from nbgrader.apps import NbGraderAPI
         from nbgrader.coursedir import CourseDirectory
