@@ -30,7 +30,8 @@ class ShapeError(SnakekitError, ValueError):
 
     def __init__(self, name: str, expected: str, actual: tuple, hint: str = ""):
         self.name, self.expected, self.actual = name, expected, actual
-        msg = f"{name} must have shape {expected}, got shape {actual}"
+        got = actual if isinstance(actual, str) else f"shape {actual}"  # a str: e.g. ragged rows
+        msg = f"{name} must have shape {expected}, got {got}"
         super().__init__(msg + (f". {hint}" if hint else ""))
 
 

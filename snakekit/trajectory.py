@@ -16,7 +16,7 @@ import numpy as np
 
 from .errors import FileFormatError, LimitError, NotFiniteError, ShapeError, TrajectoryError
 from .model import SPEC, SnakeSpec
-from .validate import check_limits, frozen
+from .validate import check_limits, frozen, number, real_array
 
 
 @dataclass(frozen=True)
@@ -88,8 +88,8 @@ class Trajectory:
 
     def __post_init__(self):
         n = self.n_joints
-        t = np.asarray(self.times, dtype=float)
-        p = np.asarray(self.positions, dtype=float)
+        t = real_array(self.times, "times", "(N,)", "Give one time [s] per point")
+        p = real_array(self.positions, "positions", f"(N, {n})", f"Give {n} angles [rad] per time")
         if t.ndim != 1 or t.size == 0:
             raise ShapeError("times", "(N,) with N >= 1", t.shape, "give one time [s] per point")
         if p.ndim == 1 and p.size == n and t.size == 1:
@@ -110,7 +110,8 @@ class Trajectory:
         object.__setattr__(self, "times", frozen(t))
         object.__setattr__(self, "positions", frozen(p))
         if self.velocities is not None:
-            v = np.asarray(self.velocities, dtype=float)
+            v = real_array(self.velocities, "velocities", f"{p.shape} (same as positions)",
+                           f"Give {n} joint rates [rad/s] per time")
             if v.shape != p.shape:
                 raise ShapeError("velocities", f"{p.shape} (same as positions)", v.shape)
             if not np.isfinite(v).all():
@@ -353,10 +354,17 @@ def joint_trajectory(q_start, q_end, duration: float | None = None, *, method: s
     scaling, peak = _SCALINGS[method]
     a = check_limits(q_start, spec, "q_start")
     b = check_limits(q_end, spec, "q_end")
+    rate = number(rate, "rate", "Hz", above=0, hint="It is how many points per second the move is "
+                  "sampled at (default: 100)")
     if duration is None:
+        speed_fraction = number(speed_fraction, "speed_fraction", above=0, at_most=1,
+                                hint="It is the share of the velocity limit the fastest joint may reach "
+                                "(default: 0.8); or give the duration [s]")
         duration = max(peak * float(np.abs(b - a).max()) / (speed_fraction * spec.velocity_limit), 1.0 / rate)
-    if not duration > 0:
-        raise TrajectoryError(f"duration must be > 0 s, got {duration}")
+    else:
+        duration = number(duration, "duration", "s", above=0,
+                          hint="Give how long the move takes, or leave it out for the fastest move "
+                          "inside the velocity limit")
     n = max(int(np.ceil(duration * rate - 1e-9)), 1)
     t = np.linspace(0.0, duration, n + 1)
     s = scaling(duration, t)
@@ -375,9 +383,12 @@ def side_sweep(*, points: int = 500, rate: float = 10.0, sweeps: int = 50,
     >>> len(tr), round(tr.duration, 1), bool(abs(tr.positions[[0, -1]]).max() < 1e-12)
     (500, 49.9, True)
     """
-    if points < 2 or rate <= 0 or sweeps < 1:
-        raise TrajectoryError(f"side_sweep needs points >= 2, rate > 0 and sweeps >= 1; "
-                              f"got points={points}, rate={rate}, sweeps={sweeps}")
+    points = number(points, "points", at_least=2, integer=True, hint="It is how many goals the sweep sends "
+                    "(the task: 500)")
+    rate = number(rate, "rate", "Hz", above=0, hint="It is how many goals per second are sent (the task: 10)")
+    sweeps = number(sweeps, "sweeps", at_least=1, integer=True,
+                    hint="It is how many side-to-side sweeps fill the run (the task: 50)")
+    amplitude = number(amplitude, "amplitude", "rad", hint="It is how far each joint swings (default: 0.2)")
     t = np.arange(points) / rate
     period = t[-1] / sweeps
     w = 2 * np.pi / period
