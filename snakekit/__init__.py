@@ -13,7 +13,7 @@ import os as _os
 _os.environ.setdefault("MUJOCO_GL", "egl")
 
 from .errors import (  # noqa: E402
-    BackendError, CommunicationError, ConfigurationError, FileFormatError, HardwareError,
+    BackendError, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
     InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError,
     ServoMismatchError, ShapeError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
@@ -34,7 +34,7 @@ _LAZY = {
 __all__ = [
     "SPEC", "SnakeSpec", *_LAZY,
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
-    "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "BackendError",
+    "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError", "BackendError",
     "CommunicationError", "HardwareError", "ServoMismatchError", "InstructionError", "ViewerError",
     "MissingDependencyError", "PacketError",
 ]

@@ -25,16 +25,40 @@ PLOT_SUFFIXES = (".png", ".pdf", ".svg")
 
 def _writable(path: Path, suffixes: tuple[str, ...], what: str) -> str | None:
     """Why ``path`` can't be written as ``what``, or None if it can."""
+    from .validate import writable_file
+
     if path.suffix.lower() not in suffixes:
         return f"{what} {path} must end in {' or '.join(suffixes)}"
-    parent = path.resolve().parent
-    if not parent.is_dir():
-        return f"cannot write {what} {path}: folder {parent} does not exist"
-    if path.is_dir():
-        return f"cannot write {what} {path}: it is a folder"
-    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        return f"cannot write {what} {path}: permission denied"
+    try:
+        writable_file(path, what)  # really opened for writing: permission bits don't tell all
+    except SnakekitError as e:
+        return str(e)
     return None
+
+
+def _save_run(run, path: Path, out) -> bool:
+    """Save ``run`` to ``path``; if that fails now (full disk, the folder went away...), save
+    it in the working folder or the temporary folder instead, and say where. True if saved
+    where asked."""
+    import tempfile
+
+    try:
+        run.save(path)
+        print(f"saved run:          {path}", file=out)
+        return True
+    except SnakekitError as e:
+        print(f"snakekit sweep: {e}", file=sys.stderr)
+    name = f"snakekit-run-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.npz"
+    for folder in (Path.cwd(), Path(tempfile.gettempdir())):
+        try:
+            run.save(folder / name)
+        except SnakekitError:
+            continue
+        print(f"snakekit sweep: the run was saved to {folder / name} instead; move it where you want it",
+              file=sys.stderr)
+        return False
+    print("snakekit sweep: the run could not be saved anywhere; nothing else was written", file=sys.stderr)
+    return False
 
 
 def _sweep(args, out) -> int:
@@ -65,17 +89,19 @@ def _sweep(args, out) -> int:
     wall0 = time.perf_counter()
     with make_robot(args.backend, **options) as robot:
         run = robot.run(trajectory)
+    saved = _save_run(run, Path(args.out), out) if args.out else True  # first: a finished run is kept
     print(run.summary(), file=out)
-    if args.out:
-        run.save(args.out)
-        print(f"saved run:          {args.out}", file=out)
     if args.plot:
         from .plots import plot_run
 
-        plot_run(run).savefig(args.plot, dpi=110)
-        print(f"saved plot:         {args.plot}", file=out)
+        try:
+            plot_run(run).savefig(args.plot, dpi=110)
+            print(f"saved plot:         {args.plot}", file=out)
+        except OSError as e:
+            print(f"snakekit sweep: cannot write plot {args.plot}: {e.strerror or e}", file=sys.stderr)
+            saved = False
     print(f"total wall time:    {time.perf_counter() - wall0:.2f} s", file=out)
-    return 0 if run.limits_held() else 1
+    return 0 if run.limits_held() and saved else 1
 
 
 def _generate(args, out) -> int:

@@ -74,6 +74,11 @@ class FileFormatError(SnakekitError, ValueError):
     """A file could not be read as what it claims to be (truncated, wrong columns...)."""
 
 
+class FileWriteError(SnakekitError, OSError):
+    """A file could not be written where asked (the folder is missing, it is a folder, no
+    permission, a read-only place...); the message names the path and what to do."""
+
+
 class PacketError(SnakekitError, ValueError):
     """Bytes that are not one well-formed Dynamixel Protocol 2.0 packet."""
 

@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import BackendError, ConfigurationError, FileFormatError, InputTypeError, LimitError, ShapeError
+from .errors import BackendError, FileFormatError, InputTypeError, LimitError, ShapeError
 from .model import SPEC, SnakeSpec
 from .progress import LONG_RUN, TextProgress
 from .trajectory import Trajectory, joint_trajectory
-from .validate import check_limits, frozen
+from .validate import check_limits, frozen, number, readable_file, write_failed, writable_file
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,20 +122,29 @@ class Run:
         return "\n".join(lines)
 
     def save(self, path) -> Path:
-        """Write the run to a ``.npz`` file."""
+        """Write the run to a ``.npz`` file.
+
+        Raises:
+            FileFormatError: another suffix.
+            FileWriteError: the folder is missing, the path is a folder, or writing failed.
+        """
         path = Path(path)
         if path.suffix != ".npz":
             raise FileFormatError(f"a run is saved as .npz, not '{path.suffix}' ({path})")
-        np.savez(path, commanded_times=self.commanded.times, commanded_positions=self.commanded.positions,
-                 measured_times=self.measured.times, measured_positions=self.measured.positions,
-                 measured_velocities=self.measured.velocities, efforts=self.efforts,
-                 backend=np.array(self.backend), wall_time=self.wall_time, realtime=self.realtime)
+        writable_file(path, "run file", probe=False)
+        try:
+            np.savez(path, commanded_times=self.commanded.times, commanded_positions=self.commanded.positions,
+                     measured_times=self.measured.times, measured_positions=self.measured.positions,
+                     measured_velocities=self.measured.velocities, efforts=self.efforts,
+                     backend=np.array(self.backend), wall_time=self.wall_time, realtime=self.realtime)
+        except OSError as e:
+            raise write_failed(path, "run file", e) from e
         return path
 
     @classmethod
     def load(cls, path) -> "Run":
         """Read a run written by :meth:`save`."""
-        path = Path(path)
+        path = readable_file(path, "run file")
         try:
             with np.load(path, allow_pickle=False) as z:
                 return cls(Trajectory(z["commanded_times"], z["commanded_positions"]),
@@ -286,8 +295,10 @@ class Robot(ABC):
     @staticmethod
     def _record_times(trajectory: Trajectory, record_rate: float, settle: float) -> np.ndarray:
         """When the state is recorded during a run, from the run's start [s]."""
-        if not record_rate > 0 or settle < 0:
-            raise ConfigurationError(f"record_rate must be > 0 Hz and settle >= 0 s; got {record_rate}, {settle}")
+        record_rate = number(record_rate, "record_rate", "Hz", above=0, at_most=1e4,
+                             hint="It is how often the state is recorded during the run (default: 100)")
+        settle = number(settle, "settle", "s", at_least=0, at_most=3600,
+                        hint="It is how long recording goes on after the last goal (default: 0.5)")
         end = trajectory.duration + settle
         return np.arange(int(np.floor(end * record_rate + 1e-9)) + 1) / record_rate
 

@@ -16,8 +16,9 @@ from __future__ import annotations
 import numpy as np
 
 import operator
+from pathlib import Path
 
-from .errors import ConfigurationError, InputTypeError, LimitError, NotFiniteError, ShapeError
+from .errors import ConfigurationError, FileFormatError, FileWriteError, InputTypeError, LimitError, NotFiniteError, ShapeError
 from .model import SPEC, SnakeSpec
 
 
@@ -145,3 +146,59 @@ def check_limits(q, spec: SnakeSpec = SPEC, name: str = "q") -> np.ndarray:
         raise LimitError(f"{name} is outside the joint limits [{spec.lower}, {spec.upper}] rad: {text}. "
                          "Choose angles inside the limits (see snakekit.SPEC).", bad)
     return q
+
+
+# --- files --------------------------------------------------------------------------------
+
+
+def writable_file(path, what: str, *, probe: bool = True) -> Path:
+    """``path`` as a Path, if ``what`` (e.g. "run file") can be written there.
+
+    With ``probe``, a file is really opened there for writing (and removed again if it was
+    not there before): permission bits do not tell everything (read-only mounts, /proc...),
+    so this is how a long job checks its output before it starts.
+
+    Raises:
+        FileWriteError: the folder is missing, the path is a folder, or writing fails; the
+            message says which and what to do.
+    """
+    path = Path(path)
+    parent = path.absolute().parent
+    if not parent.is_dir():
+        state = "is a file, not a folder" if parent.exists() else "does not exist"
+        raise FileWriteError(f"cannot write {what} {path}: folder {parent} {state}. Create the folder first "
+                             f"(pathlib.Path('{parent}').mkdir(parents=True)) or choose another path")
+    if path.is_dir():
+        raise FileWriteError(f"cannot write {what} {path}: it is a folder. Give a file name inside it, "
+                             f"e.g. {path / ('name' + path.suffix)}")
+    if probe:
+        existed = path.exists()
+        try:
+            with open(path, "ab"):
+                pass
+            if not existed:
+                path.unlink()
+        except OSError as e:
+            raise write_failed(path, what, e) from e
+    return path
+
+
+def write_failed(path, what: str, e: OSError) -> FileWriteError:
+    """The error for an ``OSError`` while writing ``what`` to ``path``."""
+    return FileWriteError(f"cannot write {what} {path}: {e.strerror or e}. Choose a place you can write to "
+                          "(e.g. a file in your home folder)")
+
+
+def readable_file(path, what: str) -> Path:
+    """``path`` as a Path, if it is an existing file (not a folder).
+
+    Raises:
+        FileFormatError: it does not exist, or it is a folder.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise FileFormatError(f"{what} {path} is a folder, not a file; give the path of the "
+                              "file itself")
+    if not path.exists():
+        raise FileFormatError(f"{what} {path} does not exist")
+    return path
