@@ -138,18 +138,19 @@ class Trajectory:
 
     def sample(self, t) -> np.ndarray:
         """Positions at time(s) ``t`` [s], linearly interpolated and held beyond the ends."""
-        t = np.asarray(t, dtype=float)
+        t = real_array(t, "t", "() or (M,)", "Give the time(s) [s] to sample at")
         out = np.stack([np.interp(t, self.times, self.positions[:, j]) for j in range(self.n_joints)], -1)
         return out
 
     def resample(self, rate: float | None = None, *, times=None) -> "Trajectory":
         """A trajectory on a new time grid: every ``1/rate`` s, or at the given ``times``."""
         if times is None:
-            if rate is None or not rate > 0:
-                raise TrajectoryError(f"resample needs a rate > 0 [Hz] or times, got rate={rate}")
+            if rate is None:
+                raise TrajectoryError("resample needs a rate > 0 [Hz] or times, got neither")
+            rate = number(rate, "rate", "Hz", above=0, hint="resample needs a rate > 0 [Hz] or times")
             count = int(np.floor(self.duration * rate + 1e-9)) + 1
             times = self.times[0] + np.arange(count) / rate
-        times = np.asarray(times, dtype=float)
+        times = real_array(times, "times", "(M,)", "Give the new sample times [s]")
         vel = None
         if self.velocities is not None:
             vel = np.stack([np.interp(times, self.times, self.velocities[:, j])
