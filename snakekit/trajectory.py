@@ -304,7 +304,7 @@ def _not_utf8(path: Path, e: UnicodeDecodeError) -> FileFormatError:
 def _csv_line_problem(path: Path, width: int) -> FileFormatError | None:
     """The first malformed data line of a .csv, found by reading it line by line (only called
     when the vectorised read failed, to say where and why)."""
-    with open(path, newline="", encoding="utf-8") as f:
+    with open(path, newline="", encoding="utf-8-sig") as f:
         reader = csv.reader(f)
         next(reader, None)
         for row in reader:
@@ -312,8 +312,8 @@ def _csv_line_problem(path: Path, width: int) -> FileFormatError | None:
             if not row:
                 continue
             if len(row) != width:
-                return FileFormatError(f"{path}, line {line}: {len(row)} values, expected {width}; "
-                                       "the file may be truncated")
+                return FileFormatError(f"{path}, line {line}: {len(row)} values, expected {width}; " + (
+                    "the file may be truncated" if len(row) < width else "remove the extra values"))
             for x in row:
                 try:
                     float(x)
@@ -325,7 +325,7 @@ def _csv_line_problem(path: Path, width: int) -> FileFormatError | None:
 def _read_csv(path: Path, n: int) -> dict:
     """The arrays of a trajectory .csv, read in one vectorised pass (``numpy.loadtxt``)."""
     try:
-        with open(path, newline="", encoding="utf-8") as f:
+        with open(path, newline="", encoding="utf-8-sig") as f:
             first = f.readline()
             if not first.strip():
                 raise FileFormatError(f"{path} is empty; a trajectory .csv starts with the header "

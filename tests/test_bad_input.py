@@ -234,7 +234,7 @@ def test_saving_into_a_missing_folder(tmp_path, suffix):
 
 def test_csv_load_keeps_what_the_old_reader_accepted(tmp_path):
     """The vectorised reader reads what the line-by-line one did: blank lines, spaces and
-    quotes around numbers, a missing final newline."""
+    quotes around numbers, a missing final newline; and a spreadsheet's UTF-8 byte order mark."""
     tr = small()
     p = tmp_path / "t.csv"
     lines = tr.save(p).read_text().splitlines()
@@ -245,6 +245,13 @@ def test_csv_load_keeps_what_the_old_reader_accepted(tmp_path):
     np.testing.assert_array_equal(back.times, tr.times)
     np.testing.assert_array_equal(back.positions, tr.positions)
     np.testing.assert_array_equal(back.velocities, tr.velocities)
+    bom = tmp_path / "bom.csv"  # what a spreadsheet's "CSV UTF-8" writes: a byte order mark first
+    bom.write_bytes(b"\xef\xbb\xbf" + "\n".join(lines).encode())
+    np.testing.assert_array_equal(Trajectory.load(bom).positions, tr.positions)
+    wide = tmp_path / "wide.csv"
+    wide.write_text("time,q1,q2,q3,q4,q5\n0,0,0,0,0,0\n1,0,0,0,0,0,7\n")
+    with raises(snakekit.FileFormatError, "wide.csv, line 3: 7 values, expected 6; remove the extra values"):
+        Trajectory.load(wide)
     one = tmp_path / "one.csv"
     one.write_text("time,q1,q2,q3,q4,q5\n0,0.1,0,0,0,0\n")
     assert Trajectory.load(one).positions.tolist() == [[0.1, 0, 0, 0, 0]]
