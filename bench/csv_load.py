@@ -2,11 +2,14 @@
 per-value path (csv module, one float() per value), side by side in one run.
 
 The file is what Trajectory.save writes for 176,000 points with velocities (time, q1..q5,
-qd1..qd5): about 37 MB of text, 15.5 MB as numbers. Each loader runs in a fresh process
-(so the peak memory of one does not hide another's), ``--repeat`` times; the figures are
-medians. Peak memory is how far the process's resident set rose above where it was when
-the load began (Linux: the peak is reset through /proc/self/clear_refs, read as VmHWM). Target: the load reads the file in one vectorised pass, with a peak no larger than a
-few times the numbers themselves.
+qd1..qd5): about 36 MB of text, 15.5 MB as numbers. Each loader runs in a fresh process
+(so the peak memory of one does not hide another's), ``--repeat`` times, interleaved; the
+figures are medians. Peak memory is how far the process's resident set rose above where
+it was when the load began (Linux: the peak is reset through /proc/self/clear_refs, then
+read as VmHWM).
+
+Targets: Trajectory.load within 1.5x the time of a bare numpy.loadtxt, and a peak of at
+most 4x the numbers themselves.
 
     .venv/bin/python bench/csv_load.py [--points 176000] [--repeat 5]
 """
@@ -121,7 +124,9 @@ def main() -> int:
     new_s, new_mb = med[LOADERS[0]]
     old_s, old_mb = med[LOADERS[2]]
     print(f"snakekit vs old path: {old_s / new_s:.1f}x faster, {old_mb / max(new_mb, 1e-9):.1f}x less peak memory")
-    return 0
+    ok = new_s <= 1.5 * base_s and new_mb <= 4 * numbers
+    print(f"targets (time <= 1.5x loadtxt, peak <= 4x numbers): {'ok' if ok else 'MISSED'}")
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

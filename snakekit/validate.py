@@ -13,12 +13,13 @@ snakekit.errors.LimitError: q is outside the joint limits [-1.57, 1.57] rad: joi
 
 from __future__ import annotations
 
-import numpy as np
-
 import operator
 from pathlib import Path
 
-from .errors import ConfigurationError, FileFormatError, FileWriteError, InputTypeError, LimitError, NotFiniteError, ShapeError
+import numpy as np
+
+from .errors import (ConfigurationError, FileFormatError, FileWriteError, InputTypeError, LimitError,
+                     NotFiniteError, ShapeError)
 from .model import SPEC, SnakeSpec
 
 
@@ -76,6 +77,9 @@ def real_array(a, name: str, expected: str, hint: str = "") -> np.ndarray:
         except (TypeError, ValueError):
             pass
     x, why = _first_not_real(arr)
+    if not why:
+        raise InputTypeError(f"{name} holds values numpy can't read as numbers ({arr.dtype}); every value must "
+                             "be a real number" + (f". {hint}" if hint else ""))
     raise InputTypeError(f"{name} holds {x!r}, which is {why}; every value must be a real number"
                          + (" (use .real if the imaginary parts are only rounding noise)" if "complex" in why else "")
                          + (f". {hint}" if hint else ""))
