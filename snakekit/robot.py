@@ -152,7 +152,7 @@ class Run:
                            z["efforts"], str(z["backend"]), float(z["wall_time"]), bool(z["realtime"]))
         except FileNotFoundError as e:
             raise FileFormatError(f"run file {path} does not exist") from e
-        except (KeyError, OSError, ValueError, EOFError) as e:
+        except (KeyError, OSError, ValueError, EOFError, InputTypeError) as e:
             raise FileFormatError(f"{path} is not a snakekit run file ({e}); save runs with Run.save") from e
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FileFormatError, LimitError, NotFiniteError, ShapeError, TrajectoryError
+from .errors import FileFormatError, InputTypeError, LimitError, NotFiniteError, ShapeError, TrajectoryError
 from .model import SPEC, SnakeSpec
 from .validate import check_limits, frozen, number, readable_file, real_array, write_failed, writable_file
 
@@ -260,7 +260,7 @@ class Trajectory:
             raise FileFormatError(f"cannot read a trajectory from '{path.suffix}' ({path}); use .npz or .csv")
         try:
             return cls(**arrays, n_joints=n_joints)
-        except (ShapeError, TrajectoryError, NotFiniteError) as e:
+        except (ShapeError, TrajectoryError, NotFiniteError, InputTypeError) as e:
             raise FileFormatError(f"{path} does not hold a valid trajectory: {e}") from e
 
 

@@ -95,7 +95,7 @@ def test_text_instead_of_angles():
         snakekit.forward_kinematics(["a"] * 5)
 
 
-def test_complex_input_is_refused_not_cut_to_its_real_part():
+def test_complex_input_is_refused_not_cut_to_its_real_part(tmp_path):
     # before: Trajectory kept the real parts silently (a ComplexWarning at most)
     with raises(snakekit.InputTypeError, "positions holds 1j, which is a complex number; every value must be a "
                 "real number (use .real if the imaginary parts are only rounding noise)"):
@@ -104,6 +104,10 @@ def test_complex_input_is_refused_not_cut_to_its_real_part():
         snakekit.forward_kinematics([0.1j, 0, 0, 0, 0])
     with raises(snakekit.InputTypeError, "target_xy holds (0.25+1j), which is a complex number"):
         snakekit.inverse_kinematics([0.25 + 1j, 0.1])
+    np.savez(tmp_path / "c.npz", times=[0.0, 1.0], positions=np.zeros((2, 5)) + 1j)
+    with raises(snakekit.FileFormatError, "c.npz does not hold a valid trajectory: positions holds 1j, which is a "
+                "complex number"):
+        Trajectory.load(tmp_path / "c.npz")
     # complex numbers with no imaginary part are their real part
     tr = Trajectory([0, 1], np.full((2, 5), 0.1 + 0j))
     assert tr.positions.dtype == float and (tr.positions == 0.1).all()
