@@ -242,8 +242,9 @@ def _target(target_xy, heading) -> tuple[np.ndarray, float | None]:
 
 
 #: Targets farther than this many reaches are solved for along their direction, at this
-#: distance: the closest reachable pose is the same to far below a micrometre, and the
-#: arithmetic stays finite (a target at 1e300 m would overflow).
+#: distance: the arithmetic stays finite (a target at 1e300 m would overflow), and the
+#: closest reachable pose changes by under a millimetre (0.4 mm measured, for targets
+#: behind the arm at 1e5 m against 1e9 m; none in front of it).
 _FAR = 100.0
 
 
