@@ -1,6 +1,7 @@
 """The hardware backend (DynamixelSnake over the real dynamixel-sdk), against the bus emulator."""
 
 import math
+import threading
 import time
 
 import numpy as np
@@ -21,7 +22,8 @@ LO, HI = 1025, 3071  # +-1.57 rad in ticks, rounded inwards
 
 @pytest.fixture
 def robot():
-    r = make_emulated_robot(motion="profile", boot_time=0.02)
+    # no Bus Watchdog keep-alive here: these tests count the packets on the bus
+    r = make_emulated_robot(motion="profile", boot_time=0.02, watchdog=0)
     yield r
     r.close()
 
@@ -241,9 +243,37 @@ def test_a_lost_ping_is_retried_and_counted(robot):
 def test_a_servo_lost_mid_run_stops_the_arm(robot):
     bus = robot.emulator
     bus.faults = Faults(missing=(3,))
-    with pytest.raises(CommunicationError, match=r"servo 3 on .* did not answer the SyncRead.*stopped \(torque off\)"):
+    with pytest.raises(CommunicationError, match=r"servo 3 on .* did not answer the SyncRead") as e:
         robot.move_to(np.full(5, 0.2), duration=0.5)
     assert torques(bus)[:2] + torques(bus)[3:] == [0] * 4  # servo 3 is unplugged: nobody can reach it
+    # servo 3 never confirmed torque off: the message must not claim it
+    assert "servo(s) 3 did not confirm it: they may still have torque on" in str(e.value)
+    assert "read back from every servo" not in str(e.value)
+
+
+def test_a_dead_bus_mid_run_never_claims_torque_off(robot):
+    # every packet lost: the torque-off broadcast too, so the servos keep their torque
+    bus = robot.emulator
+    move = snakekit.joint_trajectory(np.zeros(5), np.full(5, 0.3), duration=1.0)
+    timer = threading.Timer(0.3, lambda: setattr(bus, "faults", Faults(drop=1.0)))
+    timer.start()
+    with pytest.raises(CommunicationError) as e:
+        robot.run(move)
+    timer.join()
+    assert torques(bus) == [1] * 5  # the servos still hold torque...
+    message = str(e.value)
+    assert "did not confirm it: they may still have torque on" in message  # ...and the message says so
+    assert "servo(s) 1, 2, 3, 4, 5" in message and "torque off, read back" not in message
+    assert robot.torque_enabled
+    bus.faults = Faults()
+
+
+def test_a_confirmed_torque_off_is_reported_as_read_back(robot):
+    bus = robot.emulator
+    with pytest.raises(CommunicationError, match="torque off, read back from every servo"):
+        bus.faults = Faults(corrupt=1.0, count=20)  # 4 SyncReads of 5 status packets fail, then the bus is fine
+        robot.read()
+    assert torques(bus) == [0] * 5 and not robot.torque_enabled
 
 
 def test_a_corrupt_bus_raises_communication_error_and_leaves_torque_off(robot):
