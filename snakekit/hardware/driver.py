@@ -36,18 +36,18 @@ import weakref
 import numpy as np
 from dataclasses import dataclass
 
-from ..errors import (BackendError, CommunicationError, ConfigurationError, HardwareError,
-                       InputTypeError, InstructionError, LimitError, ServoMismatchError)
+from ..errors import (CommunicationError, ConfigurationError, HardwareError,
+                       InstructionError, LimitError, ServoMismatchError)
 from ..model import SPEC, SnakeSpec
-from ..profile_planner import DEFAULT_PROFILE_ACCELERATION, VELOCITY_UNIT
+from ..profile_planner import DEFAULT_PROFILE_ACCELERATION
 from ..robot import JointState, Robot
 from .bus import Bus, SyncRead, describe, sdk
-from .keepalive import KeepAlive
+from .keepalive import STATUS_BLOCK, KeepAlive, WatchdogMixin
 from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_ERROR_STATUS, PACKET_ERRORS,
                         PRESENT_POSITION, PROFILE_ACCELERATION, PROFILE_VELOCITY, STATE_BLOCK, TORQUE_ENABLE,
-                        WATCHDOG_UNIT, decode_hardware_error, decode_state, load_to_torque, position_bytes,
-                        position_limit_ticks, radians_to_ticks, ticks_to_radians, to_signed,
-                        velocity_limit_units, velocity_to_radians_per_second)
+                        decode_hardware_error, decode_state, load_to_torque, position_bytes, position_limit_ticks,
+                        radians_to_ticks, ticks_to_radians, to_signed, velocity_to_radians_per_second)
+from .options import ON_CLOSE, check_options
 from .startup import check_eeprom
 
 #: The driver's Profile Velocity (0.229 rev/min units): 58 = 1.39 rad/s. A servo's measured
@@ -55,22 +55,9 @@ from .startup import check_eeprom
 #: on the emulated arm: a full-speed step peaks at 1.56 rad/s with 62, 1.46 rad/s with 58), so
 #: the profile stays that far under the 1.5 rad/s limit.
 KIT_PROFILE_VELOCITY = 58
-STATUS_BLOCK = (TORQUE_ENABLE, BUS_WATCHDOG - TORQUE_ENABLE + 1)  # 64..98: torque, errors, watchdog
 _OPEN: "weakref.WeakValueDictionary[str, DynamixelSnake]" = weakref.WeakValueDictionary()
 
 
-def _whole(value, name: str, low: int, high: int | None = None) -> int:
-    """``value`` as an int in ``low..high``, or a :class:`ConfigurationError` that says so."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise InputTypeError(f"{name} must be a whole number, got {value!r}")
-    value = int(value)
-    if value < low or (high is not None and value > high):
-        bound = f">= {low}" if high is None else f"in {low}..{high}"
-        raise ConfigurationError(f"{name} must be {bound}, got {value}")
-    return value
-
-
-ON_CLOSE = ("torque_off", "hold")
 
 
 @dataclass(frozen=True)
@@ -88,7 +75,7 @@ class ServoInfo:
     firmware: int
 
 
-class DynamixelSnake(Robot):
+class DynamixelSnake(WatchdogMixin, Robot):
     """The arm on a Dynamixel bus (a U2D2 adapter, or the bus emulator's pseudo-terminal).
 
     Args:
@@ -125,28 +112,8 @@ class DynamixelSnake(Robot):
         self.closed = True  # until the port is open: close() has nothing to release
         self._keepalive = None
         self._release: list = []  # extra clean-ups (e.g. stop an emulator) run by close()
-        if ids is None:
-            ids = spec.servo_ids
-        if isinstance(ids, (str, bytes)) or not hasattr(ids, "__iter__"):
-            raise InputTypeError(f"ids must be {spec.n_joints} servo ids, base to tip, e.g. (1, 2, 3, 4, 5); got {ids!r}")
-        ids = tuple(_whole(i, "each servo id", 0, 252) for i in ids)
-        if len(ids) != spec.n_joints or len(set(ids)) != len(ids):
-            raise ConfigurationError(f"ids must be {spec.n_joints} distinct servo ids, one a joint, got {ids}")
-        if on_close not in ON_CLOSE:
-            raise ConfigurationError(f"on_close must be one of {', '.join(map(repr, ON_CLOSE))}, got {on_close!r}")
-        retries = _whole(retries, "retries", 0, 100)
-        top = velocity_limit_units(spec)
-        if isinstance(profile_velocity, numbers.Integral) and not isinstance(profile_velocity, bool) and (
-                profile_velocity == 0 or profile_velocity > top):
-            raise ConfigurationError(
-                f"profile_velocity {profile_velocity} would let the servos move at "
-                f"{'full speed (0 = no profile)' if profile_velocity == 0 else f'{profile_velocity * VELOCITY_UNIT:.2f} rad/s'}, "
-                f"over the {spec.velocity_limit} rad/s joint speed limit; use 1..{top} (0.229 rev/min units)")
-        self.profile_velocity = _whole(profile_velocity, "profile_velocity", 1, top)
-        self.profile_acceleration = _whole(profile_acceleration, "profile_acceleration", 1, 32767)
-        if not isinstance(watchdog, numbers.Real) or not (watchdog == 0 or 0.02 <= watchdog <= 2.54):
-            raise ConfigurationError(f"watchdog must be 0 (off) or 0.02..2.54 s, got {watchdog!r}")
-        self.watchdog = float(watchdog)
+        ids, retries, self.profile_velocity, self.profile_acceleration, self.watchdog = check_options(
+            spec, ids, on_close, retries, profile_velocity, profile_acceleration, watchdog)
         self.port_name = str(port)
         self.baudrate = int(baudrate)
         self.ids = ids
@@ -243,68 +210,6 @@ class DynamixelSnake(Robot):
         """The RAM settings a reboot erases: profile (torque is handled by the caller)."""
         self._write(servo_id, PROFILE_ACCELERATION, 4, self.profile_acceleration)
         self._write(servo_id, PROFILE_VELOCITY, 4, self.profile_velocity)
-
-    def _arm_watchdog(self) -> None:
-        """Clear any watchdog stop, then set the period (20 ms units) on every servo."""
-        units = round(self.watchdog / WATCHDOG_UNIT)
-        for i in self.ids:
-            self._write(i, BUS_WATCHDOG, 1, 0)
-            if units:
-                self._write(i, BUS_WATCHDOG, 1, units)
-
-    def servo_status(self) -> dict[int, tuple[bool, int]]:
-        """One SyncRead of every servo's Torque Enable and Bus Watchdog: ``{id: (torque on, watchdog)}``.
-
-        A watchdog of -1 means the servo stopped because it heard nothing for too long.
-        """
-        self._check_open()
-        status = self._status
-
-        def once():
-            result = status.txRxPacket()
-            if result == sdk.COMM_SUCCESS and not all(status.isAvailable(i, *STATUS_BLOCK) for i in self.ids):
-                result = sdk.COMM_RX_CORRUPT
-            return result, None
-
-        result, _ = self.bus.retry(once)
-        if result != sdk.COMM_SUCCESS:
-            self._fail(f"servo {status.failed_id} on {self.port_name} did not answer the SyncRead of its "
-                       f"status ({describe(result)}, {self._tries()})", result)
-        out = {}
-        for i in self.ids:
-            data = bytes(status.data_dict[i])
-            out[i] = (data[0] == 1, to_signed(data[-1], 1))
-        self._last_status = out
-        return out
-
-    def _keep_alive(self) -> None:
-        """What the keep-alive thread sends: a status read (never stops the arm); what it reads
-        is kept for :meth:`command` to check without a packet of its own."""
-        if not self.closed:
-            with self.bus.hold():
-                ok = self._status.txRxPacket() == sdk.COMM_SUCCESS
-            if ok:
-                self._last_status = {i: (self._status.data_dict[i][0] == 1, to_signed(self._status.data_dict[i][-1], 1))
-                                     for i in self.ids}
-
-    def _check_ready(self, status=None) -> None:
-        """Refuse to send goals the servos would ignore: torque off, or stopped by the watchdog.
-
-        ``status`` (``{id: (torque on, watchdog)}``) is read from the servos when not given.
-        """
-        status = self.servo_status() if status is None else status
-        stopped = [i for i, (_, w) in status.items() if w < 0]
-        off = [i for i, (on, _) in status.items() if not on]
-        self.torque_enabled = not off
-        if stopped:
-            raise BackendError(
-                f"the Bus Watchdog stopped servo(s) {', '.join(map(str, stopped))} on {self.port_name}: they "
-                f"heard nothing for more than {self.watchdog:g} s, so they hold where they stopped and "
-                "refuse goals. Call robot.torque_on() to clear it and go on.")
-        if off:
-            raise BackendError(
-                f"torque is off on servo(s) {', '.join(map(str, off))} on {self.port_name} (read back from the "
-                "servos), so they would ignore goals; call robot.torque_on() first")
 
     # --- requests ----------------------------------------------------------------------------
 
