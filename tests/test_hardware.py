@@ -77,7 +77,7 @@ def test_start_up_configures_every_servo(robot):
         m = bus.servo(i).memory
         assert m.get("Return Delay Time") == 0
         assert (m.get("Min Position Limit"), m.get("Max Position Limit")) == (LO, HI)
-        assert m.get("Profile Velocity") == snakekit.profile_planner.DEFAULT_PROFILE_VELOCITY
+        assert m.get("Profile Velocity") == hw.driver.KIT_PROFILE_VELOCITY
         assert m.get("Profile Acceleration") == snakekit.profile_planner.DEFAULT_PROFILE_ACCELERATION
         assert m.get("Torque Enable") == 1
         assert m.get("Goal Position") == 2048
@@ -310,7 +310,7 @@ def test_overload_mid_run_raises_hardware_error_then_reboot_recovers(robot):
     assert robot.hardware_error_status(3) == []
     assert [r.packet.id for r in bus.received("REBOOT")] == [3]   # only the faulted servo
     m = bus.servo(3).memory
-    assert m.get("Profile Velocity") == snakekit.profile_planner.DEFAULT_PROFILE_VELOCITY
+    assert m.get("Profile Velocity") == hw.driver.KIT_PROFILE_VELOCITY
     robot.torque_on()
     assert torques(bus) == [1] * 5
     robot.home(duration=1.0)
@@ -382,9 +382,10 @@ def test_task2_sweep_on_the_emulator_matches_the_simulator():
         run = robot.run(sweep)
         bus = robot.emulator
         goals = goal_ticks_on_the_bus(bus)
+        run_profile_velocity = robot.profile_velocity
     # The reference: the simulator given the same goals at the times they were actually sent
     # (a busy machine sends some late; that is the bus's timing, not its motion).
-    with snakekit.make_robot("sim") as sim:
+    with snakekit.make_robot("sim", profile_velocity=run_profile_velocity) as sim:
         # (no limit check here: a goal sent late makes the step after it look fast on paper)
         sim._check_trajectory = lambda trajectory: None
         reference = sim.run(run.commanded)

@@ -377,7 +377,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
         for i in self.ids:
             self._write(i, TORQUE_ENABLE, 1, int(on))
         self.torque_enabled = on
-        self._last_status = {}
+        self._last_status = {i: (on, 0) for i in self.ids}  # every servo acknowledged the write
 
     def _hold_here(self, servo_id: int) -> None:
         """Goal = present position (clamped into the limits), so torque-on doesn't jump."""

@@ -72,6 +72,7 @@ class WatchdogMixin:
             self._write(i, BUS_WATCHDOG, 1, 0)
             if units:
                 self._write(i, BUS_WATCHDOG, 1, units)
+        self._last_status = {i: (self.torque_enabled, units) for i in self.ids}
 
     def servo_status(self) -> dict[int, tuple[bool, int]]:
         """One SyncRead of every servo's Torque Enable and Bus Watchdog: ``{id: (torque on, watchdog)}``.
