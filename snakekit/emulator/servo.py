@@ -133,7 +133,7 @@ class EmulatedServo:
                     self.motion.set_torque(t, self.joint, bool(v), self.present_rad(t))
                     if v:
                         self._drive(t)
-                    else:  # the firmware's goal follows the joint while torque is off
+                    else:  # torque off: the firmware sets the goal where the joint is
                         m.set("Goal Position", self.rad_to_ticks(self.present_rad(t)))
             elif f.name == "Goal Position" and self.mode in POSITION_MODES:
                 self.motion.set_goal(t, self.joint, self.ticks_to_rad(v))

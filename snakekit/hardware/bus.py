@@ -156,7 +156,7 @@ class Bus:
                 self.port.is_using = False
                 self.last_used = time.perf_counter()
 
-    def drain(self, quiet: float, longest: float = 0.25) -> None:
+    def drain(self, quiet: float, longest: float = 0.5) -> None:
         """Throw away bytes until the line has been quiet for ``quiet`` [s] (at most ``longest`` [s]):
         a status packet that arrives after the SDK gave up must not be taken as the next answer."""
         ser = self.port.ser
@@ -179,7 +179,7 @@ class Bus:
                 except IndexError:  # the SDK read a stale, shorter status packet as the answer
                     result, value = sdk.COMM_RX_CORRUPT, None
                 if result != sdk.COMM_SUCCESS:
-                    self.drain(max(self.port.packet_timeout, 20.0) / 1000.0)
+                    self.drain(max(2 * self.port.packet_timeout, 50.0) / 1000.0)  # ms -> s
             if result == sdk.COMM_SUCCESS:
                 break
             if attempt < self.retries:

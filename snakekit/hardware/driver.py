@@ -50,12 +50,9 @@ from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_
 from .options import ON_CLOSE, check_options
 from .startup import check_eeprom
 
-#: The driver's Profile Velocity (0.229 rev/min units): 55 = 1.32 rad/s. A servo's measured
-#: speed overshoots its profile while it catches up with the reference: on the emulated arm a
-#: full-speed step peaks 5 % over the profile, and the Task 2 sweep, whose goals arrive late
-#: on a busy machine, up to 8 % over (1.56 rad/s with 62 units, 1.487 and more with 58). So
-#: the profile stays 12 % under the 1.5 rad/s limit; the sweep itself never needs more
-#: than 1.26 rad/s.
+#: The driver's Profile Velocity (0.229 rev/min units): 55 = 1.32 rad/s, 12 % under the limit,
+#: because a servo overshoots its profile while it catches up with the reference (emulated
+#: arm: a full-speed step peaks at 1.56 rad/s with 62; late sweep goals, 8 % over with 58).
 KIT_PROFILE_VELOCITY = 55
 _OPEN: "weakref.WeakValueDictionary[str, DynamixelSnake]" = weakref.WeakValueDictionary()
 
