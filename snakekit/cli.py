@@ -16,6 +16,7 @@ import argparse
 import os
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -139,7 +140,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
         terminated.append(signum)
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGTERM, terminate)
+    in_main = threading.current_thread() is threading.main_thread()  # only there can signals be caught
+    previous = signal.signal(signal.SIGTERM, terminate) if in_main else None
     try:
         return args.func(args, out)
     except SnakekitError as e:
@@ -150,7 +152,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
         print(f"snakekit {args.command}: {why}; the robot was closed", file=sys.stderr)
         return 143 if terminated else 130
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":
