@@ -6,14 +6,17 @@
     snakekit check LESSON.ipynb      (run a lesson's exercise checks: one row per exercise)
     snakekit grade ASSIGNMENT [...]  (grade a class's submissions; see grader/README.md)
 
-Exit codes: 0 success, 1 the robot or a file failed, 2 bad arguments.
+Exit codes: 0 success, 1 the robot or a file failed (or a limit was not held), 2 bad
+arguments, 130 interrupted by Ctrl-C, 143 stopped by SIGTERM (both close the robot first).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -157,14 +160,26 @@ def main(argv: list[str] | None = None, out=None) -> int:
 
         return grade(argv[1:], out)
     args = build_parser().parse_args(argv)
+    terminated = []
+
+    def terminate(signum, frame):  # SIGTERM cleans up like Ctrl-C: the robot is closed on the way out
+        terminated.append(signum)
+        raise KeyboardInterrupt
+
+    in_main = threading.current_thread() is threading.main_thread()  # only there can signals be caught
+    previous = signal.signal(signal.SIGTERM, terminate) if in_main else None
     try:
         return args.func(args, out)
     except SnakekitError as e:
         print(f"snakekit {args.command}: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"snakekit {args.command}: interrupted; the robot was closed", file=sys.stderr)
-        return 130
+        why = "terminated (SIGTERM)" if terminated else "interrupted"
+        print(f"snakekit {args.command}: {why}; the robot was closed", file=sys.stderr)
+        return 143 if terminated else 130
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

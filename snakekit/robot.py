@@ -89,11 +89,21 @@ class Run:
         ref = self.commanded.sample(t[inside])
         return np.abs(self.measured.positions[inside] - ref).max(axis=0)
 
+    def peak_speeds(self) -> np.ndarray:
+        """The largest measured joint speed |velocity| per joint [rad/s] (what the servos did)."""
+        return np.abs(self.measured.velocities).max(axis=0)
+
+    def speed_limit_held(self) -> bool:
+        """True if no joint was measured faster than the velocity limit."""
+        return bool((self.peak_speeds() <= self.spec.velocity_limit).all())
+
     def limits_held(self) -> bool:
-        """True if every commanded goal and every measured position stayed inside the limits."""
+        """True if every commanded goal and every measured position stayed inside the position
+        limits, and no measured joint speed went over the velocity limit."""
         s = self.spec
         return bool(((self.commanded.positions >= s.lower) & (self.commanded.positions <= s.upper)).all()
-                    and ((self.measured.positions >= s.lower) & (self.measured.positions <= s.upper)).all())
+                    and ((self.measured.positions >= s.lower) & (self.measured.positions <= s.upper)).all()
+                    and self.speed_limit_held())
 
     def final_distance_from_home(self) -> float:
         """Tool distance [m] between the last measured pose and the home pose."""
@@ -116,6 +126,8 @@ class Run:
             f"wall time:          {self.wall_time:.2f} s ({self.robot_time / max(self.wall_time, 1e-9):.1f}x real time)",
             "max tracking error: " + "  ".join(f"j{j + 1} {np.degrees(e):.2f} deg" for j, e in enumerate(err)),
             f"limits held:        {'yes' if self.limits_held() else 'NO'}",
+            "max measured speed: " + "  ".join(f"j{j + 1} {v:.2f}" for j, v in enumerate(self.peak_speeds()))
+            + f" rad/s (limit {self.spec.velocity_limit:g}: {'held' if self.speed_limit_held() else 'EXCEEDED'})",
             "final joint angles: " + " ".join(f"{q:+.2f}" for q in np.degrees(self.measured.positions[-1])) + " deg",
             f"final distance from home (tool): {1000 * self.final_distance_from_home():.2f} mm",
         ]
