@@ -126,8 +126,9 @@ class Run:
             f"wall time:          {self.wall_time:.2f} s ({self.robot_time / max(self.wall_time, 1e-9):.1f}x real time)",
             "max tracking error: " + "  ".join(f"j{j + 1} {np.degrees(e):.2f} deg" for j, e in enumerate(err)),
             f"limits held:        {'yes' if self.limits_held() else 'NO'}",
-            "max measured speed: " + "  ".join(f"j{j + 1} {v:.2f}" for j, v in enumerate(self.peak_speeds()))
-            + f" rad/s (limit {self.spec.velocity_limit:g}: {'held' if self.speed_limit_held() else 'EXCEEDED'})",
+            "max measured speed: " + "  ".join(f"j{j + 1} {v:.1f}" for j, v in enumerate(np.degrees(self.peak_speeds())))
+            + f" deg/s (limit {np.degrees(self.spec.velocity_limit):.1f}: "
+            + f"{'held' if self.speed_limit_held() else 'EXCEEDED'})",
             "final joint angles: " + " ".join(f"{q:+.2f}" for q in np.degrees(self.measured.positions[-1])) + " deg",
             f"final distance from home (tool): {1000 * self.final_distance_from_home():.2f} mm",
         ]

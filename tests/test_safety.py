@@ -151,9 +151,10 @@ def test_a_run_reports_measured_speed_against_the_limit():
     over = Run(Trajectory(t, q), Trajectory(t, q, fast), np.zeros((11, 5)), "emulator", 1.0, True)
     assert ok.limits_held() and ok.speed_limit_held() and ok.peak_speeds()[0] == 1.49
     assert not over.limits_held() and not over.speed_limit_held()
-    assert "max measured speed: j1 1.49  j2 0.00" in ok.summary() and "(limit 1.5: held)" in ok.summary()
-    assert "limits held:        NO" in over.summary() and "j1 1.56" in over.summary()
-    assert "(limit 1.5: EXCEEDED)" in over.summary()
+    # the summary speaks degrees, like the plots: 1.49 rad/s = 85.4 deg/s, limit 1.5 rad/s = 85.9 deg/s
+    assert "max measured speed: j1 85.4  j2 0.0" in ok.summary() and "deg/s (limit 85.9: held)" in ok.summary()
+    assert "limits held:        NO" in over.summary() and "j1 89.4" in over.summary()
+    assert "(limit 85.9: EXCEEDED)" in over.summary()
 
 
 # --- 3. the emulator is a servo for any client ---------------------------------------------------------
