@@ -26,9 +26,9 @@ lab: setup
 test: setup
 	$(PY) -m pytest -q $(PYTEST_ARGS)
 
+# Every benchmark under bench/, into bench/RESULTS.md and its plots (BENCH_ARGS: e.g. --only sim).
 bench: setup
-	@status=0; for b in bench/[a-z]*.py; do echo "== $$b"; $(PY) $$b || status=1; echo; done; \
-	 [ $$status = 0 ] || echo "bench: some targets were missed (see MISSED above)"; exit $$status
+	$(PY) bench/run.py $(BENCH_ARGS)
 
 lock:
 	tools/lock

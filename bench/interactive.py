@@ -54,7 +54,7 @@ def worker() -> None:
     robot.close()
 
 
-def measure(browser, command=None, processes=None) -> dict:
+def measure(browser, command=None, processes=None, env=None) -> dict:
     """One repeat: start the worker (``command``, default this file in this Python), run Task 1.
 
     ``processes(worker_pid, server_pid)`` returns the psutil processes to count (default:
@@ -67,7 +67,7 @@ def measure(browser, command=None, processes=None) -> dict:
     from _common import Sampler
 
     proc = subprocess.Popen(command or [sys.executable, __file__, "--worker"], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, text=True, env=env)
     page = None
     try:
         line = proc.stdout.readline().split()
@@ -108,15 +108,26 @@ def measure(browser, command=None, processes=None) -> dict:
             proc.wait()
 
 
-def run_repeats(repeats: int, browser: bool = True, **kwargs) -> list[dict]:
+def run_repeats(repeats: int, browser: bool = True, variants=None, **kwargs) -> list[dict]:
+    """``repeats`` measurements; with ``variants`` ({name: measure kwargs}), that many of each,
+    alternating, returned as {name: [results]}."""
+    def rounds(chromium):
+        if variants is None:
+            return [measure(chromium, **kwargs) for _ in range(repeats)]
+        out = {name: [] for name in variants}
+        for _ in range(repeats):
+            for name, extra in variants.items():
+                out[name].append(measure(chromium, **kwargs, **extra))
+        return out
+
     if not browser:
-        return [measure(None, **kwargs) for _ in range(repeats)]
+        return rounds(None)
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:
         chromium = pw.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=CHROMIUM_FLAGS)
         try:
-            return [measure(chromium, **kwargs) for _ in range(repeats)]
+            return rounds(chromium)
         finally:
             chromium.close()
 

@@ -62,9 +62,10 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def time_to_lab(command: list[str] | None = None, timeout: float = 120.0) -> float:
-    """Seconds from ``make lab`` to the /lab page served (token given, as a browser has it)."""
-    port, token = free_port(), "snakekit-bench"
+def time_to_lab(command: list[str] | None = None, port: int | None = None, timeout: float = 120.0) -> float:
+    """Seconds from ``make lab`` (or ``command``, serving on ``port``) to the /lab page served
+    (token given, as a browser has it)."""
+    port, token = port or free_port(), "snakekit-bench"
     cmd = command or ["make", "-s", "lab", f"LAB_PORT={port}"]
     env = {**os.environ, "JUPYTER_TOKEN": token}
     t0 = time.perf_counter()
