@@ -54,7 +54,7 @@ class Step:
 
 def steps(submissions: int) -> list[Step]:
     return [
-        Step("kinematics", "FK, Jacobian, IK vs bare Pinocchio", ["kinematics.py"], 30),
+        Step("kinematics", "FK, Jacobian, IK vs bare Pinocchio", ["kinematics.py"], 15),
         Step("bus", "control cycle vs the bare Dynamixel SDK", ["bus.py"], 25),
         Step("sim", "Task 2: fast vs bare MuJoCo, and in real time", ["sim.py"], 85),
         Step("interactive", "Task 1 through the control panel and viewer", ["interactive.py", "--repeats", "3"], 60),
@@ -205,7 +205,8 @@ def plots(results: dict, out: Path) -> list[tuple[str, str]]:
             ax.set_ylim(bottom=0)
             ax.set_xlim(left=0)
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=8, loc="best")
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize=8, loc="best")
             fig.tight_layout()
             name = f"{task}_{key}.png"
             fig.savefig(out / name)
