@@ -88,7 +88,7 @@ class Sampler:
         for pid, c in seen.items():
             cpu += c - self._cpu.get(pid, c if self._started else 0.0)
         self._cpu = seen
-        return cpu, rss / 1e6, pss / 1e6
+        return cpu, rss / 1e6, pss / 1e6, len(seen)
 
     def start(self) -> "Sampler":
         self._started = False
@@ -116,8 +116,10 @@ class Sampler:
             self._peak = max(self._peak, rss / 1e6)
 
     def _take(self) -> None:
-        cpu, rss, pss = self._read()
+        cpu, rss, pss, count = self._read()
         now = time.perf_counter()
+        if not count:  # the processes have ended: nothing to sample
+            return
         self.samples.append((now - self._t0, 100 * cpu / max(now - self._last, 1e-6), rss, pss))
         self._last = now
 

@@ -98,6 +98,7 @@ print("start", flush=True)
 c0, w0 = me.cpu_times(), time.perf_counter()
 run = robot.run(sweep)
 c1, w1 = me.cpu_times(), time.perf_counter()
+print("done", flush=True)
 robot.close()
 stop.set()
 cpu = (c1.user + c1.system - c0.user - c0.system) / (w1 - w0)
@@ -115,8 +116,11 @@ def realtime_mode():
         raise SystemExit("the real-time Task 2 run did not start")
     me = psutil.Process(proc.pid)
     sampler = Sampler(lambda: [me] if proc.poll() is None else []).start()
+    line = proc.stdout.readline().strip()
+    series = sampler.stop()  # the run is over (or failed): the sampling ends with it
     out, _ = proc.communicate()
-    series = sampler.stop()
+    if line != "done":
+        raise SystemExit("the real-time Task 2 run stopped early")
     if proc.returncode != 0:
         raise SystemExit("the real-time Task 2 run failed")
     result = json.loads(out.strip().splitlines()[-1])
