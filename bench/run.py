@@ -387,7 +387,12 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
 
     # --- optimisations
     o = results.get("optimisations")
-    if o:
+    if o and o.get("not_measured"):
+        add("## This round's changes, before and after")
+        add("")
+        add(f"{o['not_measured']} (the 'before' is commit `{o['before_rev']}`).")
+        add("")
+    elif o:
         add("## This round's changes, each measured before and after in one run")
         add("")
         add(f"Before = the library and Makefile at commit `{o['before_rev']}`, after = this tree; the two "
