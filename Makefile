@@ -13,17 +13,22 @@ export MUJOCO_GL ?= egl
 setup:
 	@tools/setup
 
+# JupyterLab without rfc3987-syntax: jsonschema loads it, when installed, for an "iri" format
+# check Jupyter never makes, and it compiles 25 Earley grammars on import (about 1.9 s of
+# every start, more than half of the time to a ready JupyterLab; see bench/RESULTS.md).
+LAB_MAIN := import sys; sys.modules["rfc3987_syntax"] = None; from jupyterlab.labapp import main; sys.exit(main())
+
 lab: setup
 	@echo "snakekit: JupyterLab on the lessons in notebooks/ (the simulator is the default robot)"
-	$(VENV)/bin/jupyter lab --no-browser --allow-root --ip=$(LAB_IP) --port=$(LAB_PORT) \
+	$(PY) -c '$(LAB_MAIN)' --no-browser --allow-root --ip=$(LAB_IP) --port=$(LAB_PORT) \
 	    --ServerApp.root_dir=notebooks --LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate
 
 test: setup
 	$(PY) -m pytest -q $(PYTEST_ARGS)
 
+# Every benchmark under bench/, into bench/RESULTS.md and its plots (BENCH_ARGS: e.g. --only sim).
 bench: setup
-	@status=0; for b in bench/[a-z]*.py; do echo "== $$b"; $(PY) $$b || status=1; echo; done; \
-	 [ $$status = 0 ] || echo "bench: some targets were missed (see MISSED above)"; exit $$status
+	$(PY) bench/run.py $(BENCH_ARGS)
 
 lock:
 	tools/lock
