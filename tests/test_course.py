@@ -66,7 +66,8 @@ def test_exercises_follow_the_contract(name):
         assert t["points"] >= 1 and t["locked"]
     text = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
     total = sum(t["points"] for t in tests.values())
-    assert f"Total: {total} points" in text, f"{name} should state 'Total: {total} points'"
+    total_text = f"Total: {total} point{'' if total == 1 else 's'}"
+    assert total_text in text, f"{name} should state {total_text!r}"
     assert "Objectives" in text and "What it assumes" in text and "Predict, then run" in text
     assert "<!-- BEGIN ANSWER -->" in text, f"{name}: the instructor version holds the predicted answers"
 
@@ -156,3 +157,33 @@ def test_every_exercise_hands_in_for_the_grader(autograded, name):
         assert path.exists(), f"{gid} handed nothing in"
         with np.load(path, allow_pickle=False) as z:
             assert z.files, f"{gid} handed in an empty file"
+
+
+# --- the README's lesson table is the course's ------------------------------------------------
+
+EXERCISE = re.compile(r"^### Exercise (\d+\.\d+) \((\d+) points?\): `(\w+)\(", re.M)
+
+
+def lesson_table() -> str:
+    """The README's lesson table, made from course/source/ (paste it when this test fails)."""
+    lines = ["| lesson | what the student writes (exercise: function, points) | exercises | points |",
+             "|---|---|---:|---:|"]
+    for name in SOURCES:
+        nb = read(COURSE / "source" / name / f"{name}.ipynb")
+        title = nb.cells[0].source.splitlines()[0].split(":", 1)[1].strip()
+        found = EXERCISE.findall("\n".join(c.source for c in nb.cells if c.cell_type == "markdown"))
+        graded = graded_cells(nb)
+        # the headings agree with the graded cells' points, in order
+        assert [int(p) for _, p, _ in found] == [g["points"] for g in graded.values()], (name, found)
+        what = "; ".join(f"{n} `{fn}` ({p})" for n, p, fn in found)
+        lines.append(f"| {name[:2]} {title} | {what} | {len(found)} | {sum(int(p) for _, p, _ in found)} |")
+    total = sum(len(graded_cells(read(COURSE / "source" / n / f"{n}.ipynb"))) for n in SOURCES)
+    points = sum(g["points"] for n in SOURCES for g in graded_cells(read(COURSE / "source" / n / f"{n}.ipynb")).values())
+    lines.append(f"| | **all lessons** | **{total}** | **{points}** |")
+    return "\n".join(lines)
+
+
+def test_readme_lesson_table_matches_the_course():
+    readme = (ROOT / "README.md").read_text()
+    table = lesson_table()
+    assert table in readme, "README.md's lesson table is out of date with course/source/; it should read:\n\n" + table
