@@ -8,7 +8,7 @@ LAB_IP  ?= 127.0.0.1
 export PATH := $(abspath $(VENV))/bin:$(PATH)
 export MUJOCO_GL ?= egl
 
-.PHONY: setup lab test bench lock generate check-generated clean references
+.PHONY: setup lab test bench lock generate student check-generated clean references
 
 setup:
 	@tools/setup
@@ -16,7 +16,8 @@ setup:
 lab: setup
 	@echo "snakekit: JupyterLab on the lessons in notebooks/ (the simulator is the default robot)"
 	$(VENV)/bin/jupyter lab --no-browser --allow-root --ip=$(LAB_IP) --port=$(LAB_PORT) \
-	    --ServerApp.root_dir=notebooks --LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate
+	    --ServerApp.root_dir=notebooks --LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate \
+	    --ServerApp.jpserver_extensions nbgrader.server_extensions.validate_assignment=True
 
 test: setup
 	$(PY) -m pytest -q $(PYTEST_ARGS)
@@ -30,6 +31,10 @@ lock:
 
 generate: setup
 	$(VENV)/bin/snakekit generate
+
+# The student versions in notebooks/ from the instructor versions in course/source/ (nbgrader).
+student: setup
+	$(PY) tools/generate_student
 
 # Fails when a generated file (URDF, MJCF) is out of date with the spec it comes from.
 check-generated: setup
