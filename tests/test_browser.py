@@ -207,6 +207,9 @@ def test_lesson0_student_fills_exercise_moves_view_and_validates(tmp_path):
                 assert tracebacks == []
                 moves = page.locator(".jp-OutputArea-output", has_text="mm from its target").first.inner_text()
                 assert moves.count("mm from its target") == 3, moves   # the demonstration after the exercise ran
+                # the panel's plot after Execute arrives as a picture, not as "<Figure size ...>"
+                assert page.locator(".jp-RenderedImage img[src^='data:image/png']").count() >= 1
+                assert page.locator("text=<Figure size").count() == 0
 
                 view = page.locator("iframe[title='snakekit 3D view']").first
                 view.scroll_into_view_if_needed()
