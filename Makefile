@@ -13,11 +13,17 @@ export MUJOCO_GL ?= egl
 setup:
 	@tools/setup
 
+# A student's JupyterLab: nbgrader's Validate button on, its teacher tools (formgrader, create
+# assignment, the exchange's lists) off; tools/student-lab/labconfig/page_config.json hides their UI.
 lab: setup
 	@echo "snakekit: JupyterLab on the lessons in notebooks/ (the simulator is the default robot)"
-	$(VENV)/bin/jupyter lab --no-browser --allow-root --ip=$(LAB_IP) --port=$(LAB_PORT) \
+	JUPYTER_CONFIG_PATH=$(CURDIR)/tools/student-lab $(VENV)/bin/jupyter lab --no-browser --allow-root \
+	    --ip=$(LAB_IP) --port=$(LAB_PORT) \
 	    --ServerApp.root_dir=notebooks --LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate \
-	    --ServerApp.jpserver_extensions nbgrader.server_extensions.validate_assignment=True
+	    --ServerApp.jpserver_extensions nbgrader.server_extensions.validate_assignment=True \
+	    --ServerApp.jpserver_extensions nbgrader.server_extensions.formgrader=False \
+	    --ServerApp.jpserver_extensions nbgrader.server_extensions.course_list=False \
+	    --ServerApp.jpserver_extensions nbgrader.server_extensions.assignment_list=False
 
 test: setup
 	$(PY) -m pytest -q $(PYTEST_ARGS)

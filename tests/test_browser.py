@@ -54,6 +54,7 @@ class JupyterLab:
         env = dict(os.environ,
                    JUPYTER_CONFIG_DIR=str(home / "config"), JUPYTER_RUNTIME_DIR=str(home / "runtime"),
                    IPYTHONDIR=str(home / "ipython"), MPLBACKEND="module://matplotlib_inline.backend_inline",
+                   JUPYTER_CONFIG_PATH=str(ROOT / "tools" / "student-lab"),   # the student's lab, as `make lab`
                    PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
         self.log = open(home / "jupyterlab.log", "wb")
         self.proc = subprocess.Popen(

@@ -8,6 +8,7 @@ import signal
 import socket
 import subprocess
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -58,8 +59,18 @@ def test_make_lab_serves_the_lessons(tmp_path):
                                       page, re.S).group(1))
         federated = {e["name"] for e in config["federated_extensions"]}
         assert "@jupyter/nbgrader" in federated, sorted(federated)
-        disabled = config.get("disabledExtensions", [])
-        assert not any(d.startswith("@jupyter/nbgrader") and "validate" in d for d in disabled), disabled
+        disabled = set(config.get("disabledExtensions", []))
+        assert "@jupyter/nbgrader:validate-assignment" not in disabled, disabled
+        # the teacher's tools are not in the student's lab: not in the page, not on the server
+        teacher = {"@jupyter/nbgrader:formgrader", "@jupyter/nbgrader:create-assignment",
+                   "@jupyter/nbgrader:course-list", "@jupyter/nbgrader:assignment-list", "@jupyter/nbgrader:menu"}
+        assert teacher <= disabled, sorted(teacher - disabled)
+        for path in ("formgrader", "assignments", "courses"):
+            try:
+                urllib.request.urlopen(f"{base}/{path}?token={token}", timeout=10)
+                raise AssertionError(f"/{path} answers in the student's lab")
+            except urllib.error.HTTPError as e:
+                assert e.code == 404, (path, e.code)
         nbgrader = need("nbgrader")
         assert get_json(f"{base}/nbgrader_version?version={nbgrader.__version__}&token={token}") == {"success": True}
         log_text = (tmp_path / "lab.log").read_text()
