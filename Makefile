@@ -8,7 +8,7 @@ LAB_IP  ?= 127.0.0.1
 export PATH := $(abspath $(VENV))/bin:$(PATH)
 export MUJOCO_GL ?= egl
 
-.PHONY: setup lab test bench lock generate check-generated clean references
+.PHONY: setup lab test bench lock generate student check-generated clean references
 
 setup:
 	@tools/setup
@@ -18,10 +18,17 @@ setup:
 # every start, more than half of the time to a ready JupyterLab; see bench/RESULTS.md).
 LAB_MAIN := import sys; sys.modules["rfc3987_syntax"] = None; from jupyterlab.labapp import main; sys.exit(main())
 
+# A student's JupyterLab: nbgrader's Validate button on, its teacher tools (formgrader, create
+# assignment, the exchange's lists) off; tools/student-lab/labconfig/page_config.json hides their UI.
 lab: setup
 	@echo "snakekit: JupyterLab on the lessons in notebooks/ (the simulator is the default robot)"
-	$(PY) -c '$(LAB_MAIN)' --no-browser --allow-root --ip=$(LAB_IP) --port=$(LAB_PORT) \
-	    --ServerApp.root_dir=notebooks --LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate
+	JUPYTER_CONFIG_PATH=$(CURDIR)/tools/student-lab $(PY) -c '$(LAB_MAIN)' --no-browser --allow-root \
+	    --ip=$(LAB_IP) --port=$(LAB_PORT) \
+	    --ServerApp.root_dir=notebooks --LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate \
+	    --ServerApp.jpserver_extensions nbgrader.server_extensions.validate_assignment=True \
+	    --ServerApp.jpserver_extensions nbgrader.server_extensions.formgrader=False \
+	    --ServerApp.jpserver_extensions nbgrader.server_extensions.course_list=False \
+	    --ServerApp.jpserver_extensions nbgrader.server_extensions.assignment_list=False
 
 test: setup
 	$(PY) -m pytest -q $(PYTEST_ARGS)
@@ -35,6 +42,10 @@ lock:
 
 generate: setup
 	$(VENV)/bin/snakekit generate
+
+# The student versions in notebooks/ from the instructor versions in course/source/ (nbgrader).
+student: setup
+	$(PY) tools/generate_student
 
 # Fails when a generated file (URDF, MJCF) is out of date with the spec it comes from.
 check-generated: setup

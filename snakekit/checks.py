@@ -221,11 +221,12 @@ class Exercise:
             name = f"{what} {labels[i[0]]}"
         elif arr.ndim >= 1:
             name = f"{what}[{', '.join(str(int(k)) for k in i)}]"
-        reason = why or ("exact math" if tol == 0 else "")
-        tol_text = f"{_fmt_diff(float(bound[i]), u)}"
-        tol_text += f": {reason}" if reason else ""
-        if tol == 0:
+        # Without a stated reason the check is exact math: 1e-9 relative, plus a tiny absolute
+        # floor (when given) for expected values at or near 0.
+        tol_text = f"{_fmt_diff(float(bound[i]), u)}: {why or 'exact math'}"
+        if why is None:
             tol_text += ", " + f"{rtol:g}".replace("e-0", "e-") + " relative"
+            tol_text += f" + {_fmt_diff(tol, u)}" if tol else ""
         hint = _mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()) * 10 + 1e-9)
         self.fail(f"{name}{_where(where)} is {_fmt(float(arr[i]), u)}, expected {_fmt(float(exp[i]), u)}: "
                   f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
