@@ -13,9 +13,9 @@ import os as _os
 _os.environ.setdefault("MUJOCO_GL", "egl")
 
 from .errors import (  # noqa: E402
-    BackendError, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
+    BackendError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
     InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError,
-    ServoMismatchError, ShapeError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
+    ServoMismatchError, ShapeError, ShortcutError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
 from .model import SPEC, SnakeSpec  # noqa: E402
 
@@ -36,7 +36,7 @@ __all__ = [
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
     "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError", "BackendError",
     "CommunicationError", "HardwareError", "ServoMismatchError", "InstructionError", "ViewerError",
-    "MissingDependencyError", "PacketError",
+    "MissingDependencyError", "PacketError", "CheckFailed", "ShortcutError",
 ]
 
 

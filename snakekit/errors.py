@@ -114,3 +114,32 @@ class InstructionError(BackendError):
 
 class ViewerError(SnakekitError, RuntimeError):
     """The 3D viewer's server could not be started, or stopped answering, or is closed."""
+
+
+class CheckFailed(SnakekitError, AssertionError):
+    """A course check failed (:mod:`snakekit.checks`). The message says what, where and by how much.
+
+    Attributes:
+        student_frames: the part of a traceback that lies in the student's own code (may be
+            empty); shown under the message, never frames of the checks module.
+    """
+
+    def __init__(self, message: str, student_frames: str = ""):
+        super().__init__(message)
+        self.student_frames = student_frames
+
+    def __str__(self) -> str:
+        return self.args[0] if self.args else ""
+
+    def _render_traceback_(self) -> list[str]:
+        """What IPython shows instead of a traceback: the message (and the student's frames)."""
+        red, bold, reset = "\x1b[31m", "\x1b[1m", "\x1b[0m"
+        title = "Shortcut" if isinstance(self, ShortcutError) else "Check failed"
+        lines = [f"{red}{bold}{title}{reset}: {self}"]
+        if self.student_frames:
+            lines += ["", "Where, in your code:", self.student_frames.rstrip()]
+        return lines
+
+
+class ShortcutError(CheckFailed):
+    """A library function was called inside an exercise that asks the student to write it."""
