@@ -129,6 +129,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=7, help="measurements per implementation")
     ap.add_argument("--motion", choices=("profile", "mujoco"), default="profile",
                     help="the emulator's motion source")
+    ap.add_argument("--json", metavar="PATH", help="write the results as JSON to PATH")
     args = ap.parse_args(argv)
 
     from snakekit.hardware import DynamixelSnake
@@ -182,6 +183,13 @@ def main(argv=None) -> int:
     print("select() until the reply; the bare SDK spins until it arrives.")
     if missed:
         print(f"MISSED: {', '.join(missed)}")
+    if args.json:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from _common import spread, write_json
+
+        write_json(args.json, {"ours_hz": spread(ours), "bare_hz": spread(theirs), "ratio": ratio,
+                               "seconds": args.seconds, "repeats": args.repeats, "motion": args.motion,
+                               "missed": missed})
     return 1 if missed else 0
 
 

@@ -18,6 +18,10 @@ import statistics
 import subprocess
 import sys
 import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import add_json_argument, spread, write_json  # noqa: E402
 
 TARGETS = [(0.25, 0.10, 0.3), (0.12, 0.22, 1.6), (0.28, -0.08, -0.4)]  # x [m], y [m], heading [rad]
 STUDY = [("VM (VMware, Ubuntu desktop)", "7.67", "384-450"),
@@ -50,44 +54,52 @@ def worker() -> None:
     robot.close()
 
 
-def measure(browser) -> dict:
+def measure(browser, command=None, processes=None, env=None) -> dict:
+    """One repeat: start the worker (``command``, default this file in this Python), run Task 1.
+
+    ``processes(worker_pid, server_pid)`` returns the psutil processes to count (default:
+    the worker and its meshcat server).
+    """
+    import selectors
+
     import psutil
 
-    proc = subprocess.Popen([sys.executable, __file__, "--worker"], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True)
+    from _common import Sampler
+
+    proc = subprocess.Popen(command or [sys.executable, __file__, "--worker"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True, env=env)
     page = None
     try:
         line = proc.stdout.readline().split()
         if not line or line[0] != "ready":
             raise RuntimeError("the worker did not start")
-        procs = [psutil.Process(proc.pid), psutil.Process(int(line[1]))]
+        if processes is None:
+            group = [psutil.Process(proc.pid), psutil.Process(int(line[1]))]
+            processes = lambda: group  # noqa: E731
+        else:
+            found = processes(proc.pid, int(line[1]))
+            processes = (lambda: found) if isinstance(found, list) else found
         if browser is not None:
             page = browser.new_page(viewport={"width": 1000, "height": 700})
             page.goto(line[2])
             page.wait_for_selector("canvas", timeout=30_000)
             time.sleep(1.0)
-        cpu0 = sum(sum(p.cpu_times()[:2]) for p in procs)
-        t0 = time.perf_counter()
-        peak = 0
+        sampler = Sampler(processes).start()
         proc.stdin.write("go\n")
         proc.stdin.flush()
-        import selectors
-
         sel = selectors.DefaultSelector()
         sel.register(proc.stdout, selectors.EVENT_READ)
         while True:
-            peak = max(peak, sum(p.memory_info().rss for p in procs))
             if sel.select(timeout=0.05):
                 if proc.stdout.readline().strip() == "done":
                     break
                 raise RuntimeError("the worker stopped early")
-        wall = time.perf_counter() - t0
-        cpu = sum(sum(p.cpu_times()[:2]) for p in procs) - cpu0
-        peak = max(peak, sum(p.memory_info().rss for p in procs))
+        series = sampler.stop()
         proc.stdin.write("quit\n")
         proc.stdin.flush()
         proc.wait(timeout=30)
-        return {"cpu": 100 * cpu / wall, "rss": peak / 1e6, "wall": wall}
+        return {"cpu": series["cpu_avg"], "rss": series["rss_peak"], "pss": series["pss_peak"],
+                "wall": series["wall"], "series": series}
     finally:
         if page is not None:
             page.close()
@@ -96,30 +108,45 @@ def measure(browser) -> dict:
             proc.wait()
 
 
+def run_repeats(repeats: int, browser: bool = True, variants=None, **kwargs) -> list[dict]:
+    """``repeats`` measurements; with ``variants`` ({name: measure kwargs}), that many of each,
+    alternating, returned as {name: [results]}."""
+    def rounds(chromium):
+        if variants is None:
+            return [measure(chromium, **kwargs) for _ in range(repeats)]
+        out = {name: [] for name in variants}
+        for _ in range(repeats):
+            for name, extra in variants.items():
+                out[name].append(measure(chromium, **kwargs, **extra))
+        return out
+
+    if not browser:
+        return rounds(None)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        chromium = pw.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=CHROMIUM_FLAGS)
+        try:
+            return rounds(chromium)
+        finally:
+            chromium.close()
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-browser", action="store_true", help="do not connect Chromium to the viewer")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    add_json_argument(parser)
     args = parser.parse_args(argv)
     if args.worker:
         worker()
         return 0
 
-    results = []
-    if args.no_browser:
-        results = [measure(None) for _ in range(args.repeats)]
-    else:
-        from playwright.sync_api import sync_playwright
-
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=CHROMIUM_FLAGS)
-            try:
-                results = [measure(browser) for _ in range(args.repeats)]
-            finally:
-                browser.close()
+    results = run_repeats(args.repeats, browser=not args.no_browser)
     for i, r in enumerate(results, 1):
-        print(f"repeat {i}: CPU {r['cpu']:.2f} % of one core, peak RSS {r['rss']:.0f} MB, task {r['wall']:.1f} s")
+        print(f"repeat {i}: CPU {r['cpu']:.2f} % of one core, peak RSS {r['rss']:.0f} MB (PSS {r['pss']:.0f} MB), "
+              f"task {r['wall']:.1f} s")
     cpu = statistics.median(r["cpu"] for r in results)
     rss = statistics.median(r["rss"] for r in results)
     wall = statistics.median(r["wall"] for r in results)
@@ -131,6 +158,10 @@ def main(argv=None) -> int:
     print(f"| snakekit (kernel-like Python process + meshcat server), task {wall:.1f} s | {cpu:.2f} | {rss:.0f} (peak) |")
     for name, c, m in STUDY:
         print(f"| study: {name} | {c} | {m} |")
+    spread_of = lambda key: spread(r[key] for r in results)  # noqa: E731
+    write_json(args.json, {"cpu": spread_of("cpu"), "rss": spread_of("rss"), "pss": spread_of("pss"),
+                           "wall": spread_of("wall"), "browser": not args.no_browser,
+                           "series": sorted(results, key=lambda r: r["cpu"])[len(results) // 2]["series"]})
     return 0
 
 

@@ -16,14 +16,20 @@ import pinocchio as pin
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import snakekit  # noqa: E402
-from _common import per_call, table  # noqa: E402
+from _common import add_json_argument, per_call, table, write_json  # noqa: E402
 from snakekit.kinematics import pinocchio_model  # noqa: E402
 
 N_IK = 1000
 
 
-def main() -> int:
+def main(argv=None) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    add_json_argument(parser)
+    args = parser.parse_args(argv)
     model, data, tool = pinocchio_model()
+    data_rows = []
     rng = np.random.default_rng(0)
     q = rng.uniform(-1.5, 1.5, 5)
 
@@ -41,6 +47,8 @@ def main() -> int:
         t_ours, t_bare = per_call(ours, number=20000), per_call(bare, number=20000)
         ratio = t_ours / t_bare
         ok &= ratio <= 3
+        data_rows.append({"call": name, "ours_us": t_ours * 1e6, "bare_us": t_bare * 1e6, "ratio": ratio,
+                          "target": "<= 3x", "ok": bool(ratio <= 3)})
         rows.append([name, f"{t_ours * 1e6:.2f} us", f"{t_bare * 1e6:.2f} us", f"{ratio:.2f}x", "<= 3x",
                      "ok" if ratio <= 3 else "MISSED"])
 
@@ -63,6 +71,8 @@ def main() -> int:
     rows.append(["IK success", f"{100 * rate:.1f} % of {N_IK}", "-", "-", ">= 99 %", "ok" if rate >= 0.99 else "MISSED"])
     rows.append(["IK 95th percentile", f"{np.percentile(times, 95) * 1e6:.0f} us", "-", "-", "-", "-"])
     print(table(rows, ["call", "snakekit (median)", "bare pinocchio", "ratio", "target", ""]))
+    write_json(args.json, {"calls": data_rows, "ik_median_us": med * 1e6, "ik_p95_us": float(np.percentile(times, 95)) * 1e6,
+                           "ik_success": rate, "ik_targets": N_IK, "ok": bool(ok)})
     return 0 if ok else 1
 
 

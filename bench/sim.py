@@ -29,7 +29,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 import snakekit  # noqa: E402
-from _common import table  # noqa: E402
+from _common import Sampler, add_json_argument, table, write_json  # noqa: E402
 from snakekit.profile_planner import ProfilePlanner  # noqa: E402
 from snakekit.sim import SimRobot  # noqa: E402
 
@@ -94,9 +94,11 @@ def watch():
 threading.Thread(target=watch, daemon=True).start()
 sweep = snakekit.side_sweep()
 robot = snakekit.make_robot("sim", realtime=True)
+print("start", flush=True)
 c0, w0 = me.cpu_times(), time.perf_counter()
 run = robot.run(sweep)
 c1, w1 = me.cpu_times(), time.perf_counter()
+print("done", flush=True)
 robot.close()
 stop.set()
 cpu = (c1.user + c1.system - c0.user - c0.system) / (w1 - w0)
@@ -106,11 +108,39 @@ print(json.dumps({"cpu": 100 * cpu, "wall": w1 - w0, "robot": run.robot_time, "p
 
 
 def realtime_mode():
-    out = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True, check=True)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    """Task 2 in real time in a fresh process; its CPU and RSS sampled every 0.5 s from here."""
+    import psutil
+
+    proc = subprocess.Popen([sys.executable, "-c", CHILD], stdout=subprocess.PIPE, text=True)
+    if proc.stdout.readline().strip() != "start":
+        raise SystemExit("the real-time Task 2 run did not start")
+    me = psutil.Process(proc.pid)
+    sampler = Sampler(lambda: [me] if proc.poll() is None else []).start()
+    line = proc.stdout.readline().strip()
+    series = sampler.stop()  # the run is over (or failed): the sampling ends with it
+    out, _ = proc.communicate()
+    if line != "done":
+        raise SystemExit("the real-time Task 2 run stopped early")
+    if proc.returncode != 0:
+        raise SystemExit("the real-time Task 2 run failed")
+    result = json.loads(out.strip().splitlines()[-1])
+    return result, series
 
 
-def main() -> int:
+def main(argv=None) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--fast-only", action="store_true", help="skip the 50 s real-time run")
+    parser.add_argument("--realtime-only", action="store_true", help="only the real-time run (for a container)")
+    add_json_argument(parser)
+    args = parser.parse_args(argv)
+    if args.realtime_only:
+        r, series = realtime_mode()
+        print(f"Task 2 in real time: CPU {r['cpu']:.2f} % of one core, peak RSS {r['peak_rss'] / 1e6:.0f} MB, "
+              f"{r['wall']:.1f} s")
+        write_json(args.json, {"realtime": r, "series": series})
+        return 0
     robot_time, ours, bare, still, final = fast_mode()
     speed = robot_time / ours
     overhead = ours / bare
@@ -125,11 +155,14 @@ def main() -> int:
     ok_fast = speed >= 200 and overhead <= 1.3
     print(f"targets: >= 200x real time: {'ok' if speed >= 200 else 'MISSED'}; "
           f"<= 1.3x bare: {'ok' if overhead <= 1.3 else 'MISSED'}\n")
-    if "--fast-only" in sys.argv:
+    data = {"robot_time": robot_time, "ours_s": ours, "bare_s": bare, "still_s": still, "speed": speed,
+            "overhead": overhead, "final_gap_rad": float(final), "repeats": REPEAT, "ok_fast": bool(ok_fast)}
+    if args.fast_only:
+        write_json(args.json, data)
         return 0 if ok_fast else 1
 
     print("Task 2 in real time (one run of ~50 s) ...", flush=True)
-    r = realtime_mode()
+    r, series = realtime_mode()
     mb = r["peak_rss"] / 1e6
     print(table([
         ["snakekit sim, real time (this machine)", f"{r['cpu']:.2f} %", f"{mb:.0f} MB", f"{r['wall']:.1f} s"],
@@ -139,6 +172,8 @@ def main() -> int:
     ], ["Task 2", "CPU (% of one core)", "peak RSS", "wall time"]))
     ok_rt = r["cpu"] <= 5 and mb <= 200
     print(f"targets: <= 5 % CPU: {'ok' if r['cpu'] <= 5 else 'MISSED'}; <= 200 MB: {'ok' if mb <= 200 else 'MISSED'}")
+    data.update(realtime=r, series=series)
+    write_json(args.json, data)
     return 0 if ok_fast and ok_rt else 1
 
 

@@ -13,9 +13,9 @@ import os as _os
 _os.environ.setdefault("MUJOCO_GL", "egl")
 
 from .errors import (  # noqa: E402
-    BackendError, CommunicationError, ConfigurationError, FileFormatError, HardwareError,
+    BackendError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
     InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError,
-    ServoMismatchError, ShapeError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
+    ServoMismatchError, ShapeError, ShortcutError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
 from .model import SPEC, SnakeSpec  # noqa: E402
 
@@ -34,9 +34,9 @@ _LAZY = {
 __all__ = [
     "SPEC", "SnakeSpec", *_LAZY,
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
-    "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "BackendError",
+    "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError", "BackendError",
     "CommunicationError", "HardwareError", "ServoMismatchError", "InstructionError", "ViewerError",
-    "MissingDependencyError", "PacketError",
+    "MissingDependencyError", "PacketError", "CheckFailed", "ShortcutError",
 ]
 
 

@@ -44,47 +44,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SnakekitError
+from .errors import CheckFailed, ConfigurationError, ShortcutError, SnakekitError
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "hand_in", "outputs", "rng", "quick",
            "yours_or", "waiting_for"]
 
 _HERE = os.path.abspath(__file__)
-_RED, _BOLD, _RESET = "\x1b[31m", "\x1b[1m", "\x1b[0m"
 
 
 def quick() -> bool:
     """True when long runs should shrink: ``SNAKEKIT_QUICK=1`` (or the suite's ``SNAKEKIT_TEST=1``)."""
     return any(os.environ.get(v, "").lower() not in ("", "0", "false", "no")
                for v in ("SNAKEKIT_QUICK", "SNAKEKIT_TEST"))
-
-
-class CheckFailed(AssertionError):
-    """A check failed. The message says what, where and by how much.
-
-    Attributes:
-        student_frames: the part of a traceback that lies in the student's own code (may be
-            empty); shown under the message, never frames from this module.
-    """
-
-    def __init__(self, message: str, student_frames: str = ""):
-        super().__init__(message)
-        self.student_frames = student_frames
-
-    def __str__(self) -> str:
-        return self.args[0] if self.args else ""
-
-    def _render_traceback_(self) -> list[str]:
-        """What IPython shows instead of a traceback: the message (and the student's frames)."""
-        title = "Check failed" if not isinstance(self, ShortcutError) else "Shortcut"
-        lines = [f"{_RED}{_BOLD}{title}{_RESET}: {str(self)}"]
-        if self.student_frames:
-            lines += ["", "Where, in your code:", self.student_frames.rstrip()]
-        return lines
-
-
-class ShortcutError(SnakekitError, CheckFailed):
-    """A library function was called inside an exercise that asks the student to write it."""
 
 
 def _shorten(exc: BaseException) -> BaseException:
@@ -221,11 +192,12 @@ class Exercise:
             name = f"{what} {labels[i[0]]}"
         elif arr.ndim >= 1:
             name = f"{what}[{', '.join(str(int(k)) for k in i)}]"
-        reason = why or ("exact math" if tol == 0 else "")
-        tol_text = f"{_fmt_diff(float(bound[i]), u)}"
-        tol_text += f": {reason}" if reason else ""
-        if tol == 0:
+        # Without a stated reason the check is exact math: 1e-9 relative, plus a tiny absolute
+        # floor (when given) for expected values at or near 0.
+        tol_text = f"{_fmt_diff(float(bound[i]), u)}: {why or 'exact math'}"
+        if why is None:
             tol_text += ", " + f"{rtol:g}".replace("e-0", "e-") + " relative"
+            tol_text += f" + {_fmt_diff(tol, u)}" if tol else ""
         hint = _mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()) * 10 + 1e-9)
         self.fail(f"{name}{_where(where)} is {_fmt(float(arr[i]), u)}, expected {_fmt(float(exp[i]), u)}: "
                   f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
@@ -317,7 +289,7 @@ def _resolve(name: str):
         for p in parts[i:]:
             obj = getattr(obj, p)
         return obj
-    raise ValueError(f"nothing is called {name}")
+    raise ConfigurationError(f"nothing is called {name}: check the name the lesson passes to forbid()")
 
 
 @contextlib.contextmanager

@@ -6,14 +6,17 @@
     snakekit check LESSON.ipynb      (run a lesson's exercise checks: one row per exercise)
     snakekit grade ASSIGNMENT [...]  (grade a class's submissions; see grader/README.md)
 
-Exit codes: 0 success, 1 the robot or a file failed, 2 bad arguments.
+Exit codes: 0 success, 1 the robot or a file failed (or a limit was not held), 2 bad
+arguments, 130 interrupted by Ctrl-C, 143 stopped by SIGTERM (both close the robot first).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -25,16 +28,40 @@ PLOT_SUFFIXES = (".png", ".pdf", ".svg")
 
 def _writable(path: Path, suffixes: tuple[str, ...], what: str) -> str | None:
     """Why ``path`` can't be written as ``what``, or None if it can."""
+    from .validate import writable_file
+
     if path.suffix.lower() not in suffixes:
         return f"{what} {path} must end in {' or '.join(suffixes)}"
-    parent = path.resolve().parent
-    if not parent.is_dir():
-        return f"cannot write {what} {path}: folder {parent} does not exist"
-    if path.is_dir():
-        return f"cannot write {what} {path}: it is a folder"
-    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        return f"cannot write {what} {path}: permission denied"
+    try:
+        writable_file(path, what)  # really opened for writing: permission bits don't tell all
+    except SnakekitError as e:
+        return str(e)
     return None
+
+
+def _save_run(run, path: Path, out) -> bool:
+    """Save ``run`` to ``path``; if that fails now (full disk, the folder went away...), save
+    it in the working folder or the temporary folder instead, and say where. True if saved
+    where asked."""
+    import tempfile
+
+    try:
+        run.save(path)
+        print(f"saved run:          {path}", file=out)
+        return True
+    except SnakekitError as e:
+        print(f"snakekit sweep: {e}", file=sys.stderr)
+    name = f"snakekit-run-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.npz"
+    for folder in (Path.cwd(), Path(tempfile.gettempdir())):
+        try:
+            run.save(folder / name)
+        except SnakekitError:
+            continue
+        print(f"snakekit sweep: the run was saved to {folder / name} instead; move it where you want it",
+              file=sys.stderr)
+        return False
+    print("snakekit sweep: the run could not be saved anywhere; nothing else was written", file=sys.stderr)
+    return False
 
 
 def _sweep(args, out) -> int:
@@ -65,17 +92,19 @@ def _sweep(args, out) -> int:
     wall0 = time.perf_counter()
     with make_robot(args.backend, **options) as robot:
         run = robot.run(trajectory)
+    saved = _save_run(run, Path(args.out), out) if args.out else True  # first: a finished run is kept
     print(run.summary(), file=out)
-    if args.out:
-        run.save(args.out)
-        print(f"saved run:          {args.out}", file=out)
     if args.plot:
         from .plots import plot_run
 
-        plot_run(run).savefig(args.plot, dpi=110)
-        print(f"saved plot:         {args.plot}", file=out)
+        try:
+            plot_run(run).savefig(args.plot, dpi=110)
+            print(f"saved plot:         {args.plot}", file=out)
+        except OSError as e:
+            print(f"snakekit sweep: cannot write plot {args.plot}: {e.strerror or e}", file=sys.stderr)
+            saved = False
     print(f"total wall time:    {time.perf_counter() - wall0:.2f} s", file=out)
-    return 0 if run.limits_held() else 1
+    return 0 if run.limits_held() and saved else 1
 
 
 def _generate(args, out) -> int:
@@ -131,14 +160,26 @@ def main(argv: list[str] | None = None, out=None) -> int:
 
         return grade(argv[1:], out)
     args = build_parser().parse_args(argv)
+    terminated = []
+
+    def terminate(signum, frame):  # SIGTERM cleans up like Ctrl-C: the robot is closed on the way out
+        terminated.append(signum)
+        raise KeyboardInterrupt
+
+    in_main = threading.current_thread() is threading.main_thread()  # only there can signals be caught
+    previous = signal.signal(signal.SIGTERM, terminate) if in_main else None
     try:
         return args.func(args, out)
     except SnakekitError as e:
         print(f"snakekit {args.command}: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"snakekit {args.command}: interrupted; the robot was closed", file=sys.stderr)
-        return 130
+        why = "terminated (SIGTERM)" if terminated else "interrupted"
+        print(f"snakekit {args.command}: {why}; the robot was closed", file=sys.stderr)
+        return 143 if terminated else 130
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

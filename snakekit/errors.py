@@ -30,7 +30,8 @@ class ShapeError(SnakekitError, ValueError):
 
     def __init__(self, name: str, expected: str, actual: tuple, hint: str = ""):
         self.name, self.expected, self.actual = name, expected, actual
-        msg = f"{name} must have shape {expected}, got shape {actual}"
+        got = actual if isinstance(actual, str) else f"shape {actual}"  # a str: e.g. ragged rows
+        msg = f"{name} must have shape {expected}, got {got}"
         super().__init__(msg + (f". {hint}" if hint else ""))
 
 
@@ -73,6 +74,11 @@ class FileFormatError(SnakekitError, ValueError):
     """A file could not be read as what it claims to be (truncated, wrong columns...)."""
 
 
+class FileWriteError(SnakekitError, OSError):
+    """A file could not be written where asked (the folder is missing, it is a folder, no
+    permission, a read-only place...); the message names the path and what to do."""
+
+
 class PacketError(SnakekitError, ValueError):
     """Bytes that are not one well-formed Dynamixel Protocol 2.0 packet."""
 
@@ -108,3 +114,32 @@ class InstructionError(BackendError):
 
 class ViewerError(SnakekitError, RuntimeError):
     """The 3D viewer's server could not be started, or stopped answering, or is closed."""
+
+
+class CheckFailed(SnakekitError, AssertionError):
+    """A course check failed (:mod:`snakekit.checks`). The message says what, where and by how much.
+
+    Attributes:
+        student_frames: the part of a traceback that lies in the student's own code (may be
+            empty); shown under the message, never frames of the checks module.
+    """
+
+    def __init__(self, message: str, student_frames: str = ""):
+        super().__init__(message)
+        self.student_frames = student_frames
+
+    def __str__(self) -> str:
+        return self.args[0] if self.args else ""
+
+    def _render_traceback_(self) -> list[str]:
+        """What IPython shows instead of a traceback: the message (and the student's frames)."""
+        red, bold, reset = "\x1b[31m", "\x1b[1m", "\x1b[0m"
+        title = "Shortcut" if isinstance(self, ShortcutError) else "Check failed"
+        lines = [f"{red}{bold}{title}{reset}: {self}"]
+        if self.student_frames:
+            lines += ["", "Where, in your code:", self.student_frames.rstrip()]
+        return lines
+
+
+class ShortcutError(CheckFailed):
+    """A library function was called inside an exercise that asks the student to write it."""

@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import BackendError, ConfigurationError, FileFormatError, InputTypeError, LimitError, ShapeError
+from .errors import BackendError, FileFormatError, InputTypeError, LimitError, ShapeError
 from .model import SPEC, SnakeSpec
 from .progress import LONG_RUN, TextProgress
 from .trajectory import Trajectory, joint_trajectory
-from .validate import check_limits, frozen
+from .validate import check_limits, frozen, number, readable_file, write_failed, writable_file
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,11 +89,21 @@ class Run:
         ref = self.commanded.sample(t[inside])
         return np.abs(self.measured.positions[inside] - ref).max(axis=0)
 
+    def peak_speeds(self) -> np.ndarray:
+        """The largest measured joint speed |velocity| per joint [rad/s] (what the servos did)."""
+        return np.abs(self.measured.velocities).max(axis=0)
+
+    def speed_limit_held(self) -> bool:
+        """True if no joint was measured faster than the velocity limit."""
+        return bool((self.peak_speeds() <= self.spec.velocity_limit).all())
+
     def limits_held(self) -> bool:
-        """True if every commanded goal and every measured position stayed inside the limits."""
+        """True if every commanded goal and every measured position stayed inside the position
+        limits, and no measured joint speed went over the velocity limit."""
         s = self.spec
         return bool(((self.commanded.positions >= s.lower) & (self.commanded.positions <= s.upper)).all()
-                    and ((self.measured.positions >= s.lower) & (self.measured.positions <= s.upper)).all())
+                    and ((self.measured.positions >= s.lower) & (self.measured.positions <= s.upper)).all()
+                    and self.speed_limit_held())
 
     def final_distance_from_home(self) -> float:
         """Tool distance [m] between the last measured pose and the home pose."""
@@ -116,26 +126,38 @@ class Run:
             f"wall time:          {self.wall_time:.2f} s ({self.robot_time / max(self.wall_time, 1e-9):.1f}x real time)",
             "max tracking error: " + "  ".join(f"j{j + 1} {np.degrees(e):.2f} deg" for j, e in enumerate(err)),
             f"limits held:        {'yes' if self.limits_held() else 'NO'}",
+            "max measured speed: " + "  ".join(f"j{j + 1} {v:.1f}" for j, v in enumerate(np.degrees(self.peak_speeds())))
+            + f" deg/s (limit {np.degrees(self.spec.velocity_limit):.1f}: "
+            + f"{'held' if self.speed_limit_held() else 'EXCEEDED'})",
             "final joint angles: " + " ".join(f"{q:+.2f}" for q in np.degrees(self.measured.positions[-1])) + " deg",
             f"final distance from home (tool): {1000 * self.final_distance_from_home():.2f} mm",
         ]
         return "\n".join(lines)
 
     def save(self, path) -> Path:
-        """Write the run to a ``.npz`` file."""
+        """Write the run to a ``.npz`` file.
+
+        Raises:
+            FileFormatError: another suffix.
+            FileWriteError: the folder is missing, the path is a folder, or writing failed.
+        """
         path = Path(path)
         if path.suffix != ".npz":
             raise FileFormatError(f"a run is saved as .npz, not '{path.suffix}' ({path})")
-        np.savez(path, commanded_times=self.commanded.times, commanded_positions=self.commanded.positions,
-                 measured_times=self.measured.times, measured_positions=self.measured.positions,
-                 measured_velocities=self.measured.velocities, efforts=self.efforts,
-                 backend=np.array(self.backend), wall_time=self.wall_time, realtime=self.realtime)
+        writable_file(path, "run file", probe=False)
+        try:
+            np.savez(path, commanded_times=self.commanded.times, commanded_positions=self.commanded.positions,
+                     measured_times=self.measured.times, measured_positions=self.measured.positions,
+                     measured_velocities=self.measured.velocities, efforts=self.efforts,
+                     backend=np.array(self.backend), wall_time=self.wall_time, realtime=self.realtime)
+        except OSError as e:
+            raise write_failed(path, "run file", e) from e
         return path
 
     @classmethod
     def load(cls, path) -> "Run":
         """Read a run written by :meth:`save`."""
-        path = Path(path)
+        path = readable_file(path, "run file")
         try:
             with np.load(path, allow_pickle=False) as z:
                 return cls(Trajectory(z["commanded_times"], z["commanded_positions"]),
@@ -143,7 +165,7 @@ class Run:
                            z["efforts"], str(z["backend"]), float(z["wall_time"]), bool(z["realtime"]))
         except FileNotFoundError as e:
             raise FileFormatError(f"run file {path} does not exist") from e
-        except (KeyError, OSError, ValueError, EOFError) as e:
+        except (KeyError, OSError, ValueError, EOFError, InputTypeError) as e:
             raise FileFormatError(f"{path} is not a snakekit run file ({e}); save runs with Run.save") from e
 
 
@@ -286,8 +308,10 @@ class Robot(ABC):
     @staticmethod
     def _record_times(trajectory: Trajectory, record_rate: float, settle: float) -> np.ndarray:
         """When the state is recorded during a run, from the run's start [s]."""
-        if not record_rate > 0 or settle < 0:
-            raise ConfigurationError(f"record_rate must be > 0 Hz and settle >= 0 s; got {record_rate}, {settle}")
+        record_rate = number(record_rate, "record_rate", "Hz", above=0, at_most=1e4,
+                             hint="It is how often the state is recorded during the run (default: 100)")
+        settle = number(settle, "settle", "s", at_least=0, at_most=3600,
+                        hint="It is how long recording goes on after the last goal (default: 0.5)")
         end = trajectory.duration + settle
         return np.arange(int(np.floor(end * record_rate + 1e-9)) + 1) / record_rate
 

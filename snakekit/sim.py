@@ -17,11 +17,10 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from mujoco import rollout  # noqa: E402
 
-from .errors import ConfigurationError  # noqa: E402
 from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf  # noqa: E402
 from .robot import JointState, Robot, Run  # noqa: E402
 from .trajectory import Trajectory  # noqa: E402
-from .validate import as_configuration, check_limits  # noqa: E402
+from .validate import as_configuration, check_limits, number  # noqa: E402
 from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner  # noqa: E402
 
 
@@ -166,8 +165,8 @@ class SimRobot(Robot):
 
     def step(self, duration: float) -> None:
         """Let the simulation run for ``duration`` [s] holding the present goals."""
-        if not duration >= 0:
-            raise ConfigurationError(f"duration must be >= 0 s, got {duration}")
+        duration = number(duration, "duration", "s", at_least=0,
+                          hint="It is how long the simulation runs holding the present goals")
         self._check_open()
         self._advance(self._now() + duration)
 
@@ -206,9 +205,21 @@ class SimRobot(Robot):
     def render(self, q=None, *, width: int = 640, height: int = 480, camera: str = "perspective") -> np.ndarray:
         """An RGB image (height, width, 3) of the arm at ``q`` [rad] (default: its present pose).
 
-        Rendered offscreen through EGL; the renderer is freed by :meth:`close`.
+        Rendered offscreen through EGL; the renderer is freed by :meth:`close`. The image can
+        be at most as large as the model's offscreen buffer (``<visual><global offwidth
+        offheight>``, 1280 x 960 for the kit's arm).
+
+        Raises:
+            ConfigurationError: a size that is not a whole number from 1 to the buffer's size.
         """
         self._check_open()
+        vis = self.model.vis.global_
+        width = number(width, "width", "pixels", at_least=1, at_most=vis.offwidth, integer=True,
+                       hint=f"The offscreen buffer is {vis.offwidth} x {vis.offheight} pixels; render smaller "
+                       "(and scale the image up if needed)")
+        height = number(height, "height", "pixels", at_least=1, at_most=vis.offheight, integer=True,
+                        hint=f"The offscreen buffer is {vis.offwidth} x {vis.offheight} pixels; render smaller "
+                        "(and scale the image up if needed)")
         if self._renderer is None or (self._renderer.height, self._renderer.width) != (height, width):
             if self._renderer is not None:
                 self._renderer.close()

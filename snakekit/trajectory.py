@@ -7,16 +7,16 @@ A :class:`Trajectory` is a list of timed joint configurations: ``times`` [s] of 
 from __future__ import annotations
 
 import csv
-import io
+import warnings
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .errors import FileFormatError, LimitError, NotFiniteError, ShapeError, TrajectoryError
+from .errors import FileFormatError, InputTypeError, LimitError, NotFiniteError, ShapeError, TrajectoryError
 from .model import SPEC, SnakeSpec
-from .validate import check_limits, frozen
+from .validate import check_limits, frozen, number, readable_file, real_array, write_failed, writable_file
 
 
 @dataclass(frozen=True)
@@ -88,8 +88,8 @@ class Trajectory:
 
     def __post_init__(self):
         n = self.n_joints
-        t = np.asarray(self.times, dtype=float)
-        p = np.asarray(self.positions, dtype=float)
+        t = real_array(self.times, "times", "(N,)", "Give one time [s] per point")
+        p = real_array(self.positions, "positions", f"(N, {n})", f"Give {n} angles [rad] per time")
         if t.ndim != 1 or t.size == 0:
             raise ShapeError("times", "(N,) with N >= 1", t.shape, "give one time [s] per point")
         if p.ndim == 1 and p.size == n and t.size == 1:
@@ -110,7 +110,8 @@ class Trajectory:
         object.__setattr__(self, "times", frozen(t))
         object.__setattr__(self, "positions", frozen(p))
         if self.velocities is not None:
-            v = np.asarray(self.velocities, dtype=float)
+            v = real_array(self.velocities, "velocities", f"{p.shape} (same as positions)",
+                           f"Give {n} joint rates [rad/s] per time")
             if v.shape != p.shape:
                 raise ShapeError("velocities", f"{p.shape} (same as positions)", v.shape)
             if not np.isfinite(v).all():
@@ -137,18 +138,19 @@ class Trajectory:
 
     def sample(self, t) -> np.ndarray:
         """Positions at time(s) ``t`` [s], linearly interpolated and held beyond the ends."""
-        t = np.asarray(t, dtype=float)
+        t = real_array(t, "t", "() or (M,)", "Give the time(s) [s] to sample at")
         out = np.stack([np.interp(t, self.times, self.positions[:, j]) for j in range(self.n_joints)], -1)
         return out
 
     def resample(self, rate: float | None = None, *, times=None) -> "Trajectory":
         """A trajectory on a new time grid: every ``1/rate`` s, or at the given ``times``."""
         if times is None:
-            if rate is None or not rate > 0:
-                raise TrajectoryError(f"resample needs a rate > 0 [Hz] or times, got rate={rate}")
+            if rate is None:
+                raise TrajectoryError("resample needs a rate > 0 [Hz] or times, got neither")
+            rate = number(rate, "rate", "Hz", above=0, hint="resample needs a rate > 0 [Hz] or times")
             count = int(np.floor(self.duration * rate + 1e-9)) + 1
             times = self.times[0] + np.arange(count) / rate
-        times = np.asarray(times, dtype=float)
+        times = real_array(times, "times", "(M,)", "Give the new sample times [s]")
         vel = None
         if self.velocities is not None:
             vel = np.stack([np.interp(times, self.times, self.velocities[:, j])
@@ -199,27 +201,36 @@ class Trajectory:
     # --- files ------------------------------------------------------------------------
 
     def save(self, path) -> Path:
-        """Write to ``.npz`` or ``.csv`` (chosen by the suffix). Returns the path."""
+        """Write to ``.npz`` or ``.csv`` (chosen by the suffix). Returns the path.
+
+        Raises:
+            FileFormatError: another suffix.
+            FileWriteError: the folder is missing, the path is a folder, or writing failed.
+        """
         path = Path(path)
-        if path.suffix == ".npz":
-            arrays = {"times": self.times, "positions": self.positions}
-            if self.velocities is not None:
-                arrays["velocities"] = self.velocities
-            np.savez(path, **arrays)
-        elif path.suffix == ".csv":
-            n = self.n_joints
-            header = ["time"] + [f"q{j + 1}" for j in range(n)]
-            cols = [self.times[:, None], self.positions]
-            if self.velocities is not None:
-                header += [f"qd{j + 1}" for j in range(n)]
-                cols.append(self.velocities)
-            with open(path, "w", newline="") as f:
-                w = csv.writer(f)
-                w.writerow(header)
-                for row in np.hstack(cols):
-                    w.writerow([repr(float(x)) for x in row])
-        else:
+        if path.suffix not in (".npz", ".csv"):
             raise FileFormatError(f"cannot save a trajectory as '{path.suffix}' ({path}); use .npz or .csv")
+        writable_file(path, "trajectory file", probe=False)
+        try:
+            if path.suffix == ".npz":
+                arrays = {"times": self.times, "positions": self.positions}
+                if self.velocities is not None:
+                    arrays["velocities"] = self.velocities
+                np.savez(path, **arrays)
+            else:
+                n = self.n_joints
+                header = ["time"] + [f"q{j + 1}" for j in range(n)]
+                cols = [self.times[:, None], self.positions]
+                if self.velocities is not None:
+                    header += [f"qd{j + 1}" for j in range(n)]
+                    cols.append(self.velocities)
+                with open(path, "w", newline="", encoding="utf-8") as f:
+                    w = csv.writer(f)
+                    w.writerow(header)
+                    for row in np.hstack(cols):
+                        w.writerow([repr(float(x)) for x in row])
+        except OSError as e:
+            raise write_failed(path, "trajectory file", e) from e
         return path
 
     @classmethod
@@ -229,9 +240,7 @@ class Trajectory:
         Raises:
             FileFormatError: missing, truncated or malformed file, with what was wrong.
         """
-        path = Path(path)
-        if not path.exists():
-            raise FileFormatError(f"trajectory file {path} does not exist")
+        path = readable_file(path, "trajectory file")
         if path.suffix == ".npz":
             try:
                 with np.load(path, allow_pickle=False) as z:
@@ -251,39 +260,98 @@ class Trajectory:
             raise FileFormatError(f"cannot read a trajectory from '{path.suffix}' ({path}); use .npz or .csv")
         try:
             return cls(**arrays, n_joints=n_joints)
-        except (ShapeError, TrajectoryError, NotFiniteError) as e:
+        except (ShapeError, TrajectoryError, NotFiniteError, InputTypeError) as e:
             raise FileFormatError(f"{path} does not hold a valid trajectory: {e}") from e
 
 
-def _read_csv(path: Path, n: int) -> dict:
-    text = path.read_text()
-    rows = list(csv.reader(io.StringIO(text)))
-    if not rows:
-        raise FileFormatError(f"{path} is empty; a trajectory .csv starts with the header "
-                              f"time,q1..q{n}")
-    header = [h.strip() for h in rows[0]]
+def _csv_header_problem(header: list[str], n: int) -> str | None:
+    """What is wrong with a trajectory .csv header, or None if it is one of the two forms."""
     want = ["time"] + [f"q{j + 1}" for j in range(n)]
-    if header[: n + 1] != want:
-        raise FileFormatError(f"{path} has the header {','.join(header)}; expected {','.join(want)} "
-                              f"(optionally followed by qd1..qd{n})")
-    has_v = len(header) == 2 * n + 1
-    width = len(header)
-    data = []
-    for line, row in enumerate(rows[1:], start=2):
-        if not row:
-            continue
-        if len(row) != width:
-            raise FileFormatError(f"{path}, line {line}: {len(row)} values, expected {width}; "
-                                  "the file may be truncated")
-        try:
-            data.append([float(x) for x in row])
-        except ValueError as e:
-            raise FileFormatError(f"{path}, line {line}: not a number ({e})") from e
-    if not data:
+    full = want + [f"qd{j + 1}" for j in range(n)]
+    if header in (want, full):
+        return None
+    forms = f"expected {','.join(want)} (optionally followed by qd1..qd{n})"
+    extra = [h for h in header if h not in full]
+    missing = [h for h in want if h not in header]
+    some_qd = [h for h in full[n + 1:] if h in header]
+    if extra:
+        return (f"has the column(s) {', '.join(extra)} that a trajectory does not have; {forms}. "
+                "Remove them (nothing is dropped silently)")
+    if missing:
+        return f"lacks the column(s) {', '.join(missing)}; {forms}"
+    if some_qd and len(some_qd) < n:
+        lacking = [h for h in full[n + 1:] if h not in header]
+        return (f"has velocities for some joints only (lacks {', '.join(lacking)}); {forms}. "
+                f"Give all of qd1..qd{n}, or none")
+    return f"has its columns in another order or repeated ({','.join(header)}); {forms}"
+
+
+def _not_utf8(path: Path, e: UnicodeDecodeError) -> FileFormatError:
+    """The error for a file that is not UTF-8 text, naming the first bad line and byte."""
+    with open(path, "rb") as f:
+        for line_no, line in enumerate(f, start=1):
+            try:
+                line.decode("utf-8")
+            except UnicodeDecodeError as bad:
+                byte = line[bad.start]
+                return FileFormatError(
+                    f"{path}, line {line_no}: byte 0x{byte:02x} is not UTF-8 text, so this is not a file "
+                    "Trajectory.save wrote (it may be in another encoding, e.g. Latin-1). Save it again "
+                    "as UTF-8 ('CSV UTF-8' in a spreadsheet), with only numbers below the header")
+    return FileFormatError(f"{path} is not UTF-8 text ({e}); save it again as UTF-8")
+
+
+def _csv_line_problem(path: Path, width: int) -> FileFormatError | None:
+    """The first malformed data line of a .csv, found by reading it line by line (only called
+    when the vectorised read failed, to say where and why)."""
+    with open(path, newline="", encoding="utf-8-sig") as f:
+        reader = csv.reader(f)
+        next(reader, None)
+        for row in reader:
+            line = reader.line_num
+            if not row:
+                continue
+            if len(row) != width:
+                return FileFormatError(f"{path}, line {line}: {len(row)} values, expected {width}; " + (
+                    "the file may be truncated" if len(row) < width else "remove the extra values"))
+            for x in row:
+                try:
+                    float(x)
+                except ValueError as e:
+                    return FileFormatError(f"{path}, line {line}: not a number ({e})")
+    return None
+
+
+def _read_csv(path: Path, n: int) -> dict:
+    """The arrays of a trajectory .csv, read in one vectorised pass (``numpy.loadtxt``)."""
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            first = f.readline()
+            if not first.strip():
+                raise FileFormatError(f"{path} is empty; a trajectory .csv starts with the header "
+                                      f"time,q1..q{n}")
+            header = [h.strip() for h in next(csv.reader([first]))]
+            problem = _csv_header_problem(header, n)
+            if problem:
+                raise FileFormatError(f"{path} {problem}")
+            width = len(header)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", UserWarning)  # "input contained no data": checked below
+                    a = np.loadtxt(f, delimiter=",", dtype=float, ndmin=2, comments=None, quotechar='"')
+            except ValueError as e:
+                raise _csv_line_problem(path, width) or FileFormatError(f"{path}: {e}") from e
+    except UnicodeDecodeError as e:
+        raise _not_utf8(path, e) from e
+    except OSError as e:
+        raise FileFormatError(f"{path} could not be read ({e.strerror or e})") from e
+    if a.shape[0] == 0:
         raise FileFormatError(f"{path} has a header but no points")
-    a = np.array(data)
+    if a.shape[1] != width:
+        raise _csv_line_problem(path, width) or FileFormatError(
+            f"{path}: {a.shape[1]} values per line, expected {width}")
     out = {"times": a[:, 0], "positions": a[:, 1: n + 1]}
-    if has_v:
+    if width == 2 * n + 1:
         out["velocities"] = a[:, n + 1:]
     return out
 
@@ -353,10 +421,17 @@ def joint_trajectory(q_start, q_end, duration: float | None = None, *, method: s
     scaling, peak = _SCALINGS[method]
     a = check_limits(q_start, spec, "q_start")
     b = check_limits(q_end, spec, "q_end")
+    rate = number(rate, "rate", "Hz", above=0, hint="It is how many points per second the move is "
+                  "sampled at (default: 100)")
     if duration is None:
+        speed_fraction = number(speed_fraction, "speed_fraction", above=0, at_most=1,
+                                hint="It is the share of the velocity limit the fastest joint may reach "
+                                "(default: 0.8); or give the duration [s]")
         duration = max(peak * float(np.abs(b - a).max()) / (speed_fraction * spec.velocity_limit), 1.0 / rate)
-    if not duration > 0:
-        raise TrajectoryError(f"duration must be > 0 s, got {duration}")
+    else:
+        duration = number(duration, "duration", "s", above=0,
+                          hint="Give how long the move takes, or leave it out for the fastest move "
+                          "inside the velocity limit")
     n = max(int(np.ceil(duration * rate - 1e-9)), 1)
     t = np.linspace(0.0, duration, n + 1)
     s = scaling(duration, t)
@@ -375,9 +450,12 @@ def side_sweep(*, points: int = 500, rate: float = 10.0, sweeps: int = 50,
     >>> len(tr), round(tr.duration, 1), bool(abs(tr.positions[[0, -1]]).max() < 1e-12)
     (500, 49.9, True)
     """
-    if points < 2 or rate <= 0 or sweeps < 1:
-        raise TrajectoryError(f"side_sweep needs points >= 2, rate > 0 and sweeps >= 1; "
-                              f"got points={points}, rate={rate}, sweeps={sweeps}")
+    points = number(points, "points", at_least=2, integer=True, hint="It is how many goals the sweep sends "
+                    "(the task: 500)")
+    rate = number(rate, "rate", "Hz", above=0, hint="It is how many goals per second are sent (the task: 10)")
+    sweeps = number(sweeps, "sweeps", at_least=1, integer=True,
+                    hint="It is how many side-to-side sweeps fill the run (the task: 50)")
+    amplitude = number(amplitude, "amplitude", "rad", hint="It is how far each joint swings (default: 0.2)")
     t = np.arange(points) / rate
     period = t[-1] / sweeps
     w = 2 * np.pi / period

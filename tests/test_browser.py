@@ -1,9 +1,12 @@
-"""Lesson 0 in a real browser: JupyterLab + headless Chromium, the 3D view reacts to a slider.
+"""Lesson 0 in a real browser, as a student meets it: JupyterLab + headless Chromium.
 
 Starts JupyterLab on a free loopback port over a temporary copy of ``notebooks/``, opens
-lesson 0 in Chromium (Debian's, driven by Playwright), runs every cell, waits for meshcat's
-canvas, drags the joint 1 slider, and checks that the picture changed by comparing
-screenshot pixels. Screenshots are kept in ``artifacts/`` at the repository root.
+lesson 0 (the student version, as handed out) in Chromium (Debian's, driven by Playwright)
+and runs every cell: the run stops at exercise 0.1's check, which says the exercise is not
+written yet. The student fills the exercise, runs its check and sees it pass, runs the rest;
+then drags the joint 1 slider (the picture must change: screenshot pixels are compared) and
+presses nbgrader's Validate button, which must report success. Screenshots are kept in
+``artifacts/`` at the repository root.
 Afterwards JupyterLab, its kernel, the meshcat server and Chromium must all be gone.
 """
 
@@ -27,6 +30,10 @@ from tests.conftest import free_port, need, need_program
 ROOT = Path(__file__).resolve().parents[1]
 ARTIFACTS = ROOT / "artifacts"
 LESSON = "00_meet_the_arm.ipynb"
+# What a student writes for exercise 0.1 (its answer cell, as handed out, raises NotImplementedError).
+STUDENT_ANSWER = """def distance_mm(q, target):
+    x, y, heading = snakekit.tool_pose_2d(q)
+    return 1000 * np.hypot(x - target[0], y - target[1])"""
 CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                   "--disable-component-update", "--disable-sync", "--no-first-run"]
 
@@ -47,6 +54,7 @@ class JupyterLab:
         env = dict(os.environ,
                    JUPYTER_CONFIG_DIR=str(home / "config"), JUPYTER_RUNTIME_DIR=str(home / "runtime"),
                    IPYTHONDIR=str(home / "ipython"), MPLBACKEND="module://matplotlib_inline.backend_inline",
+                   JUPYTER_CONFIG_PATH=str(ROOT / "tools" / "student-lab"),   # the student's lab, as `make lab`
                    PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
         self.log = open(home / "jupyterlab.log", "wb")
         self.proc = subprocess.Popen(
@@ -139,7 +147,7 @@ def steady_screenshot(element, *, timeout: float = 20.0) -> bytes:
     raise AssertionError(f"the 3D view kept changing for {timeout} s with nothing moving it")
 
 
-def test_lesson0_slider_moves_the_3d_view(tmp_path):
+def test_lesson0_student_fills_exercise_moves_view_and_validates(tmp_path):
     sync_api = need("playwright.sync_api")
     need("jupyterlab")
     need("meshcat")
@@ -166,12 +174,43 @@ def test_lesson0_slider_moves_the_3d_view(tmp_path):
                     " && window.jupyterapp.shell.currentWidget.sessionContext.session.kernel"
                     " && window.jupyterapp.shell.currentWidget.sessionContext.session.kernel.status === 'idle'",
                     timeout=90_000)
+                cells = page.locator(".jp-Notebook .jp-Cell")
+                # as handed out: running everything stops at the exercise's check, which says why
                 page.evaluate("() => window.jupyterapp.commands.execute('notebook:run-all-cells')")
+                check = page.locator(".jp-OutputArea-output", has_text="Check failed: exercise 0.1").first
+                check.wait_for(timeout=120_000)
+                shown = check.inner_text()
+                assert "distance_mm` is not written yet" in shown, shown
+                assert "Traceback" not in shown and "checks.py" not in shown, shown   # the message, not the stack
+                assert page.locator("text=saved meet_the_arm.html").count() == 0   # run-all stopped there
+
+                # the student fills exercise 0.1 in its answer cell (pasted, as from an editor) ...
+                answer = cells.filter(has_text='NotImplementedError("exercise 0.1').first
+                answer.locator(".cm-content").click()
+                page.keyboard.press("Control+a")
+                page.keyboard.insert_text(STUDENT_ANSWER)
+                page.keyboard.press("Shift+Enter")          # runs the answer cell, moves to its check
+                test_cell = cells.filter(has_text='checks.Exercise("0.1"').first
+                test_cell.locator(".cm-content").click()
+                page.keyboard.press("Shift+Enter")          # ... runs the check and sees it pass
+                passed = test_cell.locator(".jp-OutputArea-output", has_text="exercise 0.1 distance_mm: 2 check(s) passed")
+                passed.wait_for(timeout=60_000)
+                assert test_cell.locator(".jp-OutputArea-output[data-mime-type='application/vnd.jupyter.stderr']").count() == 0
+                test_cell.scroll_into_view_if_needed()
+                page.screenshot(path=str(ARTIFACTS / "browser_lesson0_exercise_passed.png"))
+
+                # ... and runs the rest of the lesson
+                page.evaluate("() => window.jupyterapp.commands.execute('notebook:run-all-below')")
                 page.wait_for_selector("text=saved meet_the_arm.html", timeout=120_000)
                 lab.track()
                 errors = page.locator(".jp-OutputArea-output[data-mime-type='application/vnd.jupyter.stderr']")
                 tracebacks = [t for t in errors.all_text_contents() if "Traceback" in t or "Error" in t]
                 assert tracebacks == []
+                moves = page.locator(".jp-OutputArea-output", has_text="mm from its target").first.inner_text()
+                assert moves.count("mm from its target") == 3, moves   # the demonstration after the exercise ran
+                # the panel's plot after Execute arrives as a picture, not as "<Figure size ...>"
+                assert page.locator(".jp-RenderedImage img[src^='data:image/png']").count() >= 1
+                assert page.locator("text=<Figure size").count() == 0
 
                 view = page.locator("iframe[title='snakekit 3D view']").first
                 view.scroll_into_view_if_needed()
@@ -213,6 +252,22 @@ def test_lesson0_slider_moves_the_3d_view(tmp_path):
                 assert value_after < value_before - 0.2
                 assert frac > 0.002, f"the view did not change after the slider moved ({frac:.4%} of pixels)"
                 assert frac < 0.5, f"the whole view changed ({frac:.1%}): not just the arm moving"
+
+                # nbgrader's Validate button (its JupyterLab extension) runs the saved notebook in a
+                # fresh kernel and reports the checks: the filled exercise passes
+                button = page.locator(".jp-NotebookPanel-toolbar .validate-button").first
+                button.wait_for(timeout=10_000)
+                button.click()
+                dialog = page.locator(".jp-Dialog")
+                dialog.wait_for(timeout=240_000)   # after the saved notebook ran in a fresh kernel
+                result = dialog.locator(".validation-success, .validation-failed, .validation-error, "
+                                        ".validation-unchanged, .validation-changed")
+                result.first.wait_for(timeout=240_000)
+                lab.track()   # the validation kernel and its meshcat server
+                page.screenshot(path=str(ARTIFACTS / "browser_lesson0_validate.png"))
+                report = dialog.inner_text()
+                assert "Success! Your notebook passes all the tests." in report, report
+                dialog.locator("button", has_text="OK").first.click()
             finally:
                 browser_pids += [p.pid for p in lab.psutil.Process().children(recursive=True)
                                  if "chrom" in p.name().lower()]

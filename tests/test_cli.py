@@ -104,3 +104,121 @@ def test_emulator_command_prints_a_port_the_sdk_can_use():
 def test_emulator_command_rejects_a_bad_option():
     r = subprocess.run(SNAKEKIT + ["emulator", "--drop", "2"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "drop is a probability in [0, 1], got 2.0" in r.stderr
+
+
+# --- `snakekit check`: a lesson's checks from a terminal ------------------------------------
+
+LESSON3 = "03_inverse_kinematics"
+
+
+def _exercises(nb) -> list[tuple[str, int, str, str]]:
+    """(test cell grade id, points, number, name) of each exercise, read from the notebook itself."""
+    import re
+
+    rows = []
+    for cell in nb.cells:
+        meta = cell.metadata.get("nbgrader", {})
+        if meta.get("solution") and cell.cell_type == "code":
+            number, name = re.search(r'exercise (\d+\.\d+): (\w+)', cell.source).groups() \
+                if "NotImplementedError" in cell.source else (None, None)
+            rows.append([f"{meta['grade_id']}_test", None, number, name])
+    points = {c.metadata["nbgrader"]["grade_id"]: c.metadata["nbgrader"]["points"] for c in nb.cells
+              if c.metadata.get("nbgrader", {}).get("grade")}
+    return [(gid, points[gid], number, name) for gid, _, number, name in rows]
+
+
+def check(path, cwd):
+    # the console script, as a student types it (snakekit check notebooks/03_inverse_kinematics.ipynb)
+    exe = Path(sys.executable).parent / "snakekit"
+    return subprocess.run([str(exe), "check", str(path)], cwd=cwd, capture_output=True, text=True, timeout=600)
+
+
+def _rows(stdout: str) -> dict[str, tuple[int, str, str]]:
+    import re
+
+    rows = {}
+    for line in stdout.splitlines():
+        m = re.match(r"  (ex\d\d_\d+_\w+_test)\s+(\d+) pt  (passed|FAILED)\s*(.*)$", line)
+        if m:
+            rows[m.group(1)] = (int(m.group(2)), m.group(3), m.group(4))
+    return rows
+
+
+def test_check_reports_each_exercise_of_a_student_lesson(tmp_path):
+    """As handed out, every exercise fails with the first line of the message the notebook shows."""
+    import shutil
+
+    import nbformat
+
+    src = Path(__file__).resolve().parents[1] / "notebooks" / f"{LESSON3}.ipynb"
+    shutil.copy(src, tmp_path)
+    nb = nbformat.read(src, as_version=4)
+    exercises = _exercises(nb)
+    assert len(exercises) >= 3
+    r = check(f"{LESSON3}.ipynb", cwd=tmp_path)
+    assert r.returncode == 1, r.stdout + r.stderr
+    rows = _rows(r.stdout)
+    assert list(rows) == [gid for gid, *_ in exercises], r.stdout       # one row per exercise, in order
+    for gid, points, number, name in exercises:
+        # the first line of what the student sees under the check cell, after "Check failed: "
+        assert rows[gid] == (points, "FAILED", f"exercise {number} {name}: `{name}` is not written yet (it raises "
+                             f"NotImplementedError: exercise {number}: {name}). Write it in the answer cell above, "
+                             "run that cell, then run this check again."), r.stdout
+    total = sum(p for _, p, *_ in exercises)
+    assert f"0 of {len(exercises)} exercises passed, 0 of {total} points" in r.stdout
+    assert "also failed" not in r.stdout                               # nothing fails outside the checks
+    assert nbformat.read(tmp_path / f"{LESSON3}.ipynb", as_version=4) == nb   # the file is not changed
+
+
+def test_check_shows_by_how_much_a_wrong_answer_is_off(tmp_path):
+    """Exercise 3.1 filled correctly except for degrees: its row says what, where and by how much."""
+    import re
+
+    import nbformat
+
+    root = Path(__file__).resolve().parents[1]
+    student = nbformat.read(root / "notebooks" / f"{LESSON3}.ipynb", as_version=4)
+    instructor = nbformat.read(root / "course" / "source" / LESSON3 / f"{LESSON3}.ipynb", as_version=4)
+    solutions = {c.metadata["nbgrader"]["grade_id"]: c.source for c in instructor.cells
+                 if c.metadata.get("nbgrader", {}).get("solution") and c.cell_type == "code"}
+    first, second = [c for c in student.cells if c.metadata.get("nbgrader", {}).get("solution")
+                     and c.cell_type == "code"][:2]
+    first.source = solutions[first.metadata["nbgrader"]["grade_id"]]    # 3.1: the right answer
+    body = solutions[second.metadata["nbgrader"]["grade_id"]]
+    body = re.sub(r"(\n\s*)return (.+)", r"\1return np.degrees(\2)", body, count=1)   # 3.2: in degrees
+    assert "np.degrees" in body
+    second.source = body
+    nbformat.write(student, tmp_path / "lesson.ipynb")
+    r = check("lesson.ipynb", cwd=tmp_path)
+    assert r.returncode == 1, r.stdout + r.stderr
+    rows = _rows(r.stdout)
+    gids = list(rows)
+    assert rows[gids[0]][1] == "passed" and rows[gids[0]][2] == "", r.stdout
+    status, message = rows[gids[1]][1:]
+    assert status == "FAILED" and message.startswith("exercise 3.2 "), r.stdout
+    assert re.search(r" at .* is .*, expected .*: off by [0-9.e+-]+ \w+ .*\(tolerance ", message), message
+    assert "\n" not in message and "Traceback" not in r.stdout
+
+
+def test_check_passes_a_filled_lesson(tmp_path):
+    """The instructor version (every exercise filled) passes every row and exits 0."""
+    import shutil
+
+    root = Path(__file__).resolve().parents[1]
+    shutil.copy(root / "course" / "source" / LESSON3 / f"{LESSON3}.ipynb", tmp_path)
+    import nbformat
+
+    exercises = _exercises(nbformat.read(tmp_path / f"{LESSON3}.ipynb", as_version=4))
+    r = check(f"{LESSON3}.ipynb", cwd=tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    rows = _rows(r.stdout)
+    assert rows == {gid: (points, "passed", "") for gid, points, *_ in exercises}, r.stdout
+    total = sum(p for _, p, *_ in exercises)
+    assert f"{len(exercises)} of {len(exercises)} exercises passed, {total} of {total} points" in r.stdout
+
+
+def test_check_refuses_what_is_not_a_notebook(tmp_path):
+    (tmp_path / "lesson.py").write_text("print('hi')\n")
+    r = check("lesson.py", cwd=tmp_path)
+    assert r.returncode == 2
+    assert "lesson.py is not a notebook file" in r.stderr and "notebooks/03_inverse_kinematics.ipynb" in r.stderr

@@ -66,7 +66,8 @@ def test_exercises_follow_the_contract(name):
         assert t["points"] >= 1 and t["locked"]
     text = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
     total = sum(t["points"] for t in tests.values())
-    assert f"Total: {total} points" in text, f"{name} should state 'Total: {total} points'"
+    total_text = f"Total: {total} point{'' if total == 1 else 's'}"
+    assert total_text in text, f"{name} should state {total_text!r}"
     assert "Objectives" in text and "What it assumes" in text and "Predict, then run" in text
     assert "<!-- BEGIN ANSWER -->" in text, f"{name}: the instructor version holds the predicted answers"
 
@@ -92,7 +93,7 @@ def test_student_notebooks_are_current():
 def test_student_version_hides_solutions_and_hidden_tests(name):
     text = (ROOT / "notebooks" / f"{name}.ipynb").read_text()
     for secret in ("BEGIN SOLUTION", "BEGIN HIDDEN TESTS", "BEGIN ANSWER", "checks.hand_in", "SNAKEKIT_TEST",
-                   "SNAKEKIT_QUICK", "os.environ"):
+                   "SNAKEKIT_QUICK", "SNAKEKIT_HANDIN", "environ", "getenv", "checks.quick"):
         assert secret not in text, f"notebooks/{name}.ipynb shows {secret!r} to the student"
     nb = read(ROOT / "notebooks" / f"{name}.ipynb")
     for cell in nb.cells:
@@ -156,3 +157,100 @@ def test_every_exercise_hands_in_for_the_grader(autograded, name):
         assert path.exists(), f"{gid} handed nothing in"
         with np.load(path, allow_pickle=False) as z:
             assert z.files, f"{gid} handed in an empty file"
+
+
+# --- the README's lesson table is the course's ------------------------------------------------
+
+EXERCISE = re.compile(r"^### Exercise (\d+\.\d+) \((\d+) points?\): `(\w+)\(", re.M)
+
+
+def lesson_table() -> str:
+    """The README's lesson table, made from course/source/ (paste it when this test fails)."""
+    lines = ["| lesson | what the student writes (exercise: function, points) | exercises | points |",
+             "|---|---|---:|---:|"]
+    for name in SOURCES:
+        nb = read(COURSE / "source" / name / f"{name}.ipynb")
+        title = nb.cells[0].source.splitlines()[0].split(":", 1)[1].strip()
+        found = EXERCISE.findall("\n".join(c.source for c in nb.cells if c.cell_type == "markdown"))
+        graded = graded_cells(nb)
+        # the headings agree with the graded cells' points, in order
+        assert [int(p) for _, p, _ in found] == [g["points"] for g in graded.values()], (name, found)
+        what = "; ".join(f"{n} `{fn}` ({p})" for n, p, fn in found)
+        lines.append(f"| {name[:2]} {title} | {what} | {len(found)} | {sum(int(p) for _, p, _ in found)} |")
+    total = sum(len(graded_cells(read(COURSE / "source" / n / f"{n}.ipynb"))) for n in SOURCES)
+    points = sum(g["points"] for n in SOURCES for g in graded_cells(read(COURSE / "source" / n / f"{n}.ipynb")).values())
+    lines.append(f"| | **all lessons** | **{total}** | **{points}** |")
+    return "\n".join(lines)
+
+
+def test_readme_lesson_table_matches_the_course():
+    readme = (ROOT / "README.md").read_text()
+    table = lesson_table()
+    assert table in readme, "README.md's lesson table is out of date with course/source/; it should read:\n\n" + table
+
+
+# --- the teaching layer ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", SOURCES)
+def test_each_lesson_opens_with_objectives_and_asks_to_predict(name):
+    """Objectives and assumptions first; every "predict, then run" question has its answer in the
+    instructor version, and a place for the student's guess (without the answer) in theirs."""
+    nb = read(COURSE / "source" / name / f"{name}.ipynb")
+    first = nb.cells[0].source
+    assert nb.cells[0].cell_type == "markdown" and first.startswith(f"# Lesson {int(name[:2])}: ")
+    assert "**Objectives.**" in first and "**What it assumes.**" in first, first[:300]
+    objectives = first.split("**Objectives.**")[1].split("**What it assumes.**")[0]
+    assert 1 <= objectives.count("\n- ") <= 3, objectives             # three bullets at most
+    questions = [c.source for c in nb.cells if c.cell_type == "markdown" and "**Predict, then run.**" in c.source]
+    assert 1 <= len(questions) <= 2, name
+    for q in questions:
+        answer = q.split("<!-- BEGIN ANSWER -->")[1].split("<!-- END ANSWER -->")[0]
+        assert "**Answer.**" in answer and len(answer.strip()) > 40, q
+    student = read(ROOT / "notebooks" / f"{name}.ipynb")
+    shown = [c.source for c in student.cells if c.cell_type == "markdown" and "**Predict, then run.**" in c.source]
+    assert len(shown) == len(questions)
+    for q in shown:
+        assert q.rstrip().endswith("*Your guess:*") and "Answer." not in q, q
+    # a guess is followed by the cell that shows the answer
+    for i, c in enumerate(student.cells):
+        if c.cell_type == "markdown" and "**Predict, then run.**" in c.source:
+            assert student.cells[i + 1].cell_type == "code", (name, c.source[:80])
+
+
+def test_the_numbers_a_student_meets_are_explained():
+    """Task 1 and Task 2 are defined where they first appear (lesson 0) and where Task 2 is built
+    (lesson 6); the servo's lag is explained in lesson 5 before lesson 6 measures it."""
+    def markdown(name):
+        return "\n".join(c.source for c in read(COURSE / "source" / name / f"{name}.ipynb").cells
+                         if c.cell_type == "markdown")
+
+    meet, sim, sweep = markdown("00_meet_the_arm"), markdown("05_simulation"), markdown("06_coded_sweep")
+    assert "**Task 1**" in meet and "three consecutive times" in meet and "Task 2" in meet
+    assert "**Task 1**" in sweep and "**Task 2**" in sweep
+    assert "500 trajectory points sent at 10 Hz" in sweep and "50 full side-to-side sweeps" in sweep
+    assert "**lag**" in sim and "trails" in sim
+    assert "phase lag" in sweep and "half a goal period" in sweep
+
+
+def test_lesson6_reports_lag_next_to_the_raw_tracking_error(autograded):
+    """The instructor run of lesson 6 prints, per joint, the raw tracking error, the phase lag and
+    the error left once the lag is removed; the raw figures match the simulator's own run of the
+    spec (an independent computation), and removing the lag leaves a small fraction of the error."""
+    np = need("numpy")
+    import snakekit
+
+    nb = read(autograded["course"] / "autograded" / "instructor" / "06_coded_sweep" / "06_coded_sweep.ipynb")
+    text = "\n".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" and "estimate_lag(run, j)" in c.source
+                     for o in c.outputs if o.output_type == "stream")
+    assert "raw error" in text and "error without lag" in text, text
+    rows = re.findall(r"^\s*(\d)\s+([\d.]+) deg\s+(\d+) ms\s+([\d.]+) deg$", text, re.M)
+    assert [int(r[0]) for r in rows] == [1, 2, 3, 4, 5], text
+    with snakekit.make_robot("sim") as robot:
+        run = robot.run(snakekit.side_sweep())
+    raw = np.degrees(run.tracking_error())
+    for (j, shown_raw, lag_ms, rest), expected in zip(rows, raw):
+        assert abs(float(shown_raw) - expected) <= 0.051, (j, shown_raw, expected)   # printed to 0.1 deg
+        assert 100 <= int(lag_ms) <= 250, (j, lag_ms)       # half a goal period (50 ms) plus the servo's lag
+        assert float(rest) < float(shown_raw) / 3, (j, rest, shown_raw)
+    assert 9 < raw[0] < 12.5    # "about 11 degrees on an 11.5 degree sweep", as the lesson says

@@ -198,7 +198,7 @@ def test_reg_write_waits_for_action(client, bus):
     port, ph = client
     data = [0x00, 0x09, 0, 0]  # 2304 ticks
     assert ph.regWriteTxRx(port, 3, 116, 4, data) == (sdk.COMM_SUCCESS, 0)
-    assert bus.servo(3).memory.get("Goal Position") == 0
+    assert bus.servo(3).memory.get("Goal Position") == 2048  # the firmware starts with goal = present
     assert ph.read1ByteTxRx(port, 3, 69)[0] == 1             # Registered Instruction
     assert ph.action(port, sdk.BROADCAST_ID) == sdk.COMM_SUCCESS
     time.sleep(0.01)

@@ -1,4 +1,5 @@
-"""`make lab` serves the lessons in JupyterLab, offline, and prints the URL with its token."""
+"""`make lab` serves the lessons in JupyterLab, offline, prints the URL with its token, and enables
+nbgrader's Validate button (its JupyterLab extension and the server extension it calls)."""
 
 import json
 import os
@@ -7,6 +8,7 @@ import signal
 import socket
 import subprocess
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -47,7 +49,32 @@ def test_make_lab_serves_the_lessons(tmp_path):
         served = sorted(c["name"] for c in listing["content"] if c["type"] == "notebook")
         assert served == sorted(p.name for p in (ROOT / "notebooks").glob("*.ipynb"))
         with urllib.request.urlopen(url, timeout=10) as r:
-            assert r.status == 200 and b"JupyterLab" in r.read()
+            assert r.status == 200
+            page = r.read().decode()
+        assert "JupyterLab" in page
+
+        # nbgrader's Validate button: its JupyterLab extension is loaded in the page and enabled,
+        # and the server extension it posts to answers (same nbgrader version on both sides)
+        config = json.loads(re.search(r'<script id="jupyter-config-data" type="application/json">(.*?)</script>',
+                                      page, re.S).group(1))
+        federated = {e["name"] for e in config["federated_extensions"]}
+        assert "@jupyter/nbgrader" in federated, sorted(federated)
+        disabled = set(config.get("disabledExtensions", []))
+        assert "@jupyter/nbgrader:validate-assignment" not in disabled, disabled
+        # the teacher's tools are not in the student's lab: not in the page, not on the server
+        teacher = {"@jupyter/nbgrader:formgrader", "@jupyter/nbgrader:create-assignment",
+                   "@jupyter/nbgrader:course-list", "@jupyter/nbgrader:assignment-list", "@jupyter/nbgrader:menu"}
+        assert teacher <= disabled, sorted(teacher - disabled)
+        for path in ("formgrader", "assignments", "courses"):
+            try:
+                urllib.request.urlopen(f"{base}/{path}?token={token}", timeout=10)
+                raise AssertionError(f"/{path} answers in the student's lab")
+            except urllib.error.HTTPError as e:
+                assert e.code == 404, (path, e.code)
+        nbgrader = need("nbgrader")
+        assert get_json(f"{base}/nbgrader_version?version={nbgrader.__version__}&token={token}") == {"success": True}
+        log_text = (tmp_path / "lab.log").read_text()
+        assert "nbgrader.server_extensions.validate_assignment | extension was successfully loaded" in log_text
 
         # offline: no news prompt and no update check
         notes = get_json(f"{base}/lab/api/settings/@jupyterlab/apputils-extension:notification?token={token}")
@@ -66,5 +93,11 @@ def test_make_lab_serves_the_lessons(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
         log.close()
-    with socket.socket() as s:
-        assert s.connect_ex(("127.0.0.1", port)) != 0, "JupyterLab still listens after Ctrl-C"
+    # make exits at once; JupyterLab, which got the same Ctrl-C, shuts its kernels and extensions down
+    deadline = time.monotonic() + 15
+    while True:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) != 0:
+                break
+        assert time.monotonic() < deadline, "JupyterLab still listens 15 s after Ctrl-C"
+        time.sleep(0.2)

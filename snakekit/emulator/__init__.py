@@ -46,12 +46,16 @@ def make_emulated_robot(*, motion: str = "mujoco", faults: Faults | None = None,
         **robot_options: keyword options of :class:`~snakekit.hardware.DynamixelSnake`
             (``on_close``, ``retries``, ``profile_velocity``...).
     """
+    import warnings
+
     from ..hardware import DynamixelSnake
 
     bus = BusEmulator(ids=ids, motion=motion, q0=q0, timing=timing, boot_time=boot_time,
                       baudrate=baudrate, faults=faults or Faults()).start()
     try:
-        robot = DynamixelSnake(bus.port, baudrate, ids, **robot_options)
+        with warnings.catch_warnings():  # fresh emulated servos: the kit's EEPROM values are always
+            warnings.filterwarnings("ignore", "the kit wrote its EEPROM settings")  # written (robot.eeprom_changes)
+            robot = DynamixelSnake(bus.port, baudrate, ids, **robot_options)
     except BaseException:
         bus.stop()
         raise

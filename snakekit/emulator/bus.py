@@ -126,6 +126,7 @@ class BusEmulator:
         self._fault_budget: int | None = None
         self._rng = random.Random(0)
         self._overload_at = math.inf
+        self._heard = 0.0  # when the last instruction packet reached the servos (the Bus Watchdog's clock)
         self.faults = faults
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -204,7 +205,7 @@ class BusEmulator:
         out = []
         for r in self.received():
             pk = r.packet
-            for servo_id, start, data in _write_blocks(pk):
+            for servo_id, start, data in p.write_blocks(pk):
                 if start <= address and address + size <= start + len(data):
                     raw = int.from_bytes(data[address - start:address - start + size], "little")
                     value = to_signed(raw, size) if _signed(address) else raw
@@ -237,7 +238,8 @@ class BusEmulator:
         """Answer packets until :meth:`stop` (or Ctrl-C in the foreground)."""
         advance = getattr(self.motion, "advance", None)
         while not self._stop.is_set():
-            ready, _, _ = select.select([self._master, self._wake_r], [], [], 0.05)
+            watching = any(s.watchdog_period for s in self.servos)
+            ready, _, _ = select.select([self._master, self._wake_r], [], [], 0.005 if watching else 0.05)
             if self._master in ready:
                 try:
                     data = os.read(self._master, 65536)
@@ -255,6 +257,7 @@ class BusEmulator:
                                 traceback.print_exc()
             with self._lock:
                 t = self.now()
+                self._watchdog(t)
                 if t >= self._overload_at:
                     self._overload(t)
                 if advance is not None:
@@ -317,6 +320,8 @@ class BusEmulator:
             self.record.append(Received(t, packet, fault))
             if fault == "dropped":
                 return
+            self._watchdog(t)
+            self._heard = t
             replies = self._execute(t, packet)
             if not replies:
                 return
@@ -332,6 +337,13 @@ class BusEmulator:
             if self.timing:
                 _sleep(servo.return_delay + len(pkt) * 10 / self.baudrate)
             self._send(pkt)
+
+    def _watchdog(self, t: float) -> None:
+        """Stop every torque-on servo whose Bus Watchdog period passed since the last packet."""
+        for s in self.servos:
+            period = s.watchdog_period
+            if period and s.memory.get("Torque Enable") and t - self._heard > period:
+                s.watchdog_stop(self._heard + period)
 
     def _send(self, data: bytes) -> None:
         try:
@@ -377,14 +389,14 @@ class BusEmulator:
         if inst == p.READ:
             if broadcast:
                 return []
-            address, length = _u16(params, 0), _u16(params, 2)
+            address, length = p.u16(params, 0), p.u16(params, 2)
             if len(params) != 4:
                 return reply(s, p.DATA_LENGTH_ERROR, level=1)
             self._refresh(t, [s])
             error, data = s.memory.read(address, length)
             return reply(s, error, data, level=1)
         if inst in (p.WRITE, p.REG_WRITE):
-            address, data = _u16(params, 0), params[2:]
+            address, data = p.u16(params, 0), params[2:]
             out = []
             for s in targets:
                 answers = s.status_return_level >= 2  # as set when the instruction arrived
@@ -421,7 +433,7 @@ class BusEmulator:
         if inst == p.SYNC_READ:
             if len(params) < 4:
                 return []
-            address, length = _u16(params, 0), _u16(params, 2)
+            address, length = p.u16(params, 0), p.u16(params, 2)
             wanted = [self._present(t, i) for i in params[4:]]
             wanted = [s for s in wanted if s is not None]
             self._refresh(t, wanted)
@@ -432,7 +444,7 @@ class BusEmulator:
                     out.append((s, p.status(s.id, s.error_byte(error), data)))
             return out
         if inst == p.BULK_READ:
-            blocks = [(params[i], _u16(params, i + 1), _u16(params, i + 3))
+            blocks = [(params[i], p.u16(params, i + 1), p.u16(params, i + 3))
                       for i in range(0, len(params) - 4, 5)]
             wanted = [(self._present(t, i), a, n) for i, a, n in blocks]
             wanted = [w for w in wanted if w[0] is not None]
@@ -444,7 +456,7 @@ class BusEmulator:
                     out.append((s, p.status(s.id, s.error_byte(error), data)))
             return out
         if inst in (p.SYNC_WRITE, p.BULK_WRITE):
-            for servo_id, address, data in _write_blocks(pk):
+            for servo_id, address, data in p.write_blocks(pk):
                 s = self._present(t, servo_id)
                 if s is not None:
                     s.write(t, address, data)
@@ -456,34 +468,11 @@ class BusEmulator:
         self._by_id = {s.id: s for s in self.servos}
 
 
-def _u16(b: bytes, i: int) -> int:
-    return b[i] | b[i + 1] << 8
-
-
 def _signed(address: int) -> bool:
     try:
         return field_at(address).signed
     except KeyError:
         return False
-
-
-def _write_blocks(pk: p.Packet) -> list[tuple[int, int, bytes]]:
-    """``(servo id, address, data)`` for every write carried by an instruction packet."""
-    b, inst = pk.params, pk.instruction
-    if inst in (p.WRITE, p.REG_WRITE) and len(b) >= 3:
-        return [(pk.id, _u16(b, 0), b[2:])]
-    if inst == p.SYNC_WRITE and len(b) >= 4:
-        address, length = _u16(b, 0), _u16(b, 2)
-        step = 1 + length
-        return [(b[i], address, b[i + 1:i + step]) for i in range(4, len(b) - step + 1, step)]
-    if inst == p.BULK_WRITE:
-        out, i = [], 0
-        while i + 5 <= len(b):
-            servo_id, address, length = b[i], _u16(b, i + 1), _u16(b, i + 3)
-            out.append((servo_id, address, b[i + 5:i + 5 + length]))
-            i += 5 + length
-        return out
-    return []
 
 
 def _sleep(seconds: float) -> None:

@@ -13,12 +13,30 @@ With torque off a joint is limp: it stays where it is (profile) or coasts (MuJoC
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
 
 from ..model import SPEC, SnakeSpec
-from ..profile_planner import ProfilePlanner
+from ..profile_planner import ACCELERATION_UNIT, VELOCITY_UNIT, ProfilePlanner
+
+
+def velocity_plan(planner: ProfilePlanner, t: float, joint: int, velocity: float, acceleration: int,
+                  far: float) -> float:
+    """Set ``planner`` up so ``joint`` turns at ``velocity`` [rad/s] from ``t`` [s] (velocity and
+    PWM modes): the profile velocity is the speed, the goal ``far`` [rad] away; speed 0 stops
+    with ``acceleration`` (register units; 0 = at once). Returns the goal [rad]."""
+    p, v = planner.profiles[joint].at(t)
+    if velocity == 0:
+        amax = acceleration * ACCELERATION_UNIT
+        if amax <= 0 or v == 0:
+            planner.hold(t, joint, p)
+            return p
+        planner.set_profile(joint, max(int(math.ceil(abs(v) / VELOCITY_UNIT)), 1), acceleration)
+        return p + v * abs(v) / (2 * amax)
+    planner.set_profile(joint, max(int(round(abs(velocity) / VELOCITY_UNIT)), 1), acceleration)
+    return p + math.copysign(far, velocity)
 
 
 class MotionSource(ABC):
@@ -37,6 +55,15 @@ class MotionSource(ABC):
     @abstractmethod
     def set_torque(self, t: float, joint: int, on: bool, goal: float) -> None:
         """Torque on or off; on, the joint moves from where it is towards ``goal`` [rad]."""
+
+    @abstractmethod
+    def set_velocity(self, t: float, joint: int, velocity: float, acceleration: int) -> None:
+        """Turn ``joint`` at ``velocity`` [rad/s] (velocity and PWM modes), reaching it with the
+        Profile Acceleration register value ``acceleration`` (0: at once)."""
+
+    @abstractmethod
+    def stop(self, t: float, joint: int) -> float:
+        """Stop ``joint`` where it is at ``t`` [s], at once (a watchdog stop); returns where [rad]."""
 
     @abstractmethod
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -63,6 +90,17 @@ class ProfileMotion(MotionSource):
 
     def set_profile(self, t, joint, velocity, acceleration):
         self.planner.set_profile(joint, velocity, acceleration)
+
+    def set_velocity(self, t, joint, velocity, acceleration):
+        if self.torque[joint]:
+            goal = velocity_plan(self.planner, t, joint, velocity, acceleration, far=1e4)
+            self.planner.set_goal(t, [goal], [joint])
+
+    def stop(self, t, joint):
+        q = float(self.planner.at(t)[0][joint])
+        if self.torque[joint]:
+            self.planner.hold(t, joint, q)
+        return q
 
     def set_torque(self, t, joint, on, goal):
         if on == self.torque[joint]:
@@ -119,14 +157,42 @@ class MujocoMotion(MotionSource):
         """Step the simulation up to the emulator's time ``t`` [s]."""
         self.sim.advance_to(t)
 
+    def _push(self) -> None:
+        """Send every goal to the simulated servos. A servo with no profile (Profile Velocity 0)
+        jumps its reference to the goal now; the others re-plan from where their reference is."""
+        sim = self.sim
+        for j in np.flatnonzero(self.torque & (sim.planner.profile_velocity == 0)):
+            sim.hold_joint(int(j), float(self.goals[j]))
+        sim.set_servo_goals(self.goals)
+
     def set_goal(self, t, joint, goal):
         self.advance(t)
         self.goals[joint] = goal
         if self.torque[joint]:
-            self.sim.set_servo_goals(self.goals)
+            self._push()
 
     def set_profile(self, t, joint, velocity, acceleration):
         self.sim.planner.set_profile(joint, velocity, acceleration)
+
+    def set_velocity(self, t, joint, velocity, acceleration):
+        self.advance(t)
+        if self.torque[joint]:
+            spec = self.sim.spec
+            goal = velocity_plan(self.sim.planner, self.sim.time, joint, velocity, acceleration, far=4.0)
+            self.goals[joint] = float(np.clip(goal, spec.lower, spec.upper))  # the joint's range ends there
+            self._push()
+
+    def stop(self, t, joint):
+        self.advance(t)
+        q = float(self.sim.data.qpos[joint])
+        if self.torque[joint]:
+            planner = self.sim.planner
+            velocity = int(planner.profile_velocity[joint])
+            planner.set_profile(joint, 0)  # the firmware stops with no profile
+            self.goals[joint] = q
+            self._push()
+            planner.set_profile(joint, velocity)
+        return q
 
     def set_torque(self, t, joint, on, goal):
         self.advance(t)
@@ -136,7 +202,7 @@ class MujocoMotion(MotionSource):
             self.sim.hold_joint(joint, float(self.sim.data.qpos[joint]))
             self._actuator(joint, True)
             self.goals[joint] = goal
-            self.sim.set_servo_goals(self.goals)
+            self._push()
         else:
             self._actuator(joint, False)
 

@@ -189,3 +189,27 @@ def describe_error(error: int) -> str:
     if low:
         words.append(ERROR_NAMES.get(low, f"unknown error {low}"))
     return ", ".join(words) or "no error"
+
+
+def u16(b: bytes, i: int) -> int:
+    """A little-endian 16-bit value at ``b[i]``."""
+    return b[i] | b[i + 1] << 8
+
+
+def write_blocks(pk: Packet) -> list[tuple[int, int, bytes]]:
+    """``(servo id, address, data)`` for every write carried by an instruction packet."""
+    b, inst = pk.params, pk.instruction
+    if inst in (WRITE, REG_WRITE) and len(b) >= 3:
+        return [(pk.id, u16(b, 0), b[2:])]
+    if inst == SYNC_WRITE and len(b) >= 4:
+        address, length = u16(b, 0), u16(b, 2)
+        step = 1 + length
+        return [(b[i], address, b[i + 1:i + step]) for i in range(4, len(b) - step + 1, step)]
+    if inst == BULK_WRITE:
+        out, i = [], 0
+        while i + 5 <= len(b):
+            servo_id, address, length = b[i], u16(b, i + 1), u16(b, i + 3)
+            out.append((servo_id, address, b[i + 5:i + 5 + length]))
+            i += 5 + length
+        return out
+    return []

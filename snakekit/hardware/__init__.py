@@ -8,7 +8,10 @@ Modules, one concept each:
 
 * :mod:`.registers`: control-table addresses, units and the tick conversions (servo ticks
   exist only in this package: 2048 ticks = 0 rad, 4096 a turn);
-* :mod:`.bus`: the SDK's port and packets, and the one retry loop;
+* :mod:`.bus`: the SDK's port (opened exclusively) and packets, and the one retry loop;
+* :mod:`.options`: the driver's options, checked before the port opens;
+* :mod:`.startup`: the EEPROM settings checked (and written, or refused) at start-up;
+* :mod:`.keepalive`: the Bus Watchdog, armed while the robot is open, and its keep-alive;
 * :mod:`.driver`: :class:`DynamixelSnake`, the arm as a :class:`~snakekit.robot.Robot`.
 """
 

@@ -17,6 +17,7 @@ from ..errors import BackendError, MissingDependencyError
 
 try:
     import dynamixel_sdk as sdk
+    import serial
 except ImportError as e:  # pragma: no cover - the kit's environment has it
     raise MissingDependencyError("the hardware backend needs dynamixel-sdk: install the kit's environment "
                                  "with tools/setup (or `pip install dynamixel-sdk`)") from e
@@ -52,6 +53,18 @@ class Port(sdk.PortHandler):
     #: cost of a wake-up, a slow one costs no CPU
     spin = 3e-4
 
+    def setupPort(self, cflag_baud):
+        """The SDK's port set-up, opening the port exclusively (a second program, or a second
+        robot object, can't share the bus and undo this one's settings)."""
+        if self.is_open:
+            self.closePort()
+        self.ser = serial.Serial(port=self.port_name, baudrate=self.baudrate, bytesize=serial.EIGHTBITS,
+                                 timeout=0, exclusive=True)
+        self.is_open = True
+        self.ser.reset_input_buffer()
+        self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
+        return True
+
     def readPort(self, length):
         ser = self.ser
         data = ser.read(length)  # what the SDK does: a read that never waits
@@ -82,6 +95,8 @@ class SyncRead(sdk.GroupSyncRead):
         result = sdk.COMM_RX_FAIL
         for dxl_id in self.data_dict:
             self.data_dict[dxl_id], result, self.errors[dxl_id] = self.ph.readRx(self.port, dxl_id, self.data_length)
+            if result == sdk.COMM_SUCCESS and len(self.data_dict[dxl_id]) != self.data_length:
+                result = sdk.COMM_RX_CORRUPT  # a late status packet of another request
             if result != sdk.COMM_SUCCESS:
                 self.failed_id = dxl_id
                 return result
@@ -106,12 +121,18 @@ class Bus:
         self.retries = int(retries)
         #: packets sent again after a loss or corruption, since the bus was opened
         self.retried = 0
+        #: when the bus last carried a packet (time.perf_counter() [s])
+        self.last_used = time.perf_counter()
         self._lock = threading.RLock()
         self.port = Port(self.name)
         self.ph = sdk.PacketHandler(2.0)
         try:
             opened = self.port.openPort()
         except Exception as e:  # pyserial raises SerialException (an OSError) for a bad path
+            if "exclusive" in str(e).lower() or "lock" in str(e).lower():
+                raise BackendError(f"the servo bus at {self.name} is in use by another program (another "
+                                   "notebook kernel or snakekit command?); close the robot there first "
+                                   "(robot.close()) or stop that program") from e
             raise BackendError(f"could not open the servo bus at {self.name}: {e}; check the port "
                                "name, that the adapter is plugged in, and that you may use it "
                                "(the 'dialout' group)") from e
@@ -133,6 +154,17 @@ class Bus:
                 yield
             finally:
                 self.port.is_using = False
+                self.last_used = time.perf_counter()
+
+    def drain(self, quiet: float, longest: float = 0.5) -> None:
+        """Throw away bytes until the line has been quiet for ``quiet`` [s] (at most ``longest`` [s]):
+        a status packet that arrives after the SDK gave up must not be taken as the next answer."""
+        ser = self.port.ser
+        end = time.perf_counter() + longest
+        while time.perf_counter() < end:
+            if not select.select([ser.fileno()], [], [], quiet)[0]:
+                return
+            ser.read(4096)
 
     def retry(self, call: Callable[[], tuple[int, object]]) -> tuple[int, object]:
         """Run ``call()`` (one packet exchange, returning ``(result, value)``) with the bus held,
@@ -141,7 +173,13 @@ class Bus:
         """
         for attempt in range(self.retries + 1):
             with self.hold():
-                result, value = call()
+                self.port.clearPort()  # nothing left over from an earlier, failed exchange
+                try:
+                    result, value = call()
+                except IndexError:  # the SDK read a stale, shorter status packet as the answer
+                    result, value = sdk.COMM_RX_CORRUPT, None
+                if result != sdk.COMM_SUCCESS:
+                    self.drain(max(2 * self.port.packet_timeout, 50.0) / 1000.0)  # ms -> s
             if result == sdk.COMM_SUCCESS:
                 break
             if attempt < self.retries:
@@ -150,13 +188,15 @@ class Bus:
 
     def read(self, servo_id: int, address: int, size: int) -> tuple[int, int, int]:
         """One READ with retries: ``(result, value, error byte)``; the value is unsigned."""
-        fn = {1: self.ph.read1ByteTxRx, 2: self.ph.read2ByteTxRx, 4: self.ph.read4ByteTxRx}[size]
 
         def once():
-            value, result, error = fn(self.port, servo_id, address)
-            return result, (value, error)
+            data, result, error = self.ph.readTxRx(self.port, servo_id, address, size)
+            if result == sdk.COMM_SUCCESS and len(data) != size:
+                result = sdk.COMM_RX_CORRUPT  # the status of another request, arriving late
+            return result, (int.from_bytes(bytes(data), "little") if result == sdk.COMM_SUCCESS else 0, error)
 
-        result, (value, error) = self.retry(once)
+        result, value = self.retry(once)
+        value, error = value if value is not None else (0, 0)
         return result, value, error
 
     def write(self, servo_id: int, address: int, size: int, value: int) -> tuple[int, int]:
@@ -172,7 +212,8 @@ class Bus:
             model, result, error = self.ph.ping(self.port, servo_id)
             return result, (model, error)
 
-        result, (model, error) = self.retry(once)
+        result, value = self.retry(once)
+        model, error = value if value is not None else (0, 0)
         return result, model, error
 
     def reboot(self, servo_id: int) -> tuple[int, int]:

@@ -3,19 +3,22 @@
 What the driver does at start-up, in order (the "good driver" habits of the Dynamixel
 e-manual and of well-kept drivers):
 
-1. ping every id and check the model number (``spec.servo.model_number``: 30 = MX-28 Protocol 2.0);
-2. refuse to start on a servo with a hardware error (or reboot it, if asked);
-3. torque off, then write the EEPROM only where it differs: Return Delay Time 0, position
-   mode, Min/Max Position Limit from the joint limits;
-4. write the RAM settings: Profile Acceleration and Velocity;
-5. goal = present position, then torque on.
+1. open the port exclusively (a robot already open on it in this program is closed first);
+2. ping every id and check the model number (``spec.servo.model_number``: 30 = MX-28 Protocol 2.0);
+3. refuse to start on a servo with a hardware error (or reboot it, if asked); clear a Bus
+   Watchdog that stopped a servo after an earlier program lost contact;
+4. torque off, then check every EEPROM setting that changes what a tick means or how far a
+   joint may go (:mod:`snakekit.hardware.startup`): write the kit's values, or refuse;
+5. write the RAM settings: Profile Acceleration and Velocity (within the speed limit);
+6. goal = present position, torque on, then arm the Bus Watchdog (:mod:`.keepalive`).
 
 Each control cycle is one SyncWrite of the five goals and one SyncRead of Present Load,
 Velocity and Position (addresses 126..135, one block). Lost or corrupt packets are retried
 a bounded number of times (:meth:`snakekit.hardware.bus.Bus.retry`); then the arm is
 stopped and :class:`~snakekit.errors.CommunicationError` raised. A status packet with the
 alert bit makes the driver read Hardware Error Status (70), stop the arm and raise
-:class:`~snakekit.errors.HardwareError` naming the servo and the fault.
+:class:`~snakekit.errors.HardwareError` naming the servo and the fault. Messages say how
+the arm was left only as far as the servos confirmed it.
 
 On :meth:`DynamixelSnake.close`, on an exception inside :meth:`DynamixelSnake.run` and on
 Ctrl-C the arm is stopped as configured by ``on_close``: ``"torque_off"`` (limp) or
@@ -24,25 +27,36 @@ Ctrl-C the arm is stopped as configured by ``on_close``: ``"torque_off"`` (limp)
 
 from __future__ import annotations
 
+import numbers
+import os
 import time
+import warnings
+import weakref
 
 import numpy as np
 from dataclasses import dataclass
 
-from ..errors import (BackendError, CommunicationError, ConfigurationError, HardwareError,
+from ..errors import (CommunicationError, ConfigurationError, HardwareError,
                        InstructionError, LimitError, ServoMismatchError)
 from ..model import SPEC, SnakeSpec
-from ..profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY
+from ..profile_planner import DEFAULT_PROFILE_ACCELERATION
 from ..robot import JointState, Robot
 from .bus import Bus, SyncRead, describe, sdk
-from .registers import (FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_ERROR_STATUS, MAX_POSITION_LIMIT,
-                        MIN_POSITION_LIMIT, OPERATING_MODE, PACKET_ERRORS, POSITION_MODE, PRESENT_POSITION,
-                        PROFILE_ACCELERATION, PROFILE_VELOCITY, RETURN_DELAY_TIME, STATE_BLOCK, TORQUE_ENABLE,
-                        decode_hardware_error, decode_state, load_to_torque, position_bytes,
-                        position_limit_ticks, radians_to_ticks, ticks_to_radians, to_signed,
-                        velocity_to_radians_per_second)
+from .keepalive import STATUS_BLOCK, KeepAlive, WatchdogMixin
+from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_ERROR_STATUS, PACKET_ERRORS,
+                        PRESENT_POSITION, PROFILE_ACCELERATION, PROFILE_VELOCITY, STATE_BLOCK, TORQUE_ENABLE,
+                        decode_hardware_error, decode_state, load_to_torque, position_bytes, position_limit_ticks,
+                        radians_to_ticks, ticks_to_radians, to_signed, velocity_to_radians_per_second)
+from .options import ON_CLOSE, check_options
+from .startup import check_eeprom
 
-ON_CLOSE = ("torque_off", "hold")
+#: The driver's Profile Velocity (0.229 rev/min units): 55 = 1.32 rad/s, 12 % under the limit,
+#: because a servo overshoots its profile while it catches up with the reference (emulated
+#: arm: a full-speed step peaks at 1.56 rad/s with 62; late sweep goals, 8 % over with 58).
+KIT_PROFILE_VELOCITY = 55
+_OPEN: "weakref.WeakValueDictionary[str, DynamixelSnake]" = weakref.WeakValueDictionary()
+
+
 
 
 @dataclass(frozen=True)
@@ -60,7 +74,7 @@ class ServoInfo:
     firmware: int
 
 
-class DynamixelSnake(Robot):
+class DynamixelSnake(WatchdogMixin, Robot):
     """The arm on a Dynamixel bus (a U2D2 adapter, or the bus emulator's pseudo-terminal).
 
     Args:
@@ -70,12 +84,18 @@ class DynamixelSnake(Robot):
         spec: the arm (limits, number of joints, servo ids, the servo model).
         on_close: ``"torque_off"`` (limp) or ``"hold"`` (keep the present position) when
             closed, after an exception in :meth:`run` and after Ctrl-C.
-        profile_velocity: Profile Velocity register (0.229 rev/min units).
-        profile_acceleration: Profile Acceleration register (214.577 rev/min^2 units).
+        profile_velocity: Profile Velocity register (0.229 rev/min units), 1 up to the
+            joint speed limit (62 for 1.5 rad/s); default :data:`KIT_PROFILE_VELOCITY`.
+        profile_acceleration: Profile Acceleration register (214.577 rev/min^2 units), >= 1.
         retries: how many times a lost or corrupt packet is sent again before giving up.
         torque: turn torque on at the end of the start-up.
         reboot_faulted: reboot a servo that reports a hardware error at start-up
             (otherwise refuse to start).
+        fix_eeprom: write the kit's EEPROM settings where a servo differs (with torque off,
+            and a warning listing each change); ``False`` refuses to start instead
+            (:mod:`snakekit.hardware.startup`).
+        watchdog: Bus Watchdog period [s] while the robot is open (0.02..2.54, rounded to
+            20 ms; 0 turns it off): a servo that hears nothing for longer stops.
     """
 
     backend = "hardware"
@@ -83,41 +103,50 @@ class DynamixelSnake(Robot):
 
     def __init__(self, port: str, baudrate: int = 4_000_000, ids=None, *,
                  spec: SnakeSpec = SPEC, on_close: str = "torque_off",
-                 profile_velocity: int = DEFAULT_PROFILE_VELOCITY,
+                 profile_velocity: int = KIT_PROFILE_VELOCITY,
                  profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION,
-                 retries: int = 3, torque: bool = True, reboot_faulted: bool = False):
+                 retries: int = 3, torque: bool = True, reboot_faulted: bool = False,
+                 fix_eeprom: bool = True, watchdog: float = 0.2):
         super().__init__(spec)
         self.closed = True  # until the port is open: close() has nothing to release
-        ids = tuple(int(i) for i in (spec.servo_ids if ids is None else ids))
-        if len(ids) != spec.n_joints or len(set(ids)) != len(ids):
-            raise ConfigurationError(f"ids must be {spec.n_joints} distinct servo ids, one a joint, got {ids}")
-        if on_close not in ON_CLOSE:
-            raise ConfigurationError(f"on_close must be one of {', '.join(map(repr, ON_CLOSE))}, got {on_close!r}")
-        if retries < 0:
-            raise ConfigurationError(f"retries must be >= 0, got {retries}")
+        self._keepalive = None
+        self._release: list = []  # extra clean-ups (e.g. stop an emulator) run by close()
+        ids, retries, self.profile_velocity, self.profile_acceleration, self.watchdog = check_options(
+            spec, ids, on_close, retries, profile_velocity, profile_acceleration, watchdog)
         self.port_name = str(port)
         self.baudrate = int(baudrate)
         self.ids = ids
         self.on_close = on_close
-        self.profile_velocity = int(profile_velocity)
-        self.profile_acceleration = int(profile_acceleration)
         self.tick_limits = position_limit_ticks(spec)
+        #: torque as last read back from (or confirmed by) the servos
         self.torque_enabled = False
         #: SyncWrites of goal positions sent, since start-up
         self.goals_sent = 0
-        self._release: list = []  # extra clean-ups (e.g. stop an emulator) run by close()
+        #: EEPROM values written at start-up (:class:`snakekit.hardware.startup.EepromChange`)
+        self.eeprom_changes: list = []
         self._t0 = time.perf_counter()
         self._last_positions = None
+        self._last_status: dict = {}  # the keep-alive's last status read
 
+        key = os.path.realpath(self.port_name)
+        old = _OPEN.get(key)
+        if old is not None and not old.closed:
+            warnings.warn(f"a robot was already open on {self.port_name}; it was closed first "
+                          f"({old.on_close.replace('_', ' ')}), so the new one starts from a known state",
+                          UserWarning, stacklevel=2)
+            old.close()
         self.bus = Bus(self.port_name, self.baudrate, retries)
         self.closed = False
+        _OPEN[key] = self
         self._reader = SyncRead(self.port, self.bus.ph, *STATE_BLOCK)
+        self._status = SyncRead(self.port, self.bus.ph, *STATUS_BLOCK)
         self._writer = sdk.GroupSyncWrite(self.port, self.bus.ph, GOAL_POSITION, 4)
         for i in ids:
             self._reader.addParam(i)
+            self._status.addParam(i)
             self._writer.addParam(i, [0, 0, 0, 0])
         try:
-            self._start(torque, reboot_faulted)
+            self._start(torque, reboot_faulted, fix_eeprom)
         except BaseException:
             self.close()
             raise
@@ -138,7 +167,7 @@ class DynamixelSnake(Robot):
 
     # --- start-up --------------------------------------------------------------------------
 
-    def _start(self, torque: bool, reboot_faulted: bool) -> None:
+    def _start(self, torque: bool, reboot_faulted: bool, fix_eeprom: bool) -> None:
         self.servos = [self._check_servo(i) for i in self.ids]
         for i in self.ids:
             bits = self._read(i, HARDWARE_ERROR_STATUS, 1, check_alert=False)
@@ -150,16 +179,21 @@ class DynamixelSnake(Robot):
                         "remove the cause (load, heat, supply), then power-cycle the arm or pass "
                         "reboot_faulted=True")
                 self._reboot(i)
-        self._torque(False)
-        lo, hi = self.tick_limits
+        tripped = [i for i in self.ids if to_signed(self._read(i, BUS_WATCHDOG, 1), 1) < 0]
         for i in self.ids:
-            self._write_if_different(i, RETURN_DELAY_TIME, 1, 0)
-            self._write_if_different(i, OPERATING_MODE, 1, POSITION_MODE)
-            self._write_if_different(i, MIN_POSITION_LIMIT, 4, lo)
-            self._write_if_different(i, MAX_POSITION_LIMIT, 4, hi)
+            self._write(i, BUS_WATCHDOG, 1, 0)
+        if tripped:
+            warnings.warn(f"the Bus Watchdog had stopped servo(s) {', '.join(map(str, tripped))} on "
+                          f"{self.port_name} (an earlier program lost contact with the arm); cleared",
+                          UserWarning, stacklevel=3)
+        self._torque(False)
+        self.eeprom_changes = check_eeprom(self._read, self._write, self.ids, self.spec, self.port_name, fix_eeprom)
+        for i in self.ids:
             self._apply_ram(i)
         if torque:
             self.torque_on()
+        if self.watchdog:
+            self._keepalive = KeepAlive(self, self.watchdog)
 
     def _check_servo(self, servo_id: int) -> ServoInfo:
         info = self.ping(servo_id)
@@ -176,33 +210,25 @@ class DynamixelSnake(Robot):
         self._write(servo_id, PROFILE_ACCELERATION, 4, self.profile_acceleration)
         self._write(servo_id, PROFILE_VELOCITY, 4, self.profile_velocity)
 
-    def _write_if_different(self, servo_id, address, size, value) -> None:
-        if self._read(servo_id, address, size) != value:
-            self._write(servo_id, address, size, value)
-
     # --- requests ----------------------------------------------------------------------------
 
     def _fail(self, message: str, result: int):
         hint = ("check the cable and power, or the id" if result == sdk.COMM_RX_TIMEOUT
                 else "check the cable, the baud rate and for noise on the bus")
-        self.stop()
-        raise CommunicationError(f"{message}; {hint}. The arm was stopped ({self._stop_words()}).")
+        raise CommunicationError(f"{message}; {hint}. {self.stop()}")
 
     def _tries(self) -> str:
         return f"{self.retries + 1} tries"
 
-    def _stop_words(self) -> str:
-        return "torque off" if self.on_close == "torque_off" else "holding position"
-
     def _check_error(self, servo_id: int, error: int, what: str, check_alert: bool = True) -> None:
         if error & 0x80 and check_alert:
             bits = self._read(servo_id, HARDWARE_ERROR_STATUS, 1, check_alert=False)
-            self.stop()
+            stopped = self.stop()
             names = ", ".join(decode_hardware_error(bits)) or "an alert that has cleared"
             raise HardwareError(
                 f"servo {servo_id} (joint {self.ids.index(servo_id) + 1}) on {self.port_name} reports "
                 f"a hardware error: {names} (Hardware Error Status 0x{bits:02X}). The servo turned its "
-                f"torque off and the arm was stopped ({self._stop_words()}). Remove the cause "
+                f"torque off. {stopped} Remove the cause "
                 f"(a blocked joint, heat, the supply), then robot.reboot({servo_id}) and robot.torque_on().")
         code = error & 0x7F
         if code:
@@ -303,7 +329,17 @@ class DynamixelSnake(Robot):
         self.goals_sent += 1
 
     def command(self, q) -> None:
-        """Send a position goal ``q`` [rad]; on Ctrl-C the arm is stopped (``on_close``)."""
+        """Send a position goal ``q`` [rad]; on Ctrl-C the arm is stopped (``on_close``).
+
+        Raises :class:`~snakekit.errors.BackendError`, sending nothing, when a servo's torque is
+        off or its Bus Watchdog stopped it (the servos would ignore the goal).
+        """
+        self._check_open()
+        quiet = time.perf_counter() - self.bus.last_used
+        if self._last_status and not (self.watchdog and quiet > self.watchdog / 2):
+            self._check_ready(self._last_status)  # what the keep-alive read, no packet of its own
+        else:
+            self._check_ready()
         try:
             super().command(q)
         except (KeyboardInterrupt, SystemExit):
@@ -316,6 +352,8 @@ class DynamixelSnake(Robot):
         A trajectory refused by the checks (limits, start pose, type) never moved the arm: it
         is left as it is, torque on.
         """
+        self._check_open()
+        self._check_ready()
         sent = self.goals_sent
         try:
             return super().run(trajectory, **options)
@@ -338,6 +376,7 @@ class DynamixelSnake(Robot):
         for i in self.ids:
             self._write(i, TORQUE_ENABLE, 1, int(on))
         self.torque_enabled = on
+        self._last_status = {i: (on, 0) for i in self.ids}  # every servo acknowledged the write
 
     def _hold_here(self, servo_id: int) -> None:
         """Goal = present position (clamped into the limits), so torque-on doesn't jump."""
@@ -346,31 +385,42 @@ class DynamixelSnake(Robot):
         self._write(servo_id, GOAL_POSITION, 4, min(max(present, lo), hi))
 
     def torque_on(self) -> None:
-        """Goal = present position on every servo, then torque on (the arm holds still)."""
+        """Goal = present position on every servo, then torque on (the arm holds still), then
+        the Bus Watchdog armed (a stop by the watchdog is cleared)."""
         self._check_open()
         for i in self.ids:
+            self._write(i, BUS_WATCHDOG, 1, 0)  # a stopped servo refuses goals until cleared
             self._hold_here(i)
         self._torque(True)
+        self._arm_watchdog()
 
     def torque_off(self) -> None:
         """Torque off on every servo: the arm goes limp."""
         self._check_open()
         self._torque(False)
 
-    def stop(self) -> None:
-        """Stop the arm now, as ``on_close`` says; never raises (the bus may be failing)."""
+    def stop(self) -> str:
+        """Stop the arm now, as ``on_close`` says; never raises (the bus may be failing).
+
+        Returns what was done, in words, saying only what the servos confirmed.
+        """
         with self.bus.hold():
             self.port.is_using = False  # an exception may have left the SDK's flag set
             try:
                 if self.on_close == "hold":
-                    self._hold_safely()
-                else:
-                    self._torque_off_safely()
+                    return self._hold_safely()
+                still_on = self._torque_off_safely()
             except Exception:  # a closed or broken port: nothing more can be sent
-                pass
+                still_on = list(self.ids)
+        if not still_on:
+            return "The arm was stopped: torque off, read back from every servo."
+        return (f"Torque off was sent, but servo(s) {', '.join(map(str, still_on))} did not confirm it: "
+                "they may still have torque on. Switch the arm's power off before touching it.")
 
-    def _torque_off_safely(self) -> None:
+    def _torque_off_safely(self) -> list[int]:
+        """Broadcast torque off and read it back; the ids that did not confirm it."""
         ph, port = self.bus.ph, self.port
+        still_on = list(self.ids)
         for attempt in range(self.retries + 1):
             try:
                 port.clearPort()
@@ -386,17 +436,20 @@ class DynamixelSnake(Robot):
                     still_on.append(i)
             if not still_on:
                 break
-        self.torque_enabled = False
+        self.torque_enabled = bool(still_on)
+        return still_on
 
-    def _hold_safely(self) -> None:
+    def _hold_safely(self) -> str:
         if self._last_positions is None:
-            return
+            return "The arm holds its last goal (no position was read yet)."
         self._load_goals(self._last_positions)
         try:
             self._writer.txPacket()
         except Exception:
-            pass
-        self.port.is_using = False
+            return "The arm was to hold where it is, but the goals could not be sent: it holds its last goal."
+        finally:
+            self.port.is_using = False
+        return "The arm was told to hold where it was last read (a SyncWrite is not answered: not confirmed)."
 
     def _reboot(self, servo_id: int, timeout: float = 2.0) -> None:
         result, error = self.bus.reboot(servo_id)
@@ -418,17 +471,26 @@ class DynamixelSnake(Robot):
         set to where it is, and torque on if the arm's torque is on.
         """
         self._check_open()
-        if servo_id not in self.ids:
+        if isinstance(servo_id, bool) or not isinstance(servo_id, numbers.Integral) or servo_id not in self.ids:
             raise ConfigurationError(f"servo {servo_id} is not on this arm; ids: {', '.join(map(str, self.ids))}")
         self._reboot(servo_id)
         self._apply_ram(servo_id)
         if self.torque_enabled:
             self._hold_here(servo_id)
             self._write(servo_id, TORQUE_ENABLE, 1, 1)
+            self._arm_watchdog()
 
     def _shutdown(self) -> None:
         try:
+            if self._keepalive is not None:
+                self._keepalive.stop()
             if self.bus.is_open:
+                if self.on_close == "hold" and self.watchdog:
+                    try:  # asked to hold after closing: the watchdog must not stop the arm later
+                        for i in self.ids:
+                            self.bus.write(i, BUS_WATCHDOG, 1, 0)
+                    except Exception:
+                        pass
                 self.stop()
                 self.bus.close()
         finally:

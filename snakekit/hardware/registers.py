@@ -26,13 +26,16 @@ LOAD_UNIT = 0.001  # Present Load counts 0.1 % of the stall torque
 
 # Control-table addresses (EEPROM below 64, RAM from 64).
 FIRMWARE_VERSION = 6
-RETURN_DELAY_TIME, OPERATING_MODE, MAX_POSITION_LIMIT, MIN_POSITION_LIMIT = 9, 11, 48, 52
-TORQUE_ENABLE, STATUS_RETURN_LEVEL, HARDWARE_ERROR_STATUS = 64, 68, 70
+RETURN_DELAY_TIME, DRIVE_MODE, OPERATING_MODE, HOMING_OFFSET = 9, 10, 11, 20
+PWM_LIMIT, VELOCITY_LIMIT, MAX_POSITION_LIMIT, MIN_POSITION_LIMIT = 36, 44, 48, 52
+TORQUE_ENABLE, STATUS_RETURN_LEVEL, HARDWARE_ERROR_STATUS, BUS_WATCHDOG = 64, 68, 70, 98
+WATCHDOG_UNIT = 0.02  # s per Bus Watchdog unit
 PROFILE_ACCELERATION, PROFILE_VELOCITY, GOAL_POSITION = 108, 112, 116
 PRESENT_LOAD, PRESENT_POSITION = 126, 132
 STATE_BLOCK = (PRESENT_LOAD, 10)  # Present Load (2), Velocity (4), Position (4): one SyncRead
 _STATE = struct.Struct("<hii")  # that block, signed little-endian
 POSITION_MODE = 3  # Operating Mode value
+FULL_PWM = 885  # PWM Limit's factory value: the whole supply voltage (the MX-28 has no current limit)
 
 HARDWARE_ERROR_BITS = {0: "input voltage", 2: "overheating", 3: "motor encoder",
                        4: "electrical shock", 5: "overload"}
@@ -123,3 +126,12 @@ def position_limit_ticks(spec: SnakeSpec = SPEC) -> tuple[int, int]:
     lo = math.ceil(CENTER_TICK + spec.lower * TICKS_PER_RAD - 1e-9)
     hi = math.floor(CENTER_TICK + spec.upper * TICKS_PER_RAD + 1e-9)
     return max(lo, 0), min(hi, TICKS_PER_TURN - 1)
+
+
+def velocity_limit_units(spec: SnakeSpec = SPEC) -> int:
+    """The joint speed limit as Velocity Limit / Profile Velocity units (0.229 rev/min), rounded down.
+
+    >>> velocity_limit_units()                 # 1.5 rad/s
+    62
+    """
+    return math.floor(spec.velocity_limit / VELOCITY_UNIT + 1e-9)

@@ -1,0 +1,301 @@
+"""A student's mistakes get a SnakekitError that says what was wrong and what to do.
+
+Each test gives the library one of the bad inputs a new user tried, and checks the message a
+user sees, and that the error is in snakekit's tree (so ``except SnakekitError`` catches it,
+and generic ``except ValueError`` / ``except OSError`` code keeps working).
+"""
+
+import errno
+import os
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import snakekit
+from snakekit import SPEC, Trajectory
+from snakekit.robot import Run
+from snakekit.trajectory import joint_trajectory, side_sweep
+
+
+def raises(kind, text):
+    """pytest.raises for ``kind`` whose message holds ``text`` (plain text, not a regex)."""
+    class _Ctx:
+        def __enter__(self):
+            self.cm = pytest.raises(kind)
+            self.info = self.cm.__enter__()
+            return self.info
+
+        def __exit__(self, *exc):
+            out = self.cm.__exit__(*exc)
+            assert isinstance(self.info.value, snakekit.SnakekitError)
+            assert text in str(self.info.value), f"{text!r} not in {str(self.info.value)!r}"
+            return out
+    return _Ctx()
+
+
+# --- inverse kinematics ----------------------------------------------------------------------
+
+
+def test_ik_with_max_iter_zero_is_refused_not_solved():
+    # before: the start pose came back as a "solution" (it puts the tool at (0.3315, 0), not on the target)
+    with raises(snakekit.ConfigurationError, "max_iter must be a whole number >= 1, got 0. It is how many solver"):
+        snakekit.inverse_kinematics([0.25, 0.10], max_iter=0)
+    with raises(snakekit.ConfigurationError, "restarts must be a whole number >= 0, got -1"):
+        snakekit.inverse_kinematics([0.25, 0.10], restarts=-1)
+
+
+def test_ik_target_far_beyond_reach_is_unreachable_without_overflow():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # before: overflow warnings flooded, then a ShapeError about q
+        with raises(snakekit.UnreachableTargetError,
+                    "target (1e+300, 1e+300) m is out of reach: it is 1.414e+300 m from joint 1 and the arm reaches "
+                    "0.3315 m. The closest tool point found is (0.2344, 0.2344) m") as e:
+            snakekit.inverse_kinematics([1e300, 1e300])
+        pose, q = snakekit.closest_reachable_point([1e300, 1e300])
+    # the arm stretched towards 45 degrees: reach * (cos 45, sin 45)
+    np.testing.assert_allclose(e.value.closest, [SPEC.reach / np.sqrt(2)] * 2, atol=1e-6)
+    np.testing.assert_allclose(pose[:2], [SPEC.reach / np.sqrt(2)] * 2, atol=1e-6)
+    assert e.value.target == (1e300, 1e300)
+
+
+@pytest.mark.parametrize("tol", [0, float("nan"), -1e-6])
+def test_ik_tolerance_must_be_a_positive_distance(tol):
+    # before: "out of reach", with the target itself as the closest point
+    with raises(snakekit.ConfigurationError, f"tol must be a finite number >= 1e-12 [m], got {tol!r}. "
+                "It is how close the tool must come to the target"):
+        snakekit.inverse_kinematics([0.25, 0.10], tol=tol)
+
+
+def test_ik_heading_must_be_an_angle():
+    # before: numpy's TypeError "ufunc 'isfinite' not supported"
+    with raises(snakekit.InputTypeError, "heading must be a finite number [rad], got 'north' (str). Give the "
+                "tool's heading as an angle from the x axis, e.g. heading=numpy.pi / 2 for 'north' (+y)"):
+        snakekit.inverse_kinematics([0.25, 0.10], heading="north")
+    assert isinstance(snakekit.InputTypeError("x"), TypeError)
+
+
+# --- arrays: ragged, text, complex ---------------------------------------------------------------
+
+
+def test_ragged_rows_say_so():
+    with raises(snakekit.ShapeError, "positions must have shape (N, 5), got rows of different lengths (5, 4). "
+                "Give every row the same number of values"):
+        Trajectory([0, 1], [[0, 0, 0, 0, 0], [0, 0, 0, 0]])
+    with raises(snakekit.ShapeError, "q must have shape (5,), got rows of different lengths (2, 3)"):
+        snakekit.forward_kinematics([[0, 0], [0, 0, 0]])
+
+
+def test_text_instead_of_angles():
+    # before: ValueError "could not convert string to float: 'a'"
+    with raises(snakekit.InputTypeError, "q holds 'a', which is not a number (str); every value must be a real "
+                "number. Give one angle [rad] per joint, base to tip"):
+        snakekit.forward_kinematics(["a"] * 5)
+
+
+def test_complex_input_is_refused_not_cut_to_its_real_part(tmp_path):
+    # before: Trajectory kept the real parts silently (a ComplexWarning at most)
+    with raises(snakekit.InputTypeError, "positions holds 1j, which is a complex number; every value must be a "
+                "real number (use .real if the imaginary parts are only rounding noise)"):
+        Trajectory([0, 1], np.zeros((2, 5)) + 1j)
+    with raises(snakekit.InputTypeError, "q holds 0.1j, which is a complex number"):
+        snakekit.forward_kinematics([0.1j, 0, 0, 0, 0])
+    with raises(snakekit.InputTypeError, "target_xy holds (0.25+1j), which is a complex number"):
+        snakekit.inverse_kinematics([0.25 + 1j, 0.1])
+    np.savez(tmp_path / "c.npz", times=[0.0, 1.0], positions=np.zeros((2, 5)) + 1j)
+    with raises(snakekit.FileFormatError, "c.npz does not hold a valid trajectory: positions holds 1j, which is a "
+                "complex number"):
+        Trajectory.load(tmp_path / "c.npz")
+    # complex numbers with no imaginary part are their real part
+    tr = Trajectory([0, 1], np.full((2, 5), 0.1 + 0j))
+    assert tr.positions.dtype == float and (tr.positions == 0.1).all()
+
+
+# --- trajectories -------------------------------------------------------------------------
+
+
+def test_joint_trajectory_speed_fraction_and_duration():
+    a, b = np.zeros(5), [0.5, 0, 0, 0, 0]
+    with raises(snakekit.ConfigurationError, "speed_fraction must be a finite number > 0 and <= 1, got 0. It is "
+                "the share of the velocity limit the fastest joint may reach"):
+        joint_trajectory(a, b, speed_fraction=0)  # before: ZeroDivisionError
+    with raises(snakekit.ConfigurationError, "duration must be a finite number > 0 [s], got inf. Give how long "
+                "the move takes"):
+        joint_trajectory(a, b, duration=float("inf"))  # before: OverflowError
+    with raises(snakekit.ConfigurationError, "rate must be a finite number > 0 [Hz], got -10"):
+        joint_trajectory(a, b, 1.0, rate=-10)  # before: accepted, one point at each end
+
+
+@pytest.mark.parametrize("rate", [0, -10, float("nan"), float("inf")])
+def test_side_sweep_rate_must_be_positive(rate):
+    with raises(snakekit.ConfigurationError, f"rate must be a finite number > 0 [Hz], got {rate!r}. It is how "
+                "many goals per second are sent (the task: 10)"):
+        side_sweep(rate=rate)
+
+
+def test_side_sweep_counts_are_whole_numbers():
+    with raises(snakekit.ConfigurationError, "points must be a whole number >= 2, got 1"):
+        side_sweep(points=1)
+    with raises(snakekit.InputTypeError, "sweeps must be a whole number >= 1, got 2.5 (float)"):
+        side_sweep(sweeps=2.5)
+
+
+# --- the simulator ------------------------------------------------------------------------
+
+
+def test_sim_step_and_run_options():
+    from snakekit.sim import SimRobot
+
+    with SimRobot() as robot:
+        with raises(snakekit.ConfigurationError, "duration must be a finite number >= 0 [s], got nan"):
+            robot.step(float("nan"))
+        with raises(snakekit.ConfigurationError, "duration must be a finite number >= 0 [s], got inf"):
+            robot.step(float("inf"))  # before: OverflowError
+        with raises(snakekit.InputTypeError, "duration must be a finite number >= 0 [s], got '1' (str)"):
+            robot.step("1")
+        move = joint_trajectory(np.zeros(5), [0.2, 0, 0, 0, 0], 0.5)
+        with raises(snakekit.ConfigurationError, "record_rate must be a finite number > 0 and <= 10000 [Hz], got 0. "
+                    "It is how often the state is recorded"):
+            robot.run(move, record_rate=0)
+        with raises(snakekit.ConfigurationError, "settle must be a finite number >= 0 and <= 3600 [s], got nan"):
+            robot.run(move, settle=float("nan"))  # before: ValueError "cannot convert float NaN to integer"
+        assert robot.read().time == 0  # nothing ran
+
+
+def test_render_beyond_the_offscreen_buffer():
+    from snakekit.sim import SimRobot
+
+    with SimRobot() as robot:
+        buffer = robot.model.vis.global_
+        with raises(snakekit.ConfigurationError, f"width must be a whole number >= 1 and <= {buffer.offwidth} "
+                    f"[pixels], got 1920. The offscreen buffer is {buffer.offwidth} x {buffer.offheight} pixels"):
+            robot.render(width=1920, height=1080)  # before: MuJoCo's own ValueError
+        image = robot.render(width=buffer.offwidth, height=buffer.offheight)
+        assert image.shape == (buffer.offheight, buffer.offwidth, 3)
+
+
+# --- files ----------------------------------------------------------------------------------
+
+
+def small():
+    return joint_trajectory(np.zeros(5), [0.3, 0, 0, 0, 0], 1.0, rate=10)
+
+
+def csv_lines(tmp_path):
+    return small().save(tmp_path / "t.csv").read_text().splitlines()
+
+
+def test_csv_with_an_extra_column(tmp_path):
+    lines = csv_lines(tmp_path)
+    p = tmp_path / "extra.csv"
+    p.write_text("\n".join([lines[0] + ",note"] + [x + ",1" for x in lines[1:]]) + "\n")
+    with raises(snakekit.FileFormatError, "extra.csv has the column(s) note that a trajectory does not have; "
+                "expected time,q1,q2,q3,q4,q5 (optionally followed by qd1..qd5). Remove them"):
+        Trajectory.load(p)  # before: loaded, the column dropped
+
+
+def test_csv_with_velocities_for_some_joints(tmp_path):
+    rows = np.hstack([small().times[:, None], small().positions, small().velocities[:, :2]])
+    p = tmp_path / "some.csv"
+    p.write_text("time,q1,q2,q3,q4,q5,qd1,qd2\n" + "\n".join(",".join(map(repr, r.tolist())) for r in rows) + "\n")
+    with raises(snakekit.FileFormatError, "some.csv has velocities for some joints only (lacks qd3, qd4, qd5); "
+                "expected time,q1,q2,q3,q4,q5 (optionally followed by qd1..qd5). Give all of qd1..qd5, or none"):
+        Trajectory.load(p)  # before: loaded without velocities
+
+
+def test_csv_in_latin_1(tmp_path):
+    p = tmp_path / "latin.csv"
+    p.write_bytes("time,q1,q2,q3,q4,q5\n0,0,0,0,0,0\n0.1,0,0,0,0,0 \xb0\n".encode("latin-1"))
+    with raises(snakekit.FileFormatError, "latin.csv, line 3: byte 0xb0 is not UTF-8 text, so this is not a file "
+                "Trajectory.save wrote (it may be in another encoding, e.g. Latin-1). Save it again as UTF-8"):
+        Trajectory.load(p)  # before: UnicodeDecodeError
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_a_folder_named_like_a_trajectory(tmp_path, suffix):
+    (tmp_path / f"runs{suffix}").mkdir()
+    with raises(snakekit.FileFormatError, f"runs{suffix} is a folder, not a file; give the path of the file itself"):
+        Trajectory.load(tmp_path / f"runs{suffix}")  # before: IsADirectoryError (.csv), "may be truncated" (.npz)
+    with raises(snakekit.FileFormatError, "is a folder, not a file"):
+        Run.load(tmp_path / f"runs{suffix}")
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_saving_into_a_missing_folder(tmp_path, suffix):
+    target = tmp_path / "missing" / f"t{suffix}"
+    with raises(snakekit.FileWriteError, f"cannot write trajectory file {target}: folder {target.parent} does not "
+                f"exist. Create the folder first (pathlib.Path('{target.parent}').mkdir(parents=True))") as e:
+        small().save(target)  # before: FileNotFoundError
+    assert isinstance(e.value, OSError)
+    with snakekit.make_robot("sim") as robot:
+        run = robot.run(small())
+    with raises(snakekit.FileWriteError, f"cannot write run file {target.with_suffix('.npz')}: folder"):
+        run.save(target.with_suffix(".npz"))
+    assert not target.parent.exists()
+
+
+def test_csv_load_keeps_what_the_old_reader_accepted(tmp_path):
+    """The vectorised reader reads what the line-by-line one did: blank lines, spaces and
+    quotes around numbers, a missing final newline; and a spreadsheet's UTF-8 byte order mark."""
+    tr = small()
+    p = tmp_path / "t.csv"
+    lines = tr.save(p).read_text().splitlines()
+    body = [",".join(f'"{v}"' if i == 2 else f" {v} " if i == 3 else v for i, v in enumerate(x.split(",")))
+            for x in lines[1:]]
+    p.write_text("\n".join([lines[0] + " ", "", *body[:3], "", *body[3:]]))
+    back = Trajectory.load(p)
+    np.testing.assert_array_equal(back.times, tr.times)
+    np.testing.assert_array_equal(back.positions, tr.positions)
+    np.testing.assert_array_equal(back.velocities, tr.velocities)
+    bom = tmp_path / "bom.csv"  # what a spreadsheet's "CSV UTF-8" writes: a byte order mark first
+    bom.write_bytes(b"\xef\xbb\xbf" + "\n".join(lines).encode())
+    np.testing.assert_array_equal(Trajectory.load(bom).positions, tr.positions)
+    wide = tmp_path / "wide.csv"
+    wide.write_text("time,q1,q2,q3,q4,q5\n0,0,0,0,0,0\n1,0,0,0,0,0,7\n")
+    with raises(snakekit.FileFormatError, "wide.csv, line 3: 7 values, expected 6; remove the extra values"):
+        Trajectory.load(wide)
+    one = tmp_path / "one.csv"
+    one.write_text("time,q1,q2,q3,q4,q5\n0,0.1,0,0,0,0\n")
+    assert Trajectory.load(one).positions.tolist() == [[0.1, 0, 0, 0, 0]]
+
+
+# --- the sweep command ---------------------------------------------------------------------
+
+
+def test_sweep_out_to_a_place_that_refuses_writing_fails_before_the_run(tmp_path):
+    # /proc takes no new files, even for root (whom permission bits let write anywhere)
+    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "sweep", "--out", "/proc/run.npz"],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "snakekit sweep: cannot write run file /proc/run.npz: " in r.stderr
+    assert "Choose a place you can write to" in r.stderr
+    assert "Task 2" not in r.stdout and "Traceback" not in r.stderr  # nothing ran
+
+
+def test_sweep_never_loses_a_finished_run(tmp_path, monkeypatch, capsys):
+    """The place was writable when checked, but the save fails after the run (a full disk):
+    the run goes to the working folder instead, and the user is told where."""
+    from snakekit import cli, robot
+
+    target = tmp_path / "out" / "run.npz"
+    target.parent.mkdir()
+    real_savez = np.savez
+
+    def savez(path, **arrays):
+        if str(path) == str(target):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+        real_savez(path, **arrays)
+
+    monkeypatch.setattr(robot.np, "savez", savez)
+    monkeypatch.chdir(tmp_path)
+    rc = cli.main(["sweep", "--out", str(target)])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert f"snakekit sweep: cannot write run file {target}: No space left on device." in err
+    kept = sorted(tmp_path.glob("snakekit-run-*.npz"))
+    assert len(kept) == 1 and f"the run was saved to {kept[0]} instead" in err
+    run = Run.load(kept[0])
+    np.testing.assert_array_equal(run.commanded.positions, side_sweep().positions)
+    assert len(run.measured) > 500
