@@ -95,7 +95,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
             and a warning listing each change); ``False`` refuses to start instead
             (:mod:`snakekit.hardware.startup`).
         watchdog: Bus Watchdog period [s] while the robot is open (0.02..2.54, rounded to
-            20 ms; 0 turns it off): a servo that hears nothing for longer stops.
+            20 ms; 0 turns it off): a servo that hears nothing for longer stops (0.5 s: a busy laptop's pauses pass).
     """
 
     backend = "hardware"
@@ -106,7 +106,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
                  profile_velocity: int = KIT_PROFILE_VELOCITY,
                  profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION,
                  retries: int = 3, torque: bool = True, reboot_faulted: bool = False,
-                 fix_eeprom: bool = True, watchdog: float = 0.2):
+                 fix_eeprom: bool = True, watchdog: float = 0.5):
         super().__init__(spec)
         self.closed = True  # until the port is open: close() has nothing to release
         self._keepalive = None
@@ -356,7 +356,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
         self._check_ready()
         sent = self.goals_sent
         try:
-            return super().run(trajectory, **options)
+            run = super().run(trajectory, **options)
         except (LimitError, TypeError, ValueError):
             if self.goals_sent != sent:
                 self._stop_once()
@@ -364,6 +364,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
         except BaseException:
             self._stop_once()
             raise
+        return self._check_after_run(run)
 
     def _stop_once(self) -> None:
         """Stop after an exception, unless the arm is closed or its torque is already off."""

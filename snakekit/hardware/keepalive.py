@@ -109,6 +109,17 @@ class WatchdogMixin:
                 self._last_status = {i: (self._status.data_dict[i][0] == 1, to_signed(self._status.data_dict[i][-1], 1))
                                      for i in self.ids}
 
+    def _check_after_run(self, run):
+        """``run``, unless the watchdog stopped servos midway (the program stalled for longer
+        than its period): then a BackendError that says so, with the run as measured on ``.run``."""
+        try:
+            self._check_ready()
+        except BackendError as e:
+            e.args = (f"during the run, {e} The run as measured is kept on this error's .run.",)
+            e.run = run
+            raise
+        return run
+
     def _check_ready(self, status=None) -> None:
         """Refuse to send goals the servos would ignore: torque off, or stopped by the watchdog.
 
