@@ -8,7 +8,8 @@
 # root and socket; make debian:bookworm-slim with debootstrap + docker import (cached);
 # hadolint the Dockerfile; validate compose.yaml with compose v2; build; run `lab` and check
 # /lab with the token, the user, the health check, the work volume and the 3D viewer's port;
-# execute a lesson inside; run `grader` with networking off on sample submissions.
+# execute a lesson inside (instructor and student versions); run `grader` with networking off
+# on sample submissions and check its CSV, gradebook and feedback.
 # Figures are printed on lines starting with "figure:".
 #
 # The engine runs without touching iptables, ip_forward or the default bridge
@@ -78,9 +79,12 @@ SYSCTLS=(/proc/sys/net/ipv4/ip_forward /proc/sys/net/ipv6/conf/all/forwarding /p
          /proc/sys/net/bridge/bridge-nf-call-arptables)
 sysctl_state() { for f in "${SYSCTLS[@]}"; do [ -e "$f" ] && echo "$f $(cat "$f")"; done; true; }
 link_state() { ip -o link show | awk -F': ' '{print $2}' | sed 's/@.*//' | sort; }
+# mounts an engine makes (overlays, shm, netns, its data and exec roots); others' mounts vary
+mount_state() { awk '{print $2}' /proc/mounts | grep -E "^($RUN|$DATA|/var/lib/docker|/run/docker|/run/containerd|/var/run/docker)" | sort; }
 net_state > "$RUN/net.before"
 sysctl_state > "$RUN/sysctl.before"
 link_state > "$RUN/links.before"
+mount_state > "$RUN/mounts.before"
 command -v nft >/dev/null && nft list ruleset > "$RUN/nft.before" 2>/dev/null || true
 command -v iptables-save >/dev/null && iptables-save > "$RUN/iptables.before" 2>/dev/null || true
 command -v ip6tables-save >/dev/null && ip6tables-save > "$RUN/ip6tables.before" 2>/dev/null || true
@@ -122,8 +126,10 @@ cleanup() {
   diff <(net_state) "$RUN/net.before" >&2 || { say "iptables/nftables differ from before"; clean=0; }
   diff <(sysctl_state) "$RUN/sysctl.before" >&2 || { say "forwarding/bridge settings differ from before"; clean=0; }
   diff <(link_state) "$RUN/links.before" >&2 || { say "network links differ from before"; clean=0; }
+  diff <(mount_state) "$RUN/mounts.before" >&2 || { say "the engine's mounts are still there"; clean=0; }
+  pgrep -f -- "--data-root $DATA" >/dev/null && { say "a dockerd on $DATA still runs"; clean=0; }
   if [ "$clean" = 1 ]; then
-    say "host state checked: iptables/nftables, ip_forward, bridge settings and links as before"
+    say "host state checked: iptables/nftables, ip_forward, bridge settings, links and mounts as before; no dockerd left"
   else
     rc=1
   fi
@@ -323,23 +329,46 @@ say "lab: the work volume keeps what the student wrote across down/up"
 CID=$("${COMPOSE[@]}" ps -q lab)
 
 # --- a lesson executed inside the container -------------------------------------------------
+# The instructor version (course/source, with the solutions) runs through; the student version
+# in the work folder stops only in its exercise cells (the stubs raise NotImplementedError),
+# and everything else in it, plots included, works.
 LESSON=${SNAKEKIT_DOCKER_LESSON:-05_simulation}
+check_executed() {  # FILE MODE: MODE=solved (no errors) or student (errors only in exercise cells)
+  python3 - "$1" "$2" <<'EOF'
+import json, sys
+nb, mode = json.load(open(sys.argv[1])), sys.argv[2]
+code = [c for c in nb["cells"] if c["cell_type"] == "code"]
+outs = [o for c in code for o in c.get("outputs", [])]
+def exercise(c):
+    meta = c.get("metadata", {}).get("nbgrader", {})
+    return bool(meta.get("solution") or meta.get("grade"))
+failed = [c for c in code if any(o.get("output_type") == "error" for o in c.get("outputs", []))]
+if mode == "solved":
+    assert not failed, f"cells failed: {[o.get('ename') for c in failed for o in c['outputs'] if o.get('output_type') == 'error']}"
+else:
+    assert failed, "no exercise cell failed: the student version holds no stubs?"
+    outside = [c.get("metadata", {}).get("nbgrader", {}).get("grade_id") or c["source"][:60] for c in failed if not exercise(c)]
+    assert not outside, f"cells outside the exercises failed: {outside}"
+print(sum("image/png" in o.get("data", {}) for o in outs), len(failed))
+EOF
+}
 t=$(now)
 $DOCKER exec "$CID" jupyter nbconvert --to notebook --execute --ExecutePreprocessor.timeout=300 \
-  --output-dir /tmp/executed "$LESSON.ipynb" >"$RUN/lesson.log" 2>&1 \
-  || { tail -30 "$RUN/lesson.log" >&2; die "lesson $LESSON failed inside the container"; }
-$DOCKER cp "$CID:/tmp/executed/$LESSON.ipynb" "$RUN/executed.ipynb"
-pngs=$(python3 - "$RUN/executed.ipynb" <<'EOF'
-import json, sys
-nb = json.load(open(sys.argv[1]))
-outs = [o for c in nb["cells"] if c["cell_type"] == "code" for o in c.get("outputs", [])]
-errors = [o for o in outs if o.get("output_type") == "error"]
-assert not errors, f"errors: {[e.get('ename') for e in errors]}"
-print(sum("image/png" in o.get("data", {}) for o in outs))
-EOF
-) || die "lesson $LESSON: cells failed"
+  --output-dir /tmp/executed "/opt/snakekit/course/source/$LESSON/$LESSON.ipynb" >"$RUN/lesson.log" 2>&1 \
+  || { tail -30 "$RUN/lesson.log" >&2; die "lesson $LESSON (instructor version) failed inside the container"; }
+$DOCKER cp "$CID:/tmp/executed/$LESSON.ipynb" "$RUN/solved.ipynb"
+out=$(check_executed "$RUN/solved.ipynb" solved) || die "lesson $LESSON (instructor version): cells failed"
+pngs=${out% *}
 [ "$pngs" -ge 1 ] || die "lesson $LESSON: no plot arrived as image/png"
-figure "lesson $LESSON executed inside the container in $(since "$t") s, $pngs pictures (image/png)"
+figure "lesson $LESSON (instructor version) executed inside the container in $(since "$t") s, $pngs pictures (image/png)"
+t=$(now)
+$DOCKER exec "$CID" jupyter nbconvert --to notebook --execute --allow-errors --ExecutePreprocessor.timeout=300 \
+  --output-dir /tmp/executed-student "$LESSON.ipynb" >"$RUN/lesson-student.log" 2>&1 \
+  || { tail -30 "$RUN/lesson-student.log" >&2; die "lesson $LESSON (student version) could not be executed inside the container"; }
+$DOCKER cp "$CID:/tmp/executed-student/$LESSON.ipynb" "$RUN/student.ipynb"
+out=$(check_executed "$RUN/student.ipynb" student) || die "lesson $LESSON (student version): see above"
+[ "${out% *}" -ge 1 ] || die "lesson $LESSON (student version): no plot arrived as image/png"
+say "lesson $LESSON (student version, as handed out): only its ${out#* } exercise cells stop, ${out% *} pictures, in $(since "$t") s"
 $DOCKER exec "$CID" python -c "import ipykernel, nbclient" || die "the image lacks ipykernel/nbclient"
 $DOCKER exec "$CID" python -c "
 import importlib.util as u, sys
@@ -349,37 +378,34 @@ say "image: ipykernel and nbclient inside; pytest, playwright, uv, hadolint not"
 "${COMPOSE[@]}" down --volumes >/dev/null 2>&1
 
 # --- the grader service, networking off ----------------------------------------------------
-if ! $DOCKER run --rm --network=none "$IMAGE" snakekit grade --help >/dev/null 2>&1; then
-  say "SKIPPED the grader step: this snakekit has no 'snakekit grade' command yet"
-else
-  ASSIGNMENT=${SNAKEKIT_ASSIGNMENT:-06_coded_sweep}
-  export SNAKEKIT_COURSE="$RUN/course" SNAKEKIT_ASSIGNMENT="$ASSIGNMENT"
-  mkdir -p "$SNAKEKIT_COURSE"/{submitted,gradebook,autograded,feedback}
-  # two students: the lesson as handed out, and one whose notebook stops with an error
-  for s in alice bob; do mkdir -p "$SNAKEKIT_COURSE/submitted/$s/$ASSIGNMENT"; done
-  cp "notebooks/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/alice/$ASSIGNMENT/"
-  python3 - "notebooks/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/bob/$ASSIGNMENT/$ASSIGNMENT.ipynb" <<'EOF'
-import json, sys
-nb = json.load(open(sys.argv[1]))
-code = [c for c in nb["cells"] if c["cell_type"] == "code"]
-code[0]["source"] = "raise RuntimeError('bob broke it')\n"
-json.dump(nb, open(sys.argv[2], "w"))
-EOF
-  chown -R 1000:1000 "$SNAKEKIT_COURSE"
-  t=$(now)
-  "${COMPOSE[@]}" run --rm grader >"$RUN/grader.log" 2>&1 || { tail -30 "$RUN/grader.log" >&2; die "the grader service failed"; }
-  python3 - "$SNAKEKIT_COURSE/gradebook/grades.csv" "$ASSIGNMENT" <<'EOF' || die "the grader's CSV is wrong"
-import csv, sys
-rows = list(csv.DictReader(open(sys.argv[1])))
-assert rows and list(rows[0]) == ["student", "assignment", "score", "max_score", "status"], rows[:1]
+# Two students: alice hands in the lesson as handed out (the stubs: no points), bob the
+# instructor's solution (every point). The grader runs each in its own sandbox.
+ASSIGNMENT=${SNAKEKIT_ASSIGNMENT:-06_coded_sweep}
+export SNAKEKIT_COURSE="$RUN/course" SNAKEKIT_ASSIGNMENT="$ASSIGNMENT"
+mkdir -p "$SNAKEKIT_COURSE"/{submitted,gradebook,autograded,feedback}
+for s in alice bob; do mkdir -p "$SNAKEKIT_COURSE/submitted/$s/$ASSIGNMENT"; done
+cp "notebooks/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/alice/$ASSIGNMENT/"
+cp "course/source/$ASSIGNMENT/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/bob/$ASSIGNMENT/"
+chown -R 1000:1000 "$SNAKEKIT_COURSE"
+t=$(now)
+"${COMPOSE[@]}" run --rm grader >"$RUN/grader.log" 2>&1 || { tail -30 "$RUN/grader.log" >&2; die "the grader service failed"; }
+grade_s=$(since "$t")
+python3 - "$SNAKEKIT_COURSE" "$ASSIGNMENT" <<'EOF' || { tail -20 "$RUN/grader.log" >&2; die "the grader's results are wrong"; }
+import csv, os, sys
+course, assignment = sys.argv[1:]
+rows = list(csv.DictReader(open(f"{course}/gradebook/grades.csv")))
+assert rows and list(rows[0]) == ["student", "assignment", "score", "max_score", "status", "detail"], rows[:1]
 by = {r["student"]: r for r in rows}
 assert set(by) == {"alice", "bob"}, by
 for r in rows:
-    assert r["assignment"] == sys.argv[2], r
-    assert 0 <= float(r["score"]) <= float(r["max_score"]) and float(r["max_score"]) > 0, r
-assert float(by["bob"]["score"]) < float(by["bob"]["max_score"]), by["bob"]
-print(rows)
+    assert r["assignment"] == assignment and r["status"] == "graded", r
+    assert float(r["max_score"]) > 0, r
+assert float(by["alice"]["score"]) == 0, by["alice"]
+assert float(by["bob"]["score"]) == float(by["bob"]["max_score"]), by["bob"]
+assert os.path.getsize(f"{course}/gradebook/gradebook.db") > 0, "no gradebook"
+for s in ("alice", "bob"):
+    assert os.listdir(f"{course}/feedback/{s}/{assignment}"), f"no feedback for {s}"
+print(f"grader: alice {by['alice']['score']}/{by['alice']['max_score']}, bob {by['bob']['score']}/{by['bob']['max_score']}")
 EOF
-  figure "grader: 2 submissions graded with networking off in $(since "$t") s"
-fi
+figure "grader: 2 submissions of $ASSIGNMENT graded with networking off, each in its sandbox, in $grade_s s"
 say "passed"
