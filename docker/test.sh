@@ -292,6 +292,20 @@ say "lab: healthy"
 sleep 10
 mem=$($DOCKER stats --no-stream --format '{{.MemUsage}}' "$CID" | cut -d/ -f1)
 figure "lab container idle memory: $mem"
+# a lesson's kernel: started, then its first cell's imports
+kt=$($DOCKER exec "$CID" python -c "
+import time
+from jupyter_client.manager import start_new_kernel
+t = time.monotonic()
+km, kc = start_new_kernel(kernel_name='python3')
+t1 = time.monotonic()
+r = kc.execute_interactive('import numpy, matplotlib.pyplot, snakekit; robot = snakekit.make_robot(\"sim\")', timeout=120)
+t2 = time.monotonic()
+km.shutdown_kernel(now=True)
+assert r['content']['status'] == 'ok', r['content']
+print(f'{t1 - t:.1f} s to a ready kernel, {t2 - t1:.1f} s for the first cell (numpy, matplotlib, snakekit, the simulator)')") \
+  || die "lab: a kernel did not start or import the kit"
+figure "lesson kernel: $kt"
 
 # the 3D viewer, as a lesson makes it, is reachable from the host on its published port
 $DOCKER exec -d "$CID" python -c "
