@@ -80,7 +80,7 @@ SYSCTLS=(/proc/sys/net/ipv4/ip_forward /proc/sys/net/ipv6/conf/all/forwarding /p
 sysctl_state() { for f in "${SYSCTLS[@]}"; do [ -e "$f" ] && echo "$f $(cat "$f")"; done; true; }
 link_state() { ip -o link show | awk -F': ' '{print $2}' | sed 's/@.*//' | sort; }
 # mounts an engine makes (overlays, shm, netns, its data and exec roots); others' mounts vary
-mount_state() { awk '{print $2}' /proc/mounts | grep -E "^($RUN|$DATA|/var/lib/docker|/run/docker|/run/containerd|/var/run/docker)" | sort; }
+mount_state() { awk '{print $2}' /proc/mounts | grep -E "^($RUN|$DATA|/var/lib/docker|/run/docker|/run/containerd|/var/run/docker)" | sort || true; }
 net_state > "$RUN/net.before"
 sysctl_state > "$RUN/sysctl.before"
 link_state > "$RUN/links.before"
