@@ -262,7 +262,7 @@ until [ "$(http_code "$LAB/lab?token=$TOKEN")" = 200 ]; do
   [ "$(since "$t" | cut -d. -f1)" -lt 60 ] || die "lab: /lab did not answer within 60 s"
   sleep 0.05
 done
-curl -s --max-time 5 "$LAB/lab?token=$TOKEN" | grep -q "JupyterLab" || die "lab: /lab is not JupyterLab's page"
+curl -s --max-time 5 "$LAB/lab?token=$TOKEN" | grep "JupyterLab" >/dev/null || die "lab: /lab is not JupyterLab's page"
 code=$(http_code "$LAB/api/contents")
 [ "$code" = 403 ] || die "lab: the API answered $code without the token (expected 403)"
 code=$(http_code "$LAB/api/contents?token=wrong$TOKEN")
@@ -274,7 +274,7 @@ got=$(curl -s --max-time 5 "$LAB/api/contents?token=$TOKEN" | python3 -c \
 [ "$got" = "$want" ] || die "lab: lessons served: '$got', expected '$want'"
 say "lab: /lab answers with the token ($(since "$t") s after compose up), 403 without; lessons: $got"
 # the URL with the token is printed
-"${COMPOSE[@]}" logs lab 2>&1 | grep -q "http://localhost:$SNAKEKIT_LAB_PORT/lab?token=$TOKEN" \
+"${COMPOSE[@]}" logs lab 2>&1 | grep -F "http://localhost:$SNAKEKIT_LAB_PORT/lab?token=$TOKEN" >/dev/null \
   || die "lab: the log does not print the URL with the token"
 # not root
 uid=$($DOCKER exec "$CID" id -u)
@@ -322,7 +322,7 @@ done
 vurl=$($DOCKER exec "$CID" cat /tmp/viewer-url)
 vport=${SNAKEKIT_VIEWER_PORTS%-*}
 [ "$vurl" = "http://localhost:$vport/static/" ] || die "viewer: URL $vurl, expected http://localhost:$vport/static/"
-curl -s --max-time 5 "http://127.0.0.1:$vport/static/" | grep -qi "meshcat" \
+curl -s --max-time 5 "http://127.0.0.1:$vport/static/" | grep -i "meshcat" >/dev/null \
   || die "viewer: $vurl does not serve meshcat's page on the host"
 say "viewer: a lesson's 3D view is served on $vurl, reachable from the host"
 
