@@ -346,7 +346,7 @@ CID=$("${COMPOSE[@]}" ps -q lab)
 # The instructor version (course/source, with the solutions) runs through; the student version
 # in the work folder stops only in its exercise cells (the stubs raise NotImplementedError),
 # and everything else in it, plots included, works.
-LESSON=${SNAKEKIT_DOCKER_LESSON:-05_simulation}
+LESSON=${SNAKEKIT_DOCKER_LESSON:-06_coded_sweep}
 check_executed() {  # FILE MODE: MODE=solved (no errors) or student (errors only in exercise cells)
   python3 - "$1" "$2" <<'EOF'
 import json, sys
