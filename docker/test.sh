@@ -367,8 +367,10 @@ print(sum("image/png" in o.get("data", {}) for o in outs), len(failed))
 EOF
 }
 t=$(now)
-$DOCKER exec "$CID" jupyter nbconvert --to notebook --execute --ExecutePreprocessor.timeout=300 \
-  --output-dir /tmp/executed "/opt/snakekit/course/source/$LESSON/$LESSON.ipynb" >"$RUN/lesson.log" 2>&1 \
+# (each in a folder of its own, as a student's lesson writes its files next to itself)
+$DOCKER exec "$CID" bash -c "mkdir -p /tmp/solved && cp /opt/snakekit/course/source/$LESSON/$LESSON.ipynb /tmp/solved/ \
+  && cd /tmp/solved && jupyter nbconvert --to notebook --execute --ExecutePreprocessor.timeout=300 \
+  --output-dir /tmp/executed $LESSON.ipynb" >"$RUN/lesson.log" 2>&1 \
   || { tail -30 "$RUN/lesson.log" >&2; die "lesson $LESSON (instructor version) failed inside the container"; }
 $DOCKER cp "$CID:/tmp/executed/$LESSON.ipynb" "$RUN/solved.ipynb"
 out=$(check_executed "$RUN/solved.ipynb" solved) || die "lesson $LESSON (instructor version): cells failed"
@@ -376,8 +378,9 @@ pngs=${out% *}
 [ "$pngs" -ge 1 ] || die "lesson $LESSON: no plot arrived as image/png"
 figure "lesson $LESSON (instructor version) executed inside the container in $(since "$t") s, $pngs pictures (image/png)"
 t=$(now)
-$DOCKER exec "$CID" jupyter nbconvert --to notebook --execute --allow-errors --ExecutePreprocessor.timeout=300 \
-  --output-dir /tmp/executed-student "$LESSON.ipynb" >"$RUN/lesson-student.log" 2>&1 \
+$DOCKER exec "$CID" bash -c "mkdir -p /tmp/student && cp $LESSON.ipynb /tmp/student/ && cd /tmp/student \
+  && jupyter nbconvert --to notebook --execute --allow-errors --ExecutePreprocessor.timeout=300 \
+  --output-dir /tmp/executed-student $LESSON.ipynb" >"$RUN/lesson-student.log" 2>&1 \
   || { tail -30 "$RUN/lesson-student.log" >&2; die "lesson $LESSON (student version) could not be executed inside the container"; }
 $DOCKER cp "$CID:/tmp/executed-student/$LESSON.ipynb" "$RUN/student.ipynb"
 out=$(check_executed "$RUN/student.ipynb" student) || die "lesson $LESSON (student version): see above"
