@@ -345,7 +345,8 @@ CID=$("${COMPOSE[@]}" ps -q lab)
 # --- a lesson executed inside the container -------------------------------------------------
 # The instructor version (course/source, with the solutions) runs through; the student version
 # in the work folder stops only in its exercise cells (the stubs raise NotImplementedError),
-# and everything else in it, plots included, works.
+# and everything else in it works (lesson 06's plots show the student's own sweep, so none
+# come before the exercises are done).
 LESSON=${SNAKEKIT_DOCKER_LESSON:-06_coded_sweep}
 check_executed() {  # FILE MODE: MODE=solved (no errors) or student (errors only in exercise cells)
   python3 - "$1" "$2" <<'EOF'
@@ -384,7 +385,6 @@ $DOCKER exec "$CID" bash -c "mkdir -p /tmp/student && cp $LESSON.ipynb /tmp/stud
   || { tail -30 "$RUN/lesson-student.log" >&2; die "lesson $LESSON (student version) could not be executed inside the container"; }
 $DOCKER cp "$CID:/tmp/executed-student/$LESSON.ipynb" "$RUN/student.ipynb"
 out=$(check_executed "$RUN/student.ipynb" student) || die "lesson $LESSON (student version): see above"
-[ "${out% *}" -ge 1 ] || die "lesson $LESSON (student version): no plot arrived as image/png"
 say "lesson $LESSON (student version, as handed out): only its ${out#* } exercise cells stop, ${out% *} pictures, in $(since "$t") s"
 $DOCKER exec "$CID" python -c "import ipykernel, nbclient" || die "the image lacks ipykernel/nbclient"
 $DOCKER exec "$CID" python -c "
