@@ -301,8 +301,10 @@ km, kc = start_new_kernel(kernel_name='python3')
 t1 = time.monotonic()
 r = kc.execute_interactive('import numpy, matplotlib.pyplot, snakekit; robot = snakekit.make_robot(\"sim\")', timeout=120)
 t2 = time.monotonic()
-km.shutdown_kernel(now=True)
 assert r['content']['status'] == 'ok', r['content']
+kc.complete('numpy.zer', 9); c = kc.get_shell_msg(timeout=60)['content']  # tab completion
+km.shutdown_kernel(now=True)
+assert 'zeros' in c['matches'], c['matches']
 print(f'{t1 - t:.1f} s to a ready kernel, {t2 - t1:.1f} s for the first cell (numpy, matplotlib, snakekit, the simulator)')") \
   || die "lab: a kernel did not start or import the kit"
 figure "lesson kernel: $kt"
