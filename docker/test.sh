@@ -8,7 +8,8 @@
 # root and socket; make debian:bookworm-slim with debootstrap + docker import (cached);
 # hadolint the Dockerfile; validate compose.yaml with compose v2; build; run `lab` and check
 # /lab with the token, the user, the health check, the work volume and the 3D viewer's port;
-# execute a lesson inside; run `grader` with networking off on sample submissions.
+# execute a lesson inside (instructor and student versions); run `grader` with networking off
+# on sample submissions and check its CSV, gradebook and feedback.
 # Figures are printed on lines starting with "figure:".
 #
 # The engine runs without touching iptables, ip_forward or the default bridge
@@ -78,9 +79,12 @@ SYSCTLS=(/proc/sys/net/ipv4/ip_forward /proc/sys/net/ipv6/conf/all/forwarding /p
          /proc/sys/net/bridge/bridge-nf-call-arptables)
 sysctl_state() { for f in "${SYSCTLS[@]}"; do [ -e "$f" ] && echo "$f $(cat "$f")"; done; true; }
 link_state() { ip -o link show | awk -F': ' '{print $2}' | sed 's/@.*//' | sort; }
+# mounts an engine makes (overlays, shm, netns, its data and exec roots); others' mounts vary
+mount_state() { awk '{print $2}' /proc/mounts | grep -E "^($RUN|$DATA|/var/lib/docker|/run/docker|/run/containerd|/var/run/docker)" | sort || true; }
 net_state > "$RUN/net.before"
 sysctl_state > "$RUN/sysctl.before"
 link_state > "$RUN/links.before"
+mount_state > "$RUN/mounts.before"
 command -v nft >/dev/null && nft list ruleset > "$RUN/nft.before" 2>/dev/null || true
 command -v iptables-save >/dev/null && iptables-save > "$RUN/iptables.before" 2>/dev/null || true
 command -v ip6tables-save >/dev/null && ip6tables-save > "$RUN/ip6tables.before" 2>/dev/null || true
@@ -122,8 +126,10 @@ cleanup() {
   diff <(net_state) "$RUN/net.before" >&2 || { say "iptables/nftables differ from before"; clean=0; }
   diff <(sysctl_state) "$RUN/sysctl.before" >&2 || { say "forwarding/bridge settings differ from before"; clean=0; }
   diff <(link_state) "$RUN/links.before" >&2 || { say "network links differ from before"; clean=0; }
+  diff <(mount_state) "$RUN/mounts.before" >&2 || { say "the engine's mounts are still there"; clean=0; }
+  pgrep -f -- "--data-root $DATA" >/dev/null && { say "a dockerd on $DATA still runs"; clean=0; }
   if [ "$clean" = 1 ]; then
-    say "host state checked: iptables/nftables, ip_forward, bridge settings and links as before"
+    say "host state checked: iptables/nftables, ip_forward, bridge settings, links and mounts as before; no dockerd left"
   else
     rc=1
   fi
@@ -256,7 +262,7 @@ until [ "$(http_code "$LAB/lab?token=$TOKEN")" = 200 ]; do
   [ "$(since "$t" | cut -d. -f1)" -lt 60 ] || die "lab: /lab did not answer within 60 s"
   sleep 0.05
 done
-curl -s --max-time 5 "$LAB/lab?token=$TOKEN" | grep -q "JupyterLab" || die "lab: /lab is not JupyterLab's page"
+curl -s --max-time 5 "$LAB/lab?token=$TOKEN" | grep "JupyterLab" >/dev/null || die "lab: /lab is not JupyterLab's page"
 code=$(http_code "$LAB/api/contents")
 [ "$code" = 403 ] || die "lab: the API answered $code without the token (expected 403)"
 code=$(http_code "$LAB/api/contents?token=wrong$TOKEN")
@@ -268,7 +274,7 @@ got=$(curl -s --max-time 5 "$LAB/api/contents?token=$TOKEN" | python3 -c \
 [ "$got" = "$want" ] || die "lab: lessons served: '$got', expected '$want'"
 say "lab: /lab answers with the token ($(since "$t") s after compose up), 403 without; lessons: $got"
 # the URL with the token is printed
-"${COMPOSE[@]}" logs lab 2>&1 | grep -q "http://localhost:$SNAKEKIT_LAB_PORT/lab?token=$TOKEN" \
+"${COMPOSE[@]}" logs lab 2>&1 | grep -F "http://localhost:$SNAKEKIT_LAB_PORT/lab?token=$TOKEN" >/dev/null \
   || die "lab: the log does not print the URL with the token"
 # not root
 uid=$($DOCKER exec "$CID" id -u)
@@ -286,6 +292,22 @@ say "lab: healthy"
 sleep 10
 mem=$($DOCKER stats --no-stream --format '{{.MemUsage}}' "$CID" | cut -d/ -f1)
 figure "lab container idle memory: $mem"
+# a lesson's kernel: started, then its first cell's imports
+kt=$($DOCKER exec "$CID" python -c "
+import time
+from jupyter_client.manager import start_new_kernel
+t = time.monotonic()
+km, kc = start_new_kernel(kernel_name='python3')
+t1 = time.monotonic()
+r = kc.execute_interactive('import numpy, matplotlib.pyplot, snakekit; robot = snakekit.make_robot(\"sim\")', timeout=120)
+t2 = time.monotonic()
+assert r['content']['status'] == 'ok', r['content']
+kc.complete('numpy.zer', 9); c = kc.get_shell_msg(timeout=60)['content']  # tab completion
+km.shutdown_kernel(now=True)
+assert 'zeros' in c['matches'], c['matches']
+print(f'{t1 - t:.1f} s to a ready kernel, {t2 - t1:.1f} s for the first cell (numpy, matplotlib, snakekit, the simulator)')") \
+  || die "lab: a kernel did not start or import the kit"
+figure "lesson kernel: $kt"
 
 # the 3D viewer, as a lesson makes it, is reachable from the host on its published port
 $DOCKER exec -d "$CID" python -c "
@@ -302,7 +324,7 @@ done
 vurl=$($DOCKER exec "$CID" cat /tmp/viewer-url)
 vport=${SNAKEKIT_VIEWER_PORTS%-*}
 [ "$vurl" = "http://localhost:$vport/static/" ] || die "viewer: URL $vurl, expected http://localhost:$vport/static/"
-curl -s --max-time 5 "http://127.0.0.1:$vport/static/" | grep -qi "meshcat" \
+curl -s --max-time 5 "http://127.0.0.1:$vport/static/" | grep -i "meshcat" >/dev/null \
   || die "viewer: $vurl does not serve meshcat's page on the host"
 say "viewer: a lesson's 3D view is served on $vurl, reachable from the host"
 
@@ -323,23 +345,49 @@ say "lab: the work volume keeps what the student wrote across down/up"
 CID=$("${COMPOSE[@]}" ps -q lab)
 
 # --- a lesson executed inside the container -------------------------------------------------
-LESSON=${SNAKEKIT_DOCKER_LESSON:-05_simulation}
-t=$(now)
-$DOCKER exec "$CID" jupyter nbconvert --to notebook --execute --ExecutePreprocessor.timeout=300 \
-  --output-dir /tmp/executed "$LESSON.ipynb" >"$RUN/lesson.log" 2>&1 \
-  || { tail -30 "$RUN/lesson.log" >&2; die "lesson $LESSON failed inside the container"; }
-$DOCKER cp "$CID:/tmp/executed/$LESSON.ipynb" "$RUN/executed.ipynb"
-pngs=$(python3 - "$RUN/executed.ipynb" <<'EOF'
+# The instructor version (course/source, with the solutions) runs through; the student version
+# in the work folder stops only in its exercise cells (the stubs raise NotImplementedError),
+# and everything else in it works (lesson 06's plots show the student's own sweep, so none
+# come before the exercises are done).
+LESSON=${SNAKEKIT_DOCKER_LESSON:-06_coded_sweep}
+check_executed() {  # FILE MODE: MODE=solved (no errors) or student (errors only in exercise cells)
+  python3 - "$1" "$2" <<'EOF'
 import json, sys
-nb = json.load(open(sys.argv[1]))
-outs = [o for c in nb["cells"] if c["cell_type"] == "code" for o in c.get("outputs", [])]
-errors = [o for o in outs if o.get("output_type") == "error"]
-assert not errors, f"errors: {[e.get('ename') for e in errors]}"
-print(sum("image/png" in o.get("data", {}) for o in outs))
+nb, mode = json.load(open(sys.argv[1])), sys.argv[2]
+code = [c for c in nb["cells"] if c["cell_type"] == "code"]
+outs = [o for c in code for o in c.get("outputs", [])]
+def exercise(c):
+    meta = c.get("metadata", {}).get("nbgrader", {})
+    return bool(meta.get("solution") or meta.get("grade"))
+failed = [c for c in code if any(o.get("output_type") == "error" for o in c.get("outputs", []))]
+if mode == "solved":
+    assert not failed, f"cells failed: {[o.get('ename') for c in failed for o in c['outputs'] if o.get('output_type') == 'error']}"
+else:
+    assert failed, "no exercise cell failed: the student version holds no stubs?"
+    outside = [c.get("metadata", {}).get("nbgrader", {}).get("grade_id") or c["source"][:60] for c in failed if not exercise(c)]
+    assert not outside, f"cells outside the exercises failed: {outside}"
+print(sum("image/png" in o.get("data", {}) for o in outs), len(failed))
 EOF
-) || die "lesson $LESSON: cells failed"
+}
+t=$(now)
+# (each in a folder of its own, as a student's lesson writes its files next to itself)
+$DOCKER exec "$CID" bash -c "mkdir -p /tmp/solved && cp /opt/snakekit/course/source/$LESSON/$LESSON.ipynb /tmp/solved/ \
+  && cd /tmp/solved && jupyter nbconvert --to notebook --execute --ExecutePreprocessor.timeout=300 \
+  --output-dir /tmp/executed $LESSON.ipynb" >"$RUN/lesson.log" 2>&1 \
+  || { tail -30 "$RUN/lesson.log" >&2; die "lesson $LESSON (instructor version) failed inside the container"; }
+$DOCKER cp "$CID:/tmp/executed/$LESSON.ipynb" "$RUN/solved.ipynb"
+out=$(check_executed "$RUN/solved.ipynb" solved) || die "lesson $LESSON (instructor version): cells failed"
+pngs=${out% *}
 [ "$pngs" -ge 1 ] || die "lesson $LESSON: no plot arrived as image/png"
-figure "lesson $LESSON executed inside the container in $(since "$t") s, $pngs pictures (image/png)"
+figure "lesson $LESSON (instructor version) executed inside the container in $(since "$t") s, $pngs pictures (image/png)"
+t=$(now)
+$DOCKER exec "$CID" bash -c "mkdir -p /tmp/student && cp $LESSON.ipynb /tmp/student/ && cd /tmp/student \
+  && jupyter nbconvert --to notebook --execute --allow-errors --ExecutePreprocessor.timeout=300 \
+  --output-dir /tmp/executed-student $LESSON.ipynb" >"$RUN/lesson-student.log" 2>&1 \
+  || { tail -30 "$RUN/lesson-student.log" >&2; die "lesson $LESSON (student version) could not be executed inside the container"; }
+$DOCKER cp "$CID:/tmp/executed-student/$LESSON.ipynb" "$RUN/student.ipynb"
+out=$(check_executed "$RUN/student.ipynb" student) || die "lesson $LESSON (student version): see above"
+say "lesson $LESSON (student version, as handed out): only its ${out#* } exercise cells stop, ${out% *} pictures, in $(since "$t") s"
 $DOCKER exec "$CID" python -c "import ipykernel, nbclient" || die "the image lacks ipykernel/nbclient"
 $DOCKER exec "$CID" python -c "
 import importlib.util as u, sys
@@ -349,37 +397,34 @@ say "image: ipykernel and nbclient inside; pytest, playwright, uv, hadolint not"
 "${COMPOSE[@]}" down --volumes >/dev/null 2>&1
 
 # --- the grader service, networking off ----------------------------------------------------
-if ! $DOCKER run --rm --network=none "$IMAGE" snakekit grade --help >/dev/null 2>&1; then
-  say "SKIPPED the grader step: this snakekit has no 'snakekit grade' command yet"
-else
-  ASSIGNMENT=${SNAKEKIT_ASSIGNMENT:-06_coded_sweep}
-  export SNAKEKIT_COURSE="$RUN/course" SNAKEKIT_ASSIGNMENT="$ASSIGNMENT"
-  mkdir -p "$SNAKEKIT_COURSE"/{submitted,gradebook,autograded,feedback}
-  # two students: the lesson as handed out, and one whose notebook stops with an error
-  for s in alice bob; do mkdir -p "$SNAKEKIT_COURSE/submitted/$s/$ASSIGNMENT"; done
-  cp "notebooks/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/alice/$ASSIGNMENT/"
-  python3 - "notebooks/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/bob/$ASSIGNMENT/$ASSIGNMENT.ipynb" <<'EOF'
-import json, sys
-nb = json.load(open(sys.argv[1]))
-code = [c for c in nb["cells"] if c["cell_type"] == "code"]
-code[0]["source"] = "raise RuntimeError('bob broke it')\n"
-json.dump(nb, open(sys.argv[2], "w"))
-EOF
-  chown -R 1000:1000 "$SNAKEKIT_COURSE"
-  t=$(now)
-  "${COMPOSE[@]}" run --rm grader >"$RUN/grader.log" 2>&1 || { tail -30 "$RUN/grader.log" >&2; die "the grader service failed"; }
-  python3 - "$SNAKEKIT_COURSE/gradebook/grades.csv" "$ASSIGNMENT" <<'EOF' || die "the grader's CSV is wrong"
-import csv, sys
-rows = list(csv.DictReader(open(sys.argv[1])))
-assert rows and list(rows[0]) == ["student", "assignment", "score", "max_score", "status"], rows[:1]
+# Two students: alice hands in the lesson as handed out (the stubs: no points), bob the
+# instructor's solution (every point). The grader runs each in its own sandbox.
+ASSIGNMENT=${SNAKEKIT_ASSIGNMENT:-06_coded_sweep}
+export SNAKEKIT_COURSE="$RUN/course" SNAKEKIT_ASSIGNMENT="$ASSIGNMENT"
+mkdir -p "$SNAKEKIT_COURSE"/{submitted,gradebook,autograded,feedback}
+for s in alice bob; do mkdir -p "$SNAKEKIT_COURSE/submitted/$s/$ASSIGNMENT"; done
+cp "notebooks/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/alice/$ASSIGNMENT/"
+cp "course/source/$ASSIGNMENT/$ASSIGNMENT.ipynb" "$SNAKEKIT_COURSE/submitted/bob/$ASSIGNMENT/"
+chown -R 1000:1000 "$SNAKEKIT_COURSE"
+t=$(now)
+"${COMPOSE[@]}" run --rm grader >"$RUN/grader.log" 2>&1 || { tail -30 "$RUN/grader.log" >&2; die "the grader service failed"; }
+grade_s=$(since "$t")
+python3 - "$SNAKEKIT_COURSE" "$ASSIGNMENT" <<'EOF' || { tail -20 "$RUN/grader.log" >&2; die "the grader's results are wrong"; }
+import csv, os, sys
+course, assignment = sys.argv[1:]
+rows = list(csv.DictReader(open(f"{course}/gradebook/grades.csv")))
+assert rows and list(rows[0]) == ["student", "assignment", "score", "max_score", "status", "detail"], rows[:1]
 by = {r["student"]: r for r in rows}
 assert set(by) == {"alice", "bob"}, by
 for r in rows:
-    assert r["assignment"] == sys.argv[2], r
-    assert 0 <= float(r["score"]) <= float(r["max_score"]) and float(r["max_score"]) > 0, r
-assert float(by["bob"]["score"]) < float(by["bob"]["max_score"]), by["bob"]
-print(rows)
+    assert r["assignment"] == assignment and r["status"] == "graded", r
+    assert float(r["max_score"]) > 0, r
+assert float(by["alice"]["score"]) == 0, by["alice"]
+assert float(by["bob"]["score"]) == float(by["bob"]["max_score"]), by["bob"]
+assert os.path.getsize(f"{course}/gradebook/gradebook.db") > 0, "no gradebook"
+for s in ("alice", "bob"):
+    assert os.listdir(f"{course}/feedback/{s}/{assignment}"), f"no feedback for {s}"
+print(f"grader: alice {by['alice']['score']}/{by['alice']['max_score']}, bob {by['bob']['score']}/{by['bob']['max_score']}")
 EOF
-  figure "grader: 2 submissions graded with networking off in $(since "$t") s"
-fi
+figure "grader: 2 submissions of $ASSIGNMENT graded with networking off, each in its sandbox, in $grade_s s"
 say "passed"

@@ -108,10 +108,12 @@ def test_container(capsys):
     with capsys.disabled():
         print()
         for line in out.splitlines():
-            if line.startswith(("figure:", "docker-test: SKIPPED", "docker-test: restored")):
+            if line.startswith(("figure:", "docker-test: restored", "docker-test: host state", "docker-test: lesson")):
                 print(line)
     assert proc.returncode == 0, out[-6000:]
     assert "docker-test: passed" in out
     assert "host state checked" in out
+    assert re.search(r"figure: grader: 2 submissions .* graded", out), out[-3000:]
+    assert re.search(r"figure: lesson \S+ \(instructor version\) executed .* [1-9]\d* pictures", out), out[-3000:]
     size = re.search(r"figure: image: (\d+) MB", out)
     assert size and int(size.group(1)) <= 1000, out
