@@ -30,9 +30,11 @@ import numpy as np
 VELOCITY_UNIT = 0.229 * 2 * math.pi / 60  # rad/s per Profile Velocity unit
 ACCELERATION_UNIT = 214.577 * 2 * math.pi / 3600  # rad/s^2 per Profile Acceleration unit
 
-# The kit's defaults: 62 units = 1.487 rad/s (just under the 1.5 rad/s limit), and 100 units
-# = 37.45 rad/s^2, so t1 = 64 * 62 / 100 = 39.7 ms.
-DEFAULT_PROFILE_VELOCITY = 62
+# The kit's defaults, for the simulator and the real arm alike: 55 units = 1.32 rad/s, 12 %
+# under the 1.5 rad/s limit (62 = 1.487 rad/s is the most the limit allows, but a servo
+# overshoots its profile while it catches up with the reference: a full-speed step peaks at
+# 1.56 rad/s with 62), and 100 units = 37.45 rad/s^2, so t1 = 64 * 55 / 100 = 35.2 ms.
+DEFAULT_PROFILE_VELOCITY = 55
 DEFAULT_PROFILE_ACCELERATION = 100
 
 

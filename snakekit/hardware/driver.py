@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from ..errors import (CommunicationError, ConfigurationError, HardwareError,
                        InstructionError, LimitError, ServoMismatchError)
 from ..model import SPEC, SnakeSpec
-from ..profile_planner import DEFAULT_PROFILE_ACCELERATION
+from ..profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY
 from ..robot import JointState, Robot
 from .bus import Bus, SyncRead, describe, sdk
 from .keepalive import STATUS_BLOCK, KeepAlive, WatchdogMixin
@@ -50,10 +50,7 @@ from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_
 from .options import ON_CLOSE, check_options
 from .startup import check_eeprom
 
-#: The driver's Profile Velocity (0.229 rev/min units): 55 = 1.32 rad/s, 12 % under the limit,
-#: because a servo overshoots its profile while it catches up with the reference (emulated
-#: arm: a full-speed step peaks at 1.56 rad/s with 62; late sweep goals, 8 % over with 58).
-KIT_PROFILE_VELOCITY = 55
+KIT_PROFILE_VELOCITY = DEFAULT_PROFILE_VELOCITY  # the simulator's too (profile_planner says why 55)
 _OPEN: "weakref.WeakValueDictionary[str, DynamixelSnake]" = weakref.WeakValueDictionary()
 
 
