@@ -13,9 +13,9 @@ Both the simulator and the bus emulator use :class:`ProfilePlanner`, so the two 
 
 >>> planner = ProfilePlanner([0.0] * 5)
 >>> planner.set_goal(0.0, [1.0, 0, 0, 0, 0])
->>> p, v = planner.at(0.0397)               # end of the acceleration phase
+>>> p, v = planner.at(0.04)                 # past the acceleration phase (t1 = 35.2 ms)
 >>> round(float(v[0]), 3), planner.moving(0.5), planner.moving(1.0)
-(1.487, True, False)
+(1.319, True, False)
 
 Register units: velocity 0.229 rev/min, acceleration 214.577 rev/min^2.
 """
@@ -41,8 +41,8 @@ DEFAULT_PROFILE_ACCELERATION = 100
 def acceleration_time_ms(profile_velocity: int, profile_acceleration: int) -> float:
     """The firmware's acceleration time t1 [ms] for the given register values.
 
-    >>> acceleration_time_ms(62, 100)          # the kit's defaults
-    39.68
+    >>> acceleration_time_ms(55, 100)          # the kit's defaults
+    35.2
     """
     return 64.0 * profile_velocity / profile_acceleration
 
