@@ -20,7 +20,7 @@ die() { echo "bench-engine: FAILED: $*" >&2; exit 1; }
 source "$ROOT/docker/engine.sh"
 
 [ "$(id -u)" = 0 ] || die "needs root to start dockerd"
-[ -x /usr/bin/dockerd ] || die "Debian's docker.io is not installed (tools/setup installs it)"
+command -v dockerd >/dev/null && [ -x /usr/bin/docker ] || die "Debian's docker.io is not installed (tools/setup installs it)"
 [ -x "$VENV_BIN/docker-compose" ] || die "docker-compose missing from $VENV_BIN; run 'make setup'"
 engine_lock "${SNAKEKIT_ENGINE_WAIT:-600}"
 

@@ -225,7 +225,7 @@ def main(argv=None) -> int:
 
 
 def private_engine_possible() -> bool:
-    return os.geteuid() == 0 and Path("/usr/bin/dockerd").exists() and Path("/usr/bin/docker").exists()
+    return os.geteuid() == 0 and shutil.which("dockerd", path="/usr/sbin:/usr/bin") is not None and Path("/usr/bin/docker").exists()
 
 
 def under_private_engine(argv: list[str], json_path: str | None) -> int:

@@ -59,10 +59,11 @@ def steps(submissions: int) -> list[Step]:
         Step("sim", "Task 2: fast vs bare MuJoCo, and in real time", ["sim.py"], 85),
         Step("interactive", "Task 1 through the control panel and viewer", ["interactive.py", "--repeats", "3"], 60),
         Step("setups", "time to a lesson kernel and to JupyterLab; install size", ["setups.py", "--repeats", "3"], 40),
-        Step("optimisations", "this round's changes, before and after", ["before_after.py"], 80),
+        Step("optimisations", "this round's changes, before and after", ["before_after.py"], 110),
         Step("grading", f"{submissions} submissions: snakekit grade vs nbgrader vs bare",
              ["run.py", "--grading-step", str(submissions)], 40 + 12 * submissions),
-        Step("container", "the container and compose set-ups (needs a Docker engine)", ["container.py"], 10),
+        Step("container", "the container and compose set-ups (starts the private Docker engine if needed)",
+             ["container.py"], 330),
     ]
 
 
@@ -395,8 +396,9 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     elif o:
         add("## This round's changes, each measured before and after in one run")
         add("")
-        add(f"Before = the library and Makefile at commit `{o['before_rev']}`, after = this tree; the two "
-            "alternate within the run (same machine, same moment), medians of the repeats.")
+        add(f"Before = the library and Makefile at commit `{o['before_rev']}`"
+            + (f" (for the workspace boundary's row: at commit `{o['boundary_rev']}`)" if o.get("boundary_rev") else "")
+            + ", after = this tree; they alternate within the run (same machine, same moment), medians of the repeats.")
         add("")
         add("| change | figure | before | after | effect |")
         add("|---|---|---|---|---|")
