@@ -136,7 +136,9 @@ def main(argv=None) -> int:
 
     proc, port = start_emulator(args.motion)
     try:
-        robot = DynamixelSnake(port)
+        # Both clients share the port, taking turns; the watchdog's keep-alive would talk while
+        # the bare loop is measured, so it is off here (it sends nothing while the bus is busy).
+        robot = DynamixelSnake(port, watchdog=0)
         bare = BareSdkLoop(port)
         rate_snakekit(robot, 0.2), bare.rate(0.2)  # warm up
         ours, theirs = [], []
