@@ -16,6 +16,7 @@ from snakekit.errors import SnakekitError
 from snakekit.trajectory import Trajectory
 
 from . import compare
+from .exercises import RULES
 from .references import TASK2, Reference
 
 __all__ = ["ExerciseScore", "read_handin", "score_exercise"]
@@ -87,6 +88,12 @@ def score_exercise(grade_id: str, handin: dict | None, reference: Reference, max
 
 def _score_values(gid, handin, ex, ref, max_score) -> ExerciseScore:
     tol = ex["tolerances"]
+    if gid in RULES:  # the grader recomputes what the hidden test judges (grader.exercises)
+        checks = RULES[gid](handin, tol)
+        total = sum(c.weight for c in checks)
+        fraction = sum(c.weight * c.fraction for c in checks) / total
+        msg = " ".join(c.message for c in checks if not c.passed) or "all hidden cases within tolerance."
+        return ExerciseScore(gid, round(fraction * max_score, 4), max_score, "scored", msg, tuple(checks))
     inputs = ref[ex["inputs"][0]] if len(ex["inputs"]) == 1 else None
     checks = []
     for name in ex["outputs"]:
