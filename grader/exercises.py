@@ -47,9 +47,19 @@ def _within(got, expected, atol, rtol=1e-9):
 
 
 def _split(rows, n, width):
-    """Rows tagged with their case index in column 0 -> one array per case (shape (k, width))."""
-    rows = np.asarray(rows, dtype=float).reshape(-1, width + 1)
+    """Rows tagged with their case index in column 0 -> one array per case (shape (k, width)).
+
+    None when the rows are not ``width`` numbers plus the index (the results had another shape).
+    """
+    rows = np.asarray(rows, dtype=float)
+    if rows.ndim != 2 or rows.shape[1] != width + 1:
+        return None
     return [rows[rows[:, 0] == k, 1:] for k in range(n)]
+
+
+def _wrong_width(h, what, width) -> Check:
+    return Check(what, 0.0, f"{what}: results of shape {np.shape(h['outputs'])[1:]} per row, expected {width} "
+                            "numbers per row.")
 
 
 # --- lesson 03 ----------------------------------------------------------------------------
@@ -131,6 +141,8 @@ def sample_move(h, tol) -> list[Check]:
     if h.get("outputs") is None:
         return [_shape(h, "outputs", (), "sample_move")]
     got = _split(h["outputs"], len(cases), 1 + SPEC.n_joints)
+    if got is None:
+        return [_wrong_width(h, "sample_move (time and 5 angles per goal)", 1 + SPEC.n_joints)]
     ok, first = [], ""
     for k, (c, g) in enumerate(zip(cases, got)):
         a, b, T, rate = c[:5], c[5:10], c[10], c[11]
@@ -158,6 +170,8 @@ def limit_violations(h, tol) -> list[Check]:
     if h.get("outputs") is None:
         return [_shape(h, "outputs", (), "limit_violations")]
     got = _split(h["outputs"], n, 3)
+    if got is None:
+        return [_wrong_width(h, "limit_violations (time, joint, kind)", 3)]
     ok, first = [], ""
     for k, (pts, g) in enumerate(zip(_split(points, n, 1 + SPEC.n_joints), got)):
         t, p = pts[:, 0], pts[:, 1:]
