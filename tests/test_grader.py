@@ -325,11 +325,14 @@ def test_ik_solutions_judged_by_the_graders_own_kinematics():
     h = dict(ref.arrays[gid])
     assert score_exercise(gid, h, ref, 4).score == 4
     home = score_exercise(gid, {**h, "outputs": np.zeros_like(h["outputs"])}, ref, 4)
-    assert home.score == 2.0 and "tool on target: 8 of 8 hidden cases wrong" in home.message
+    # tool on target 0, joint limits 1, the other hidden checks (the kernel's verdicts) 1
+    assert home.score == pytest.approx(4 * 2 / 3, abs=1e-4) and "tool on target: 8 of 8 hidden cases wrong" in home.message
+    failed = score_exercise(gid, {**h, "flags": np.array([1.0, 0.0])}, ref, 4)
+    assert failed.score == pytest.approx(4 * 2.5 / 3, abs=1e-4) and "1 of 2 failed" in failed.message
     gid = "ex03_4_task1_test"
     h = dict(ref.arrays[gid])
     off = score_exercise(gid, {**h, "outputs": h["outputs"][:2]}, ref, 2)
-    assert off.score == 0 and "results of shape (2, 5), expected (3, 5)" in off.message
+    assert off.score == 1.0 and "results of shape (2, 5), expected (3, 5)" in off.message  # the refusal passed
 
 
 def test_sampled_moves_and_violations_recomputed_by_the_grader():
@@ -354,7 +357,7 @@ def test_safe_move_judged_by_its_planned_duration_and_end():
     slow = h["outputs"].copy()
     slow[0] += 0.05                       # planned 50 ms longer than 1.875 d / v_max
     s = score_exercise(gid, {**h, "outputs": slow}, ref, 3)
-    assert s.score == 1.5 and "move duration" in s.message and "tolerance 0.011 s" in s.message
+    assert s.score == 2.0 and "move duration" in s.message and "tolerance 0.011 s" in s.message
     short = h["outputs"].copy()
     short[6:] = short[1:6]                # ended where it started
-    assert score_exercise(gid, {**h, "outputs": short}, ref, 3).score == 1.5
+    assert score_exercise(gid, {**h, "outputs": short}, ref, 3).score == 2.0   # the refusals (flags) passed
