@@ -16,6 +16,7 @@ from snakekit.errors import SnakekitError
 from snakekit.trajectory import Trajectory
 
 from . import compare
+from .exercises import RULES
 from .references import TASK2, Reference
 
 __all__ = ["ExerciseScore", "read_handin", "score_exercise"]
@@ -87,9 +88,20 @@ def score_exercise(grade_id: str, handin: dict | None, reference: Reference, max
 
 def _score_values(gid, handin, ex, ref, max_score) -> ExerciseScore:
     tol = ex["tolerances"]
+    if gid in RULES:  # the grader recomputes what the hidden test judges (grader.exercises)
+        checks = RULES[gid](handin, tol)
+        if "flags" in ex["outputs"]:
+            checks.append(_flags(handin, ref))
+        total = sum(c.weight for c in checks)
+        fraction = sum(c.weight * c.fraction for c in checks) / total
+        msg = " ".join(c.message for c in checks if not c.passed) or "all hidden cases within tolerance."
+        return ExerciseScore(gid, round(fraction * max_score, 4), max_score, "scored", msg, tuple(checks))
     inputs = ref[ex["inputs"][0]] if len(ex["inputs"]) == 1 else None
     checks = []
     for name in ex["outputs"]:
+        if name == "flags":
+            checks.append(_flags(handin, ref))
+            continue
         if name not in handin:
             return _zero(gid, max_score, "missing",
                          f"no '{name}' was handed in: your function raised an error (or called the library "
@@ -99,6 +111,20 @@ def _score_values(gid, handin, ex, ref, max_score) -> ExerciseScore:
     fraction = float(np.mean([c.fraction for c in checks])) if checks else 1.0
     msg = " ".join(c.message for c in checks if not c.passed) or "all hidden cases within tolerance."
     return ExerciseScore(gid, round(fraction * max_score, 4), max_score, "scored", msg, tuple(checks))
+
+
+def _flags(handin, ref) -> compare.Check:
+    """The verdicts (1 passed, 0 failed) of the hidden checks that come after the results: a
+    refusal, an error that must be raised, an edge case. The kernel reports them."""
+    want = np.asarray(ref["flags"], dtype=float)
+    got = np.asarray(handin.get("flags", np.zeros_like(want)), dtype=float)
+    if got.shape != want.shape:
+        return compare.Check("other hidden checks", 0.0, f"other hidden checks: {got.size} verdicts handed in, "
+                                                          f"expected {want.size}.")
+    failed = int((got != want).sum())
+    return compare.Check("other hidden checks", 1.0 - failed / want.size,
+                         f"other hidden checks (a refusal, an error to raise, an edge case): {failed} of {want.size} "
+                         "failed." if failed else f"other hidden checks: all {want.size} passed.")
 
 
 def _label(grade_id: str) -> str:

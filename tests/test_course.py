@@ -159,6 +159,22 @@ def test_every_exercise_hands_in_for_the_grader(autograded, name):
             assert z.files, f"{gid} handed in an empty file"
 
 
+@pytest.mark.parametrize("name", SOURCES)
+def test_every_exercise_scores_full_marks_out_of_the_kernel(autograded, name):
+    """The grader's own process scores each hand-in against grader/references/: full marks."""
+    need("numpy")
+    from grader.references import REFERENCES, Reference
+    from grader.score import read_handin, score_exercise
+
+    reference = Reference.load(REFERENCES / f"{name}.npz")
+    reference.check_current()
+    graded = graded_cells(read(COURSE / "source" / name / f"{name}.ipynb"))
+    assert sorted(reference.exercises) == sorted(graded), "every test cell is scored from its hand-in"
+    for gid, cell in graded.items():
+        sc = score_exercise(gid, read_handin(autograded["handin"] / f"{gid}.npz"), reference, cell["points"])
+        assert (sc.score, sc.status) == (cell["points"], "scored"), (gid, sc.message)
+
+
 # --- the README's lesson table is the course's ------------------------------------------------
 
 EXERCISE = re.compile(r"^### Exercise (\d+\.\d+) \((\d+) points?\): `(\w+)\(", re.M)

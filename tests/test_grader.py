@@ -113,7 +113,12 @@ def test_fixture_reference_is_current():
 
 @pytest.mark.parametrize("path", sorted(COURSE_REFERENCES.glob("*.npz")), ids=lambda p: p.stem)
 def test_course_references_are_current(path):
-    assert references_main([path.stem, "--check"]) == 0
+    # as a developer runs it (in-process under pytest's captured output, lesson 00's kernel,
+    # which starts the meshcat viewer, was seen to stall)
+    r = subprocess.run([sys.executable, "-m", "grader.references", path.stem, "--check"], capture_output=True,
+                       text=True, cwd=REPO, timeout=900,
+                       env={**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"})
+    assert r.returncode == 0 and f"{path.name} is current" in r.stdout, r.stderr[-3000:]
 
 
 def test_stale_reference_is_reported(tmp_path, capsys):
@@ -298,3 +303,66 @@ def test_kernel_verdict_hides_a_hidden_tests_message():
     assert fails_at(1).message == "a visible check failed: AssertionError: f(7) should be 49"
     cell.outputs = []
     assert Grader._kernel_score("t", info, nb).score == 2.0
+
+
+# --- grader.exercises: rules that recompute what a hidden test judges ---------------------------
+
+
+def _course_ref(name):
+    return Reference.load(COURSE_REFERENCES / f"{name}.npz")
+
+
+def test_two_link_ik_judged_by_the_tip_and_the_elbow_order():
+    gid, ref = "ex03_1_two_link_ik_test", _course_ref("03_inverse_kinematics")
+    h = dict(ref.arrays[gid])
+    assert score_exercise(gid, h, ref, 4).score == 4
+    # other angles that reach the same tip (q1 + 2 pi) are as right
+    assert score_exercise(gid, {**h, "outputs": h["outputs"] + [2 * np.pi, 0]}, ref, 4).score == 4
+    swapped = score_exercise(gid, {**h, "outputs": h["outputs"][:, ::-1]}, ref, 4)  # the stretched case stays right
+    assert swapped.score == pytest.approx(4 * (1 + 1 / 11) / 2, abs=1e-4)
+    assert "elbow order: 10 of 11 hidden cases wrong" in swapped.message
+    degrees = score_exercise(gid, {**h, "outputs": np.degrees(h["outputs"])}, ref, 4)
+    assert degrees.score < 2.5 and "tip of both solutions" in degrees.message and "tolerance 1e-09 m" in degrees.message
+
+
+def test_ik_solutions_judged_by_the_graders_own_kinematics():
+    gid, ref = "ex03_3_ik_loop_test", _course_ref("03_inverse_kinematics")
+    h = dict(ref.arrays[gid])
+    assert score_exercise(gid, h, ref, 4).score == 4
+    home = score_exercise(gid, {**h, "outputs": np.zeros_like(h["outputs"])}, ref, 4)
+    # tool on target 0, joint limits 1, the other hidden checks (the kernel's verdicts) 1
+    assert home.score == pytest.approx(4 * 2 / 3, abs=1e-4) and "tool on target: 8 of 8 hidden cases wrong" in home.message
+    failed = score_exercise(gid, {**h, "flags": np.array([1.0, 0.0])}, ref, 4)
+    assert failed.score == pytest.approx(4 * 2.5 / 3, abs=1e-4) and "1 of 2 failed" in failed.message
+    gid = "ex03_4_task1_test"
+    h = dict(ref.arrays[gid])
+    off = score_exercise(gid, {**h, "outputs": h["outputs"][:2]}, ref, 2)
+    assert off.score == 1.0 and "results of shape (2, 5), expected (3, 5)" in off.message  # the refusal passed
+
+
+def test_sampled_moves_and_violations_recomputed_by_the_grader():
+    ref = _course_ref("04_trajectories")
+    for gid in ("ex04_3_sample_10hz_test", "ex04_4_limit_check_test"):
+        h = dict(ref.arrays[gid])
+        assert score_exercise(gid, h, ref, 3).score == 3
+        assert score_exercise(gid, {**h, "outputs": h["outputs"][1:]}, ref, 3).score < 3        # a row missing
+        nudged = h["outputs"].copy()
+        nudged[5, 2] += 1e-6
+        assert score_exercise(gid, {**h, "outputs": nudged}, ref, 3).score < 3
+        assert score_exercise(gid, {**h, "outputs": h["outputs"][:, :-1]}, ref, 3).score == 0  # another width
+    missing_one = score_exercise("ex04_4_limit_check_test", {**ref.arrays["ex04_4_limit_check_test"],
+                                 "outputs": ref.arrays["ex04_4_limit_check_test"]["outputs"][1:]}, ref, 3)
+    assert "violations (time, joint, kind), you found" in missing_one.message
+
+
+def test_safe_move_judged_by_its_planned_duration_and_end():
+    gid, ref = "ex07_2_safe_move_test", _course_ref("07_real_robot")
+    h = dict(ref.arrays[gid])
+    assert score_exercise(gid, h, ref, 3).score == 3
+    slow = h["outputs"].copy()
+    slow[0] += 0.05                       # planned 50 ms longer than 1.875 d / v_max
+    s = score_exercise(gid, {**h, "outputs": slow}, ref, 3)
+    assert s.score == 2.0 and "move duration" in s.message and "tolerance 0.011 s" in s.message
+    short = h["outputs"].copy()
+    short[6:] = short[1:6]                # ended where it started
+    assert score_exercise(gid, {**h, "outputs": short}, ref, 3).score == 2.0   # the refusals (flags) passed

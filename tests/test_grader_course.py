@@ -1,4 +1,4 @@
-"""The course's lesson 06 graded as a TA does it: notebooks in course/submitted/, one command."""
+"""The course graded as a TA does it (lessons 06 and 01): notebooks in course/submitted/, one command."""
 
 from __future__ import annotations
 
@@ -17,21 +17,21 @@ REPO = Path(__file__).resolve().parent.parent
 LESSON = "06_coded_sweep"
 
 
-def _solutions():
-    nb = nbformat.read(REPO / "course" / "source" / LESSON / f"{LESSON}.ipynb", as_version=4)
+def _solutions(lesson=LESSON):
+    nb = nbformat.read(REPO / "course" / "source" / lesson / f"{lesson}.ipynb", as_version=4)
     return {c.metadata["nbgrader"]["grade_id"]: c.source for c in nb.cells
             if c.metadata.get("nbgrader", {}).get("solution")}
 
 
-def _hand_in(course: Path, student: str, answers: dict) -> None:
-    nb = nbformat.read(REPO / "notebooks" / f"{LESSON}.ipynb", as_version=4)  # what the student was given
+def _hand_in(course: Path, student: str, answers: dict, lesson=LESSON) -> None:
+    nb = nbformat.read(REPO / "notebooks" / f"{lesson}.ipynb", as_version=4)  # what the student was given
     for c in nb.cells:
         gid = c.metadata.get("nbgrader", {}).get("grade_id")
         if gid in answers:
             c.source = answers[gid]
-    folder = course / "submitted" / student / LESSON
+    folder = course / "submitted" / student / lesson
     folder.mkdir(parents=True)
-    nbformat.write(nb, folder / f"{LESSON}.ipynb")
+    nbformat.write(nb, folder / f"{lesson}.ipynb")
 
 
 @pytest.fixture(scope="module")
@@ -92,3 +92,44 @@ def test_task2_feedback_plots_the_run_against_the_reference(graded):
     html = (course / "feedback" / "ana" / LESSON / f"{LESSON}.html").read_text()
     assert "Grader: ex06_3_task2_test: 10 / 10 points" in html
     assert 'alt="No description has been provided for this image" class="" src="data:image/png;base64,' in html
+
+
+# --- lesson 01: scored out of the kernel too, so patching numpy and the checks earns nothing ----
+
+LESSON01 = "01_forward_kinematics"
+CHEAT = ("import numpy\n"
+         "numpy.allclose = lambda *a, **k: True                  # patch numpy\n"
+         "checks.Exercise.close = lambda self, *a, **k: None     # and the checks: every comparison passes\n"
+         "def planar_fk(q):\n"
+         "    return np.zeros(3)\n")
+
+
+@pytest.fixture(scope="module")
+def graded01(tmp_path_factory):
+    need_program("unshare")
+    tmp = tmp_path_factory.mktemp("course01")
+    course = tmp / "course"
+    shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
+        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log"))
+    sol = _solutions(LESSON01)
+    _hand_in(course, "ana", sol, LESSON01)
+    _hand_in(course, "mal", {**sol, "ex01_1_planar_fk": CHEAT}, LESSON01)
+    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", LESSON01, "--course", str(course)],
+                       capture_output=True, text=True, timeout=900, cwd=REPO)
+    return course, r
+
+
+def test_lesson01_patching_numpy_and_the_checks_scores_0_for_that_exercise(graded01):
+    course, r = graded01
+    assert r.returncode == 0, r.stderr[-3000:]
+    rows = read_csv(course / f"grades-{LESSON01}.csv")
+    # ex01_1 (4 points) is the one cheated on; ex01_2 (3) and ex01_3 (1) are the instructor's
+    assert {s: (rows[s]["score"], rows[s]["max_score"], rows[s]["status"]) for s in rows} == {
+        "ana": ("8", "8", "graded"), "mal": ("4", "8", "graded")}
+    # in the kernel the patched checks passed: nbgrader alone would have given the 4 points
+    ran = nbformat.read(course / "autograded" / "mal" / LESSON01 / f"{LESSON01}.ipynb", as_version=4)
+    test = next(c for c in ran.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex01_1_planar_fk_test")
+    assert not [o for o in test.outputs if o.output_type == "error"]
+    html = (course / "feedback" / "mal" / LESSON01 / f"{LESSON01}.html").read_text()
+    assert "Grader: ex01_1_planar_fk_test: 0 / 4 points" in html
+    assert "planar_fk: 23 of 23 hidden cases wrong" in html
