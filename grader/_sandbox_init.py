@@ -56,14 +56,15 @@ def main():
     lim = cfg["limits"]
     mount(None, "/", None, MS_REC | MS_PRIVATE)
     mount("tmpfs", root, "tmpfs", MS_NOSUID | MS_NODEV, "mode=0755,size=4m")
+    for d in ("tmp", "proc", "dev", "dev/shm"):
+        os.makedirs(inside(root, d), exist_ok=True)
+    # the private /tmp first: a kit installed under /tmp (a fresh clone there) is bound into it
+    mount("tmpfs", inside(root, "tmp"), "tmpfs", MS_NOSUID | MS_NODEV, f"mode=1777,size={lim['tmp']}")
     for src in cfg["binds"]:
         bind(root, src)
     for path in cfg["hide"]:
         if os.path.isdir(inside(root, path)):
             mount("tmpfs", inside(root, path), "tmpfs", MS_RDONLY | MS_NOSUID | MS_NODEV | MS_NOEXEC, "size=4k,mode=0555")
-    for d in ("tmp", "proc", "dev", "dev/shm"):
-        os.makedirs(inside(root, d), exist_ok=True)
-    mount("tmpfs", inside(root, "tmp"), "tmpfs", MS_NOSUID | MS_NODEV, f"mode=1777,size={lim['tmp']}")
     mount("proc", inside(root, "proc"), "proc", MS_NOSUID | MS_NODEV | MS_NOEXEC)
     mount("tmpfs", inside(root, "dev"), "tmpfs", MS_NOSUID | MS_NOEXEC, "mode=0755,size=64k")
     for node in ("null", "zero", "full", "random", "urandom"):

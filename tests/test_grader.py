@@ -366,3 +366,27 @@ def test_safe_move_judged_by_its_planned_duration_and_end():
     short = h["outputs"].copy()
     short[6:] = short[1:6]                # ended where it started
     assert score_exercise(gid, {**h, "outputs": short}, ref, 3).score == 2.0   # the refusals (flags) passed
+
+
+def test_a_kit_installed_under_tmp_is_seen_inside_the_sandbox(tmp_path, monkeypatch):
+    """A clone under /tmp (its venv and packages there) stays visible past the private /tmp."""
+    need_program("unshare")
+    from grader import sandbox
+
+    kit = tmp_path / "kit"  # pytest's tmp_path lies under /tmp
+    kit.mkdir()
+    (kit / "marker.txt").write_text("the kit is here")
+    assert str(kit).startswith("/tmp/")
+    binds = sandbox.default_binds()
+    monkeypatch.setattr(sandbox, "default_binds", lambda: binds + [str(kit)])
+    work = tmp_path / "work"
+    work.mkdir()
+    script = (f"import os; print(open({str(kit / 'marker.txt')!r}).read()); "
+              "open('/tmp/scratch', 'w').write('x'); print(sorted(os.listdir('/tmp')))")
+    with open(tmp_path / "out.txt", "w") as out:
+        outcome = sandbox.run([sys.executable, "-c", script], workdir=work, env={"PATH": "/usr/bin:/bin"},
+                              limits=sandbox.Limits(wall=60), stdout=out, stderr=subprocess.STDOUT)
+    text = (tmp_path / "out.txt").read_text()
+    assert outcome.returncode == 0, text
+    assert "the kit is here" in text
+    assert not (Path("/tmp") / "scratch").exists() or (Path("/tmp") / "scratch").read_text() != "x"  # private /tmp
