@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import statistics
 import time
+import urllib.request
 
 
 def per_call(fn, *, number: int, repeat: int = 7) -> float:
@@ -135,3 +136,21 @@ class Sampler:
                 "cpu_avg": total_cpu / max(wall, 1e-6),
                 "rss_peak": max(self._peak, max(s[2] for s in self.samples)),
                 "pss_peak": max(s[3] for s in self.samples), "wall": wall}
+
+
+def wait_for_lab(port: int, token: str, t0: float, timeout: float, *, gone=lambda: None,
+                 poll: float = 0.05) -> float:
+    """Seconds since ``t0`` until JupyterLab on ``port`` serves /lab with ``token`` (as a browser
+    has it). ``gone()`` returns why the server can no longer come up (it exited), or None."""
+    while time.perf_counter() - t0 < timeout:
+        why = gone()
+        if why:
+            raise RuntimeError(why)
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/lab?token={token}", timeout=2) as r:
+                if r.status == 200 and b"jupyter-config-data" in r.read():
+                    return time.perf_counter() - t0
+        except OSError:
+            pass
+        time.sleep(poll)
+    raise RuntimeError(f"JupyterLab was not ready within {timeout:g} s")

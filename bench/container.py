@@ -31,12 +31,12 @@ import socket
 import subprocess
 import sys
 import time
-import urllib.request
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
+import _common  # noqa: E402
 from _common import add_json_argument, spread, write_json  # noqa: E402
 
 IMAGE = os.environ.get("SNAKEKIT_IMAGE", "snakekit-lab:latest")
@@ -97,15 +97,7 @@ def free_range(count: int = 10, start: int = 17000) -> str:
 
 
 def wait_for_lab(port: int, t0: float, timeout: float = 180.0) -> float:
-    while time.perf_counter() - t0 < timeout:
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/lab?token={TOKEN}", timeout=2) as r:
-                if r.status == 200 and b"jupyter-config-data" in r.read():
-                    return time.perf_counter() - t0
-        except OSError:
-            pass
-        time.sleep(0.05)
-    raise RuntimeError(f"JupyterLab in the container was not ready within {timeout:g} s")
+    return _common.wait_for_lab(port, TOKEN, t0, timeout)
 
 
 class Single:

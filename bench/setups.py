@@ -24,11 +24,10 @@ import socket
 import subprocess
 import sys
 import time
-import urllib.request
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import add_json_argument, spread, write_json  # noqa: E402
+from _common import add_json_argument, spread, wait_for_lab, write_json  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 # the lessons: this repository's, or the container image's copy (bench/container.py runs this there)
@@ -74,17 +73,12 @@ def time_to_lab(command: list[str] | None = None, port: int | None = None, timeo
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     try:
-        while time.perf_counter() - t0 < timeout:
+        def gone():
             if proc.poll() is not None:
-                raise RuntimeError(f"`{' '.join(cmd)}` exited with code {proc.returncode} before JupyterLab was ready")
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/lab?token={token}", timeout=2) as r:
-                    if r.status == 200 and b"jupyter-config-data" in r.read():
-                        return time.perf_counter() - t0
-            except OSError:
-                pass
-            time.sleep(0.02)
-        raise RuntimeError(f"JupyterLab was not ready within {timeout:g} s")
+                return f"`{' '.join(cmd)}` exited with code {proc.returncode} before JupyterLab was ready"
+            return None
+
+        return wait_for_lab(port, token, t0, timeout, gone=gone, poll=0.02)
     finally:
         os.killpg(proc.pid, signal.SIGTERM)
         try:

@@ -42,6 +42,18 @@ def _shape(h, name, shape, what) -> Check | None:
     return None
 
 
+def _first_failed(ok) -> int:
+    """Index of the first failed case (0 when all passed: the message is then not shown)."""
+    return int(np.argmax(~ok)) if not ok.all() else 0
+
+
+def _tool_xy(q) -> np.ndarray:
+    """The tool point [x, y] of each row of joint angles, by the kit's own FK (the grader's process)."""
+    from snakekit.kinematics import tool_pose_2d
+
+    return np.array([tool_pose_2d(row)[:2] for row in q])
+
+
 def _within(got, expected, atol, rtol=1e-9):
     return np.abs(np.asarray(got, float) - expected) <= atol + rtol * np.abs(expected)
 
@@ -82,9 +94,9 @@ def two_link_ik(h, tol) -> list[Check]:
     target = np.stack([x, y], axis=-1)[:, None, :]
     on_target = _within(tips, target, tol["atol"], tol["rtol"]).all(axis=(1, 2))
     ordered = (q[:, 0, 1] >= -1e-9) & (q[:, 1, 1] <= 1e-9)
-    k = int(np.argmax(~on_target)) if not on_target.all() else 0
+    k = _first_failed(on_target)
     off = np.abs(tips[k] - target[k]).max()
-    m = int(np.argmax(~ordered)) if not ordered.all() else 0
+    m = _first_failed(ordered)
     return [_cases(on_target, "tip of both solutions",
                    f"target ({x[k]:.6g}, {y[k]:.6g}) m, links {l1[k]:.6g} and {l2[k]:.6g} m: the angles "
                    f"{np.round(q[k], 6).tolist()} put the tip {off:.3g} m away (tolerance {tol['atol']:.2g} m)."),
@@ -95,18 +107,16 @@ def two_link_ik(h, tol) -> list[Check]:
 
 def ik_loop(h, tol) -> list[Check]:
     """The solution must lie inside the joint limits and put the tool on the target (1e-5 m)."""
-    from snakekit.kinematics import tool_pose_2d
-
     targets = h["inputs"]
     bad = _shape(h, "outputs", (len(targets), SPEC.n_joints), "solve_ik")
     if bad:
         return [bad]
     q = h["outputs"]
-    tool = np.array([tool_pose_2d(row)[:2] for row in q])
+    tool = _tool_xy(q)
     on_target = _within(tool, targets, tol["atol"], 0.0).all(axis=1)
     inside = ((q >= SPEC.lower - 1e-12) & (q <= SPEC.upper + 1e-12)).all(axis=1)
-    k = int(np.argmax(~on_target)) if not on_target.all() else 0
-    m = int(np.argmax(~inside)) if not inside.all() else 0
+    k = _first_failed(on_target)
+    m = _first_failed(inside)
     return [_cases(on_target, "tool on target",
                    f"target ({targets[k, 0]:.6g}, {targets[k, 1]:.6g}) m: your angles put the tool "
                    f"{np.abs(tool[k] - targets[k]).max():.3g} m away (tolerance {tol['atol']:.2g} m)."),
@@ -117,15 +127,13 @@ def ik_loop(h, tol) -> list[Check]:
 
 def task1(h, tol) -> list[Check]:
     """One move per target, each ending with the tool within 3 mm of it (the servo settles)."""
-    from snakekit.kinematics import tool_pose_2d
-
     targets = h["inputs"]
     bad = _shape(h, "outputs", (len(targets), SPEC.n_joints), "task1 (the final angles of its moves)")
     if bad:
         return [bad]
-    tool = np.array([tool_pose_2d(row)[:2] for row in h["outputs"]])
+    tool = _tool_xy(h["outputs"])
     ok = _within(tool, targets[:, :2], tol["atol"], 0.0).all(axis=1)
-    k = int(np.argmax(~ok)) if not ok.all() else 0
+    k = _first_failed(ok)
     return [_cases(ok, "tool after each move",
                    f"move {k + 1} to ({targets[k, 0]:.4f}, {targets[k, 1]:.4f}) m ended with the tool at "
                    f"({tool[k, 0]:.4f}, {tool[k, 1]:.4f}) m, {np.abs(tool[k] - targets[k, :2]).max() * 1000:.3g} mm "

@@ -103,6 +103,14 @@ class SyncRead(sdk.GroupSyncRead):
         self.last_result = True
         return result
 
+    def exchange(self) -> tuple[int, None]:
+        """One SyncRead, for :meth:`Bus.retry`: corrupt unless every servo's whole block arrived."""
+        result = self.txRxPacket()
+        if result == sdk.COMM_SUCCESS and not all(self.isAvailable(i, self.start_address, self.data_length)
+                                                  for i in self.data_dict):
+            result = sdk.COMM_RX_CORRUPT
+        return result, None
+
 
 class Bus:
     """One open Dynamixel bus: the SDK port and packet handler, a lock, and the retry loop.

@@ -282,15 +282,8 @@ class DynamixelSnake(WatchdogMixin, Robot):
         """One SyncRead of Present Load, Velocity and Position: the present joint state."""
         self._check_open()
         reader = self._reader
-
-        def once():
-            result = reader.txRxPacket()
-            if result == sdk.COMM_SUCCESS and not all(reader.isAvailable(i, *STATE_BLOCK) for i in self.ids):
-                result = sdk.COMM_RX_CORRUPT
-            return result, None
-
         t_sent = self._now()
-        result, _ = self.bus.retry(once)
+        result, _ = self.bus.retry(reader.exchange)
         if result != sdk.COMM_SUCCESS:
             self._fail(f"servo {reader.failed_id} on {self.port_name} did not answer the SyncRead of the "
                        f"joint state ({describe(result)}, {self._tries()})", result)

@@ -81,14 +81,7 @@ class WatchdogMixin:
         """
         self._check_open()
         status = self._status
-
-        def once():
-            result = status.txRxPacket()
-            if result == sdk.COMM_SUCCESS and not all(status.isAvailable(i, *STATUS_BLOCK) for i in self.ids):
-                result = sdk.COMM_RX_CORRUPT
-            return result, None
-
-        result, _ = self.bus.retry(once)
+        result, _ = self.bus.retry(status.exchange)
         if result != sdk.COMM_SUCCESS:
             self._fail(f"servo {status.failed_id} on {self.port_name} did not answer the SyncRead of its "
                        f"status ({describe(result)}, {self._tries()})", result)
