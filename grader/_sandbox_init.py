@@ -49,9 +49,8 @@ def bind(root, src, readonly=True, extra=0):
         mount(None, dst, None, MS_REMOUNT | MS_BIND | MS_RDONLY | MS_NOSUID | MS_NODEV | extra)
 
 
-def main():
-    with open(sys.argv[1]) as f:
-        cfg = json.load(f)
+def enter(cfg):
+    """Build the sandbox from ``cfg`` and enter it: its root, folder, limits and user."""
     root = cfg["root"]
     lim = cfg["limits"]
     mount(None, "/", None, MS_REC | MS_PRIVATE)
@@ -91,6 +90,12 @@ def main():
         os.setgid(cfg["gid"])
         os.setuid(cfg["uid"])
     libc.prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0)
+
+
+def main():
+    with open(sys.argv[1]) as f:
+        cfg = json.load(f)
+    enter(cfg)
     os.execve(cfg["argv"][0], cfg["argv"], cfg["env"])
 
 

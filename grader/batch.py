@@ -28,7 +28,7 @@ import tempfile
 import threading
 import time
 import warnings
-from concurrent.futures import ThreadPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -283,6 +283,7 @@ class Grader:
         self.progress = progress
         self.workroot = workroot
         self.use_sandbox = use_sandbox
+        self.server = None
         self._lock = threading.Lock()
 
     def students(self) -> list[str]:
@@ -298,36 +299,52 @@ class Grader:
         # a submission's duplicated or missing cell ids are repaired on reading; nothing for the TA to do
         warnings.filterwarnings("ignore", category=DuplicateCellId)
         warnings.filterwarnings("ignore", category=MissingIDFieldWarning)
-        self.a = load_assignment(self.course, self.assignment, self.references)
-        if self.use_sandbox:
-            sandbox.check_available()
         base = Path(tempfile.mkdtemp(prefix="snakekit-grade-", dir=self.workroot))
         os.chmod(base, 0o711)  # the sandbox user may pass through, never list
+        server = None
         try:
             self.base = base
+            if self.use_sandbox:
+                sandbox.check_available()
+                server = self._start_fork_server(base)  # it imports for a second while the batch is set up
+            self.a = load_assignment(self.course, self.assignment, self.references)
             _template_gradebook(self.course, self.a, base / "template.db")
-            self._mpl_cache(base / "mplcache")
-            results = []
-            bar = Progress(len(students), self.progress, self.jobs)
-            with ThreadPoolExecutor(self.jobs) as pool:
-                futures = {pool.submit(self._grade_one, s): s for s in students}
-                for fut in as_completed(futures):
-                    s = futures[fut]
+            self.server = self._fork_server_ready(server)  # it built matplotlib's font cache in base/mplcache
+            if not (base / "mplcache").is_dir():
+                self._mpl_cache(base / "mplcache")
+            return self._grade_all(students)
+        finally:
+            if server is not None:
+                server.close()
+            self.server = None
+            shutil.rmtree(base, ignore_errors=True)
+
+    def _grade_all(self, students: list[str]) -> list[SubmissionResult]:
+        """Sandboxes run ``jobs`` at a time; scoring and feedback run beside them, in this process."""
+        results = []
+        bar = Progress(len(students), self.progress, self.jobs)
+        with ThreadPoolExecutor(self.jobs) as pool, ThreadPoolExecutor(1) as post:
+            pending = {pool.submit(self._grade_one, s): s for s in students}
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    s = pending.pop(fut)
                     try:
                         r = fut.result()
                     except Exception as e:  # noqa: BLE001 - one submission never stops the batch
                         r = SubmissionResult(s, self.assignment, 0.0, self.a.max_score, "grader error",
                                              f"{type(e).__name__}: {e}")
+                    if callable(r):  # ran: score it and write the feedback, while the next sandbox runs
+                        pending[post.submit(r)] = s
+                        continue
                     try:
                         self._record(r)  # only this thread writes the gradebook
                     except Exception as e:  # noqa: BLE001
                         raise GradingError(f"cannot write {s}'s grade to the gradebook: {e}") from e
                     results.append(r)
                     bar.update(r.status != "graded")
-            bar.close()
-            return sorted(results, key=lambda r: r.student)
-        finally:
-            shutil.rmtree(base, ignore_errors=True)
+        bar.close()
+        return sorted(results, key=lambda r: r.student)
 
     def _mpl_cache(self, path: Path) -> None:
         """Build matplotlib's font list once; each sandbox starts with a copy."""
@@ -337,7 +354,34 @@ class Grader:
         subprocess.run([sys.executable, "-c", "import matplotlib.font_manager"], env={**os.environ, "MPLCONFIGDIR": str(path)},
                        capture_output=True, timeout=120)
 
-    def _grade_one(self, student: str) -> SubmissionResult:
+    def _start_fork_server(self, base: Path):
+        """Start the batch's warm fork server (:mod:`grader.forkserver`), or None if it cannot start."""
+        from .forkserver import ForkServer
+
+        try:
+            extra = {k: os.environ[k] for k in ("SNAKEKIT_FORKSERVER_PRELOAD",) if k in os.environ}
+            return ForkServer({**self._env(base), "MPLCONFIGDIR": str(base / "mplcache"), **extra})
+        except Exception as e:  # noqa: BLE001
+            self._no_server(e)
+            return None
+
+    def _fork_server_ready(self, server):
+        """The started server once it has imported everything; None (each sandbox then starts
+        Python afresh: slower, same grades) if it could not."""
+        if server is None:
+            return None
+        try:
+            return server.wait_ready()
+        except Exception as e:  # noqa: BLE001
+            self._no_server(e)
+            return None
+
+    @staticmethod
+    def _no_server(e: Exception) -> None:
+        warnings.warn(f"grading without the fork server (each submission starts Python afresh): {e}", stacklevel=3)
+
+    def _grade_one(self, student: str):
+        """Run one submission's sandbox; returns its result, or (it ran) the call that scores it."""
         t0 = time.monotonic()
         a = self.a
         src = self.course / "submitted" / student / a.name
@@ -385,9 +429,13 @@ class Grader:
             (work / d).mkdir()
         shutil.copytree(self.base / "mplcache", work / "home" / ".mpl")
         outcome = self._execute(work, student)
-        result = self._collect(work, student, nbs, tampered, problems, outcome, t0)
-        shutil.rmtree(work, ignore_errors=True)
-        return result
+
+        def finish() -> SubmissionResult:
+            try:
+                return self._collect(work, student, nbs, tampered, problems, outcome, t0)
+            finally:
+                shutil.rmtree(work, ignore_errors=True)
+        return finish
 
     def _env(self, work: Path) -> dict:
         venv_bin = str(Path(os.path.abspath(sys.executable)).parent)
@@ -401,7 +449,10 @@ class Grader:
 
     def _execute(self, work: Path, student: str) -> sandbox.Outcome:
         argv = [os.path.abspath(sys.executable), "-m", "grader.worker", str(work / "course"), self.a.name, student,
-                str(int(self.timeout))]
+                str(int(self.timeout)), str(len(self.a.notebooks))]
+        if self.use_sandbox and self.server is not None:
+            return sandbox.run_forked(self.server, argv, workdir=work, env=self._env(work), limits=self.limits,
+                                      hide=[str(self.course)], log=work.parent / f".{work.name}.log")
         with open(work.parent / f".{work.name}.log", "wb") as log:
             if self.use_sandbox:
                 return sandbox.run(argv, workdir=work, env=self._env(work), limits=self.limits,

@@ -120,21 +120,7 @@ def run(argv: list[str], *, workdir: Path, env: dict, limits: Limits, hide: list
     of the sandbox is killed).
     """
     workdir = Path(workdir)
-    uid = gid = None
-    if os.geteuid() == 0 and user:
-        uid, gid = ensure_user(user)
-        _chown_tree(workdir, uid, gid)
-    config = {
-        "root": str(workdir / ".root"),
-        "binds": default_binds(),
-        "hide": [str(PACKAGE_ROOT / "grader" / "references"), *map(str, hide)],
-        "workdir": str(workdir),
-        "uid": uid, "gid": gid,
-        "limits": {"as": limits.memory, "cpu": int(limits.cpu), "fsize": limits.file_size,
-                   "tmp": limits.tmp_size},
-        "argv": argv, "env": env,
-    }
-    (workdir / ".root").mkdir(exist_ok=True)
+    config = _config(argv, workdir, env, limits, hide, user)
     cfg = workdir.parent / f".{workdir.name}.sandbox.json"  # outside the sandbox's view
     cfg.write_text(json.dumps(config))
     t0 = time.monotonic()
@@ -154,6 +140,35 @@ def run(argv: list[str], *, workdir: Path, env: dict, limits: Limits, hide: list
             proc.wait()
         cfg.unlink(missing_ok=True)
     return Outcome(None if timed_out else proc.returncode, timed_out, time.monotonic() - t0)
+
+
+def run_forked(server, argv: list[str], *, workdir: Path, env: dict, limits: Limits, log: Path,
+               hide: list[str] = (), user: str | None = USER) -> Outcome:
+    """:func:`run`, forked from a warm :class:`grader.forkserver.ForkServer`; output goes to ``log``."""
+    workdir = Path(workdir)
+    config = {**_config(argv, workdir, env, limits, hide, user), "log": str(log)}
+    t0 = time.monotonic()
+    code, timed_out = server.run(config, limits.wall)
+    return Outcome(code, timed_out, time.monotonic() - t0)
+
+
+def _config(argv, workdir: Path, env: dict, limits: Limits, hide, user) -> dict:
+    """What the sandbox's first process needs (read by :func:`grader._sandbox_init.enter`)."""
+    uid = gid = None
+    if os.geteuid() == 0 and user:
+        uid, gid = ensure_user(user)
+        _chown_tree(workdir, uid, gid)
+    (workdir / ".root").mkdir(exist_ok=True)
+    return {
+        "root": str(workdir / ".root"),
+        "binds": default_binds(),
+        "hide": [str(PACKAGE_ROOT / "grader" / "references"), *map(str, hide)],
+        "workdir": str(workdir),
+        "uid": uid, "gid": gid,
+        "limits": {"as": limits.memory, "cpu": int(limits.cpu), "fsize": limits.file_size,
+                   "tmp": limits.tmp_size},
+        "argv": list(argv), "env": env,
+    }
 
 
 def _chown_tree(root: Path, uid: int, gid: int) -> None:

@@ -1,6 +1,6 @@
 """Inside the sandbox: nbgrader's autograde of one submission, on the sandbox's own course copy.
 
-``python -m grader.worker COURSE_DIR ASSIGNMENT STUDENT CELL_TIMEOUT`` runs nbgrader's
+``python -m grader.worker COURSE_DIR ASSIGNMENT STUDENT CELL_TIMEOUT [NOTEBOOKS]`` runs nbgrader's
 ``autograde`` (its sanitising, hidden-test injection from the gradebook copy, execution and
 scoring) and writes ``result.json`` next to the course copy: whether nbgrader succeeded, and
 the tail of its log. The grader's parent process trusts none of it for points.
@@ -13,7 +13,8 @@ import sys
 from pathlib import Path
 
 
-def main(argv: list[str]) -> int:
+def main(argv: list[str], *, warm: bool = False) -> int:
+    """Autograde one submission; ``warm``: fork the kernels from this process (see :mod:`grader.warmkernel`)."""
     course, assignment, student, timeout = Path(argv[0]), argv[1], argv[2], int(argv[3])
     result_path = course.parent / "result.json"
     result = {"success": False, "error": "", "log": ""}
@@ -22,6 +23,10 @@ def main(argv: list[str]) -> int:
     # at import: about 1 s per sandbox, for an "iri" string format no notebook schema uses.
     sys.modules.setdefault("rfc3987_syntax", None)
     try:
+        if warm:
+            from . import warmkernel
+
+            warmkernel.prefork(int(argv[4]) if len(argv) > 4 else 1)  # one kernel per notebook
         from nbgrader.apps import NbGraderAPI
         from nbgrader.coursedir import CourseDirectory
         from traitlets.config import Config
@@ -32,12 +37,18 @@ def main(argv: list[str]) -> int:
         config.Execute.interrupt_on_timeout = True
         config.Execute.extra_arguments = ["--HistoryManager.hist_file=:memory:"]
         config.NbGraderAPI.timezone = "UTC"
+        if warm:
+            from nbgrader.preprocessors import execute
+
+            execute.AsyncKernelManager = warmkernel.WarmKernelManager  # Execute passes it as kernel_manager_class
         api = NbGraderAPI(CourseDirectory(config=config), config=config)
         out = api.autograde(assignment, student, force=True, create=True)
         result = {"success": bool(out.get("success")), "error": str(out.get("error", ""))[-4000:],
                   "log": str(out.get("log", ""))[-8000:]}
     except BaseException as e:  # noqa: BLE001 - report whatever stopped nbgrader
         result = {"success": False, "error": f"{type(e).__name__}: {e}"[-4000:], "log": ""}
+    if "grader.warmkernel" in sys.modules:
+        sys.modules["grader.warmkernel"].discard()
     result_path.write_text(json.dumps(result))
     return 0 if result["success"] else 3
 

@@ -390,3 +390,75 @@ def test_a_kit_installed_under_tmp_is_seen_inside_the_sandbox(tmp_path, monkeypa
     assert outcome.returncode == 0, text
     assert "the kit is here" in text
     assert not (Path("/tmp") / "scratch").exists() or (Path("/tmp") / "scratch").read_text() != "x"  # private /tmp
+
+
+# --- the warm fork server ----------------------------------------------------------------------
+
+
+def _probe(nb):
+    """A first cell that records what the kernel had imported before the notebook's own imports."""
+    import nbformat
+
+    nb.cells.insert(0, nbformat.v4.new_code_cell(
+        "import sys, os\nprint('preloaded:', 'mujoco' in sys.modules, 'pinocchio' in sys.modules, 'uid', os.getuid())"))
+
+
+def _grade_in_process(course, *, warm: bool, monkeypatch):
+    from grader import batch
+
+    if not warm:
+        monkeypatch.setattr(batch.Grader, "_start_fork_server", lambda self, base: None)
+    used = {}
+    real_execute = batch.Grader._execute
+
+    def execute(self, work, student):
+        used[student] = self.server is not None
+        return real_execute(self, work, student)
+
+    monkeypatch.setattr(batch.Grader, "_execute", execute)
+    results = batch.Grader(course, ASSIGNMENT, jobs=2, timeout=60, references=REFERENCES).run()
+    monkeypatch.undo()
+    printed = {}
+    for r in results:
+        nb_path = course / "autograded" / r.student / ASSIGNMENT / f"{ASSIGNMENT}.ipynb"
+        if not nb_path.exists():
+            continue
+        out = "".join(o.get("text", "") for o in nbformat_read(nb_path).cells[0].get("outputs", []))
+        printed[r.student] = out.strip()
+    return {r.student: (r.status, r.score, [(e.grade_id, e.score) for e in r.exercises]) for r in results}, used, printed
+
+
+def nbformat_read(path):
+    import nbformat
+
+    return nbformat.read(path, as_version=4)
+
+
+def test_warm_and_fresh_sandboxes_give_the_same_grades(tmp_path, monkeypatch):
+    """Kernels forked from the warm server grade exactly like kernels started afresh, and start warm."""
+    need_program("unshare")
+    grades, used, printed = {}, {}, {}
+    for warm in (True, False):
+        course = make_course(tmp_path / ("warm" if warm else "fresh"))
+        submit(course, "alice", edit=_probe)
+        submit(course, "bob", {"ex1_tool_xy": "def tool_xy(q):\n    return np.array([0.3315, 0.0]) + 0 * q[:2]"},
+               edit=_probe)
+        submit(course, "carol", {"ex2_sweep": "import os\nos._exit(1)"}, edit=_probe)
+        grades[warm], used[warm], printed[warm] = _grade_in_process(course, warm=warm, monkeypatch=monkeypatch)
+    assert grades[True] == grades[False]
+    assert grades[True]["alice"][:2] == ("graded", 7.0) and grades[True]["carol"][0] == "kernel died"
+    assert set(used[True].values()) == {True} and set(used[False].values()) == {False}
+    sandbox_uid = __import__("pwd").getpwnam("snakekit-grader").pw_uid if os.geteuid() == 0 else os.getuid()
+    want_uid = sandbox_uid if os.geteuid() == 0 else 0  # without root: uid 0 inside the user namespace
+    assert printed[True]["alice"] == f"preloaded: True True uid {want_uid}"
+    assert printed[False]["alice"] == f"preloaded: False False uid {want_uid}"
+
+
+def test_fork_server_that_cannot_start_says_why(tmp_path):
+    from grader.forkserver import ForkServer
+
+    server = ForkServer({"PATH": "/usr/bin:/bin", "PYTHONPATH": str(tmp_path / "nothing"),
+                         "SNAKEKIT_FORKSERVER_PRELOAD": "no_such_module_anywhere"})
+    with pytest.raises(RuntimeError, match="the grader's fork server did not start: ModuleNotFoundError: No module named 'no_such_module_anywhere'"):
+        server.wait_ready()
+    assert server.proc.poll() is not None  # not left running
