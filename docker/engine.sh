@@ -92,7 +92,9 @@ engine_stop() {  # remove what ran, stop dockerd, restore the host; returns 1 un
     ids=$($DOCKER ps -aq 2>/dev/null); [ -z "$ids" ] || $DOCKER rm -f $ids >/dev/null 2>&1
     $DOCKER volume prune -f >/dev/null 2>&1
     $DOCKER network prune -f >/dev/null 2>&1
-    $DOCKER image prune -f >/dev/null 2>&1                     # superseded builds
+    # superseded builds; the classic builder's cache is untagged images (the venv stage's too),
+    # so only those older than three days go
+    $DOCKER image prune -f --filter until=72h >/dev/null 2>&1
     $DOCKER builder prune -f --keep-storage 4gb >/dev/null 2>&1  # the cache stays bounded
     kill -TERM "$DOCKERD_PID"
     for _ in $(seq 100); do kill -0 "$DOCKERD_PID" 2>/dev/null || break; sleep 0.2; done

@@ -73,7 +73,7 @@ done
 say "compose $("$VENV_BIN/docker-compose" version --short): compose.yaml is valid (lab, hardware, grader)"
 
 # --- no CA or secret material in the repository; the build needs none ---------------------
-leaked=$(git -C "$ROOT" grep -l -I -e 'BEGIN CERTIFICATE' -e 'PRIVATE KEY-----' -- . 2>/dev/null || true)
+leaked=$(git -C "$ROOT" grep -l -I -e 'BEGIN [C]ERTIFICATE' -e '[P]RIVATE KEY-----' -- . 2>/dev/null || true)
 [ -z "$leaked" ] || die "certificate or key material in the repository: $leaked"
 ! grep -n -E -e '--mount|--secret|/run/secrets' docker/Dockerfile || die "docker/Dockerfile mounts secrets or caches"
 say "repository: no certificates or keys; the Dockerfile mounts no secrets"
