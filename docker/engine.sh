@@ -11,8 +11,10 @@
 #   engine_packages [PKG...]   install docker.io, debootstrap, curl (+PKG) when missing (apt; root)
 #   engine_lock                one engine on this cache at a time (flock)
 #   engine_start               record the host's state, start dockerd, export DOCKER_HOST
-#   engine_base                debian:bookworm-slim, made with debootstrap + docker import (cached)
-#   engine_build IMAGE LOG     build docker/Dockerfile into IMAGE (BuildKit; the host's CA as a secret)
+#   engine_base                debian:bookworm-slim, made with debootstrap + docker import (cached),
+#                              with the host's CA bundle in it (this machine's TLS is re-signed)
+#   engine_build IMAGE LOG     build the image as a user does: `docker compose -f docker/compose.yaml
+#                              build lab` (compose v2 from the venv, VENV_BIN), tagged IMAGE
 #   engine_stop                remove containers, stop dockerd, restore the host; returns 1 unless clean
 # and may define engine_on_stop (run first in engine_stop while the engine still answers).
 # Variables: CACHE, DATA (data root), RUN (this run's temporary folder), DOCKER (the client),
@@ -25,7 +27,9 @@ DOCKER=/usr/bin/docker   # Debian's client, whatever else is on PATH
 RUN=""
 DOCKERD_PID=""
 ENGINE_COLD=0
-export DOCKER_BUILDKIT=1
+# The builder is whichever compose picks, as for a user: Debian's docker.io has no buildx, so
+# compose falls back to the classic builder (DOCKER_BUILDKIT=1 in the caller's environment
+# makes it BuildKit; the Dockerfile builds with both).
 
 now() { date +%s.%N; }
 since() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
@@ -88,7 +92,9 @@ engine_stop() {  # remove what ran, stop dockerd, restore the host; returns 1 un
     ids=$($DOCKER ps -aq 2>/dev/null); [ -z "$ids" ] || $DOCKER rm -f $ids >/dev/null 2>&1
     $DOCKER volume prune -f >/dev/null 2>&1
     $DOCKER network prune -f >/dev/null 2>&1
-    $DOCKER image prune -f >/dev/null 2>&1                     # superseded builds
+    # superseded builds; the classic builder's cache is untagged images (the venv stage's too),
+    # so only those older than three days go
+    $DOCKER image prune -f --filter until=72h >/dev/null 2>&1
     $DOCKER builder prune -f --keep-storage 4gb >/dev/null 2>&1  # the cache stays bounded
     kill -TERM "$DOCKERD_PID"
     for _ in $(seq 100); do kill -0 "$DOCKERD_PID" 2>/dev/null || break; sleep 0.2; done
@@ -150,10 +156,19 @@ engine_start() {
 }
 
 # --- the base image: debian:bookworm-slim, made here ---------------------------------------
+# The debootstrap tarball is cached as made (no CA in it). At import, the host's CA bundle
+# ($CA) is added to the base as /usr/local/share/ca-certificates/host-ca-bundle.crt and
+# /etc/ssl/certs/ca-certificates.crt, with SSL_CERT_FILE and PIP_CERT pointing at it: this
+# machine reaches PyPI only through a proxy that re-signs TLS, and the build's downloads must
+# trust it. The bundle comes from the host at the time the base is made; it is never in the
+# repository. A label holds the bundle's hash: a changed bundle makes the base again.
 engine_base() {
-  local t rootfs
+  local t rootfs ca_sum have tar_ca
   BASE_TAR="$CACHE/debian-bookworm-slim.tar"
-  if ! $DOCKER image inspect debian:bookworm-slim >/dev/null 2>&1; then
+  ca_sum=none
+  [ -s "$CA" ] && ca_sum=$(sha256sum < "$CA" | cut -c1-64)
+  have=$($DOCKER image inspect -f '{{index .Config.Labels "org.snakekit.host-ca"}}' debian:bookworm-slim 2>/dev/null || true)
+  if [ "$have" != "$ca_sum" ]; then
     if [ ! -s "$BASE_TAR" ]; then
       t=$(now)
       rootfs="$RUN/rootfs"
@@ -176,14 +191,29 @@ engine_base() {
       rm -rf "$rootfs"
       figure "base: debootstrap --variant=minbase bookworm in $(since "$t") s"
     fi
-    $DOCKER import -c 'CMD ["bash"]' "$BASE_TAR" debian:bookworm-slim >/dev/null
+    $DOCKER image rm -f debian:bookworm-slim >/dev/null 2>&1 || true
+    if [ "$ca_sum" = none ]; then
+      $DOCKER import -c 'CMD ["bash"]' -c 'LABEL org.snakekit.host-ca=none' "$BASE_TAR" debian:bookworm-slim >/dev/null
+    else
+      # the cached tarball plus the bundle, in this run's folder only
+      tar_ca="$RUN/base-with-ca.tar"
+      mkdir -p "$RUN/ca/usr/local/share/ca-certificates" "$RUN/ca/etc/ssl/certs"
+      cp "$CA" "$RUN/ca/usr/local/share/ca-certificates/host-ca-bundle.crt"
+      cp "$CA" "$RUN/ca/etc/ssl/certs/ca-certificates.crt"
+      cp "$BASE_TAR" "$tar_ca"
+      tar -C "$RUN/ca" --numeric-owner --owner=0 --group=0 -rf "$tar_ca" ./usr/local/share/ca-certificates/host-ca-bundle.crt ./etc/ssl/certs/ca-certificates.crt
+      $DOCKER import -c 'CMD ["bash"]' -c "LABEL org.snakekit.host-ca=$ca_sum" \
+        -c 'ENV SSL_CERT_FILE=/etc/ssl/certs/ca-certificates.crt PIP_CERT=/etc/ssl/certs/ca-certificates.crt' \
+        "$tar_ca" debian:bookworm-slim >/dev/null
+      rm -rf "$tar_ca" "$RUN/ca"
+      say "base: the host's CA bundle ($CA) added to debian:bookworm-slim"
+    fi
   fi
   figure "base: debian:bookworm-slim $(( $($DOCKER image inspect -f '{{.Size}}' debian:bookworm-slim) / 1000000 )) MB"
 }
 
 # --- the image -------------------------------------------------------------------------------
-engine_build() {  # IMAGE LOG: docker/Dockerfile into IMAGE; the build's output into LOG
-  local secret=()
-  [ -s "$CA" ] && secret=(--secret "id=ca,src=$CA")  # the host's CA bundle, for the build only
-  (cd "$ROOT" && $DOCKER build --network=host "${secret[@]}" -f docker/Dockerfile -t "$1" .) >"$2" 2>&1
+engine_build() {  # IMAGE LOG: the user's `docker compose -f docker/compose.yaml build lab`, tagged IMAGE
+  (cd "$ROOT" && "$VENV_BIN/docker-compose" -f docker/compose.yaml build lab) >"$2" 2>&1 || return 1
+  [ "$1" = snakekit-lab:latest ] || $DOCKER tag snakekit-lab:latest "$1"
 }

