@@ -42,7 +42,7 @@ def start_emulator(motion: str) -> tuple[subprocess.Popen, str]:
 
 
 def stop_emulator(proc: subprocess.Popen) -> None:
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signal.SIGTERM)  # stops it like Ctrl-C, even when started with SIGINT ignored
     try:
         proc.communicate(timeout=10)
     except subprocess.TimeoutExpired:

@@ -9,12 +9,20 @@ from __future__ import annotations
 import importlib
 import os
 import shutil
+import signal
 import socket
 
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
+
+# A runner that starts the suite in the background (`make test &` in a script) starts it with
+# SIGINT ignored, and the programs the tests start inherit that: Ctrl-C sent to them would be
+# lost. The tests stand for a user at a terminal, so SIGINT gets its usual handler back here
+# (a handled signal is reset to the default in a child, an ignored one is not).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def need(module: str):
