@@ -302,3 +302,60 @@ def test_running_the_viewer_cell_twice_in_a_kernel_leaves_one_server(tmp_path):
         assert psutil.pid_exists(new_pid)
         servers = [p for p in psutil.Process(kernel_pid).children() if p.pid in (old_pid, new_pid)]
         assert [p.pid for p in servers] == [new_pid]
+
+
+# --- meshcat's kernel side, imported without its server --------------------------------------
+
+def _python(code: str) -> str:
+    r = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return r.stdout
+
+
+def test_the_kernel_does_not_import_meshcats_web_server_but_meshcat_still_works_as_documented():
+    out = _python("""
+        import os, sys
+        from snakekit.viewer import Viewer
+        print(sorted(m for m in ("tornado", "tornado.web", "asyncio", "ssl", "meshcat.servers.tree") if m in sys.modules))
+        import meshcat, meshcat.geometry
+        print(meshcat.Visualizer is meshcat.visualizer.Visualizer)
+        print(sorted(os.listdir(os.path.join(meshcat.viewer_assets_path(), "dist"))))
+        from meshcat.servers.zmqserver import ZMQWebSocketBridge  # a user's own server: the real module
+        print(ZMQWebSocketBridge.__module__, "tornado.web" in sys.modules)
+        print(sys.modules["meshcat.servers.zmqserver"].start_zmq_server_as_subprocess.__module__)
+    """).splitlines()
+    assert out[0] == "[]", "importing the viewer imported meshcat's server: " + out[0]
+    assert out[1] == "True"
+    assert "'index.html'" in out[2] and "'main.min.js'" in out[2], out[2]
+    assert out[3] == "meshcat.servers.zmqserver True"
+    assert out[4] == "meshcat.servers.zmqserver"
+
+
+def test_meshcats_own_launcher_still_starts_its_server_from_a_kernel_with_the_viewer():
+    out = _python("""
+        import subprocess
+        import snakekit.viewer
+        import meshcat.visualizer as mv
+        calls = []
+        import io
+        class Proc:  # the real launcher runs; only the server process it starts is replaced
+            def __init__(self, args, **kw):
+                calls.append(args)
+                self.stdout = io.BytesIO(b"zmq_url=tcp://127.0.0.1:1\\nweb_url=http://127.0.0.1:2/static/\\n")
+            poll = kill = wait = lambda self: None
+        subprocess.Popen = Proc
+        print(mv.start_zmq_server_as_subprocess(server_args=[])[1:])
+        print(calls[0][-2:] == ["-m", "meshcat.servers.zmqserver"])
+    """).splitlines()
+    assert out == ["('tcp://127.0.0.1:1', 'http://127.0.0.1:2/static/')", "True"], out
+
+
+def test_a_meshcat_imported_before_the_viewer_is_used_as_it_is():
+    out = _python("""
+        import meshcat
+        full = meshcat
+        from snakekit.viewer import Viewer
+        import sys
+        print(sys.modules["meshcat"] is full, hasattr(full, "__file__"))
+    """)
+    assert out.split() == ["True", "True"]

@@ -45,11 +45,11 @@ from ..validate import as_configuration
 from .server import LIVE, Window, start_in_range, start_server, stop_server
 from .urdf_visuals import visual_boxes
 
-with warnings.catch_warnings():  # meshcat 0.3 imports a pyzmq module deprecated since 17
-    warnings.simplefilter("ignore", DeprecationWarning)
-    import meshcat
-    import meshcat.geometry as mg
-    from meshcat.animation import Animation
+from .client import load as _load_meshcat
+
+meshcat = _load_meshcat()  # meshcat's kernel side, without its (unused) server: see client.py
+mg = meshcat.geometry
+Animation = meshcat.animation.Animation
 
 
 def _translation(x: float, y: float, z: float = 0.0) -> np.ndarray:

@@ -31,9 +31,9 @@ from ..errors import MissingDependencyError, ViewerError
 try:
     import zmq
 
-    with warnings.catch_warnings():  # meshcat 0.3 imports a pyzmq module deprecated since 17
-        warnings.simplefilter("ignore", DeprecationWarning)
-        from meshcat.visualizer import ViewerWindow
+    from .client import load as _load_meshcat
+
+    ViewerWindow = _load_meshcat().visualizer.ViewerWindow
 except ImportError as _e:  # pragma: no cover - the kit's environment has meshcat
     raise MissingDependencyError(f"snakekit.viewer needs meshcat ({_e}); install the kit's environment "
                       "with tools/setup (or `pip install meshcat`)") from _e
