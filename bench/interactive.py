@@ -4,9 +4,10 @@ Each repeat starts a fresh Python process that plays the kernel: it makes a real
 simulated arm, a viewer and a control panel; headless Chromium opens the viewer page (so
 the server really streams the scene); then the worker sets three tool targets and executes
 each through the panel's callbacks, exactly what the widgets call. Meanwhile this process
-samples the worker and its meshcat server with psutil: average CPU over the task (% of one
-core, both processes summed) and peak RSS (both summed). Chromium is not counted (the
-study's figures do not include the Windows host's browser either).
+samples the worker with psutil (the viewer's server is a thread of it; with an older library,
+a separate process, counted too): average CPU over the task (% of one core) and peak RSS.
+Chromium is not counted (the study's figures do not include the Windows host's browser
+either).
 
 Run: ``.venv/bin/python bench/interactive.py [--repeats 3] [--no-browser]``
 """
@@ -32,6 +33,8 @@ CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-network
 
 def worker() -> None:
     """The 'kernel': set up, wait for 'go', run Task 1, report."""
+    import os
+
     import snakekit
     from snakekit.viewer import Viewer
     from snakekit.widgets import ControlPanel
@@ -40,7 +43,10 @@ def worker() -> None:
     viewer = Viewer()
     viewer.draw_workspace()
     panel = ControlPanel(robot, viewer)
-    print(f"ready {viewer.server_pid} {viewer.url}", flush=True)
+    # the process serving the view: the kernel itself (a thread of it) since the viewer's server
+    # moved in; a separate process in the library before that (bench/before_after.py runs both)
+    server = getattr(viewer, "server_pid", None) or os.getpid()
+    print(f"ready {server} {viewer.url}", flush=True)
     sys.stdin.readline()
     for x, y, heading in TARGETS:
         if panel.set_target(x, y, heading) is None:
@@ -53,11 +59,11 @@ def worker() -> None:
     robot.close()
 
 
-def measure(browser, command=None, processes=None, env=None) -> dict:
+def measure(browser, command=None, env=None) -> dict:
     """One repeat: start the worker (``command``, default this file in this Python), run Task 1.
 
-    ``processes(worker_pid, server_pid)`` returns the psutil processes to count (default:
-    the worker and its meshcat server).
+    Counted: the worker and the process serving the view (the same process since the viewer's
+    server became a thread of the kernel; two in older libraries).
     """
     import selectors
     import subprocess
@@ -73,12 +79,8 @@ def measure(browser, command=None, processes=None, env=None) -> dict:
         line = proc.stdout.readline().split()
         if not line or line[0] != "ready":
             raise RuntimeError("the worker did not start")
-        if processes is None:
-            group = [psutil.Process(proc.pid), psutil.Process(int(line[1]))]
-            processes = lambda: group  # noqa: E731
-        else:
-            found = processes(proc.pid, int(line[1]))
-            processes = (lambda: found) if isinstance(found, list) else found
+        group = [psutil.Process(pid) for pid in dict.fromkeys([proc.pid, int(line[1])])]
+        processes = lambda: group  # noqa: E731
         if browser is not None:
             page = browser.new_page(viewport={"width": 1000, "height": 700})
             page.goto(line[2])
@@ -157,10 +159,10 @@ def main(argv=None) -> int:
     wall = statistics.median(r["wall"] for r in results)
     viewer = "viewer connected to headless Chromium" if not args.no_browser else "no browser connected"
     print(f"\nTask 1: three goal changes through the control panel, sim in real time, {viewer}")
-    print(f"medians of {len(results)} repeats; CPU and RSS of kernel + meshcat server\n")
+    print(f"medians of {len(results)} repeats; CPU and RSS of the kernel (which serves the view)\n")
     print(f"| set-up | Task 1 CPU [% of one core] | RAM [MB] |")
     print(f"|---|---|---|")
-    print(f"| snakekit (kernel-like Python process + meshcat server), task {wall:.1f} s | {cpu:.2f} | {rss:.0f} (peak) |")
+    print(f"| snakekit (kernel-like Python process serving the view), task {wall:.1f} s | {cpu:.2f} | {rss:.0f} (peak) |")
     for name, c, m in STUDY:
         print(f"| study: {name} | {c} | {m} |")
     spread_of = lambda key: spread(r[key] for r in results)  # noqa: E731

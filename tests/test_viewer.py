@@ -5,6 +5,7 @@ The scene is checked where meshcat keeps it: the server's scene tree, read back 
 """
 
 import base64
+import os
 import re
 import signal
 import socket
@@ -43,9 +44,14 @@ def transform_of(viewer: Viewer, path: str) -> np.ndarray:
     return np.array(matrices[-1], dtype=float).reshape(4, 4).T  # three.js is column-major
 
 
-def listening(pid: int) -> list[tuple[str, int]]:
-    return sorted((c.laddr.ip, c.laddr.port) for c in psutil.Process(pid).net_connections("inet")
-                  if c.status == psutil.CONN_LISTEN)
+def listening(*ports: int) -> list[tuple[str, int]]:
+    """The listening sockets of this machine on ``ports``, as (address, port)."""
+    return sorted((c.laddr.ip, c.laddr.port) for c in psutil.net_connections("inet")
+                  if c.status == psutil.CONN_LISTEN and c.laddr.port in ports)
+
+
+def zmq_port(viewer: Viewer) -> int:
+    return int(viewer.zmq_url.rsplit(":", 1)[1])
 
 
 def port_open(port: int, host: str = "127.0.0.1") -> bool:
@@ -54,16 +60,11 @@ def port_open(port: int, host: str = "127.0.0.1") -> bool:
         return s.connect_ex((host, port)) == 0
 
 
-def wait_gone(pid: int, port: int, timeout: float = 5.0) -> bool:
-    """True once the process has ended (a zombie waiting for init counts) and the port is closed.
-
-    A process that ends from a worker thread shows as a zombie before its last threads
-    have closed its sockets, hence the port check.
-    """
+def wait_closed(*ports: int, timeout: float = 5.0) -> bool:
+    """True once nothing listens on ``ports`` any more."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        ended = not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
-        if ended and not port_open(port):
+        if not any(port_open(p) for p in ports):
             return True
         time.sleep(0.05)
     return False
@@ -191,10 +192,17 @@ def test_save_html_is_self_contained(viewer, tmp_path):
 
 
 def test_server_listens_on_loopback_only(viewer):
-    addrs = listening(viewer.server_pid)
-    assert len(addrs) == 2  # the web page + websocket, and ZeroMQ
-    assert {ip for ip, _ in addrs} == {"127.0.0.1"}
+    addrs = listening(viewer.port, zmq_port(viewer))
+    assert addrs == sorted([("127.0.0.1", viewer.port), ("127.0.0.1", zmq_port(viewer))])  # page+websocket, ZeroMQ
     assert viewer.url == f"http://127.0.0.1:{viewer.port}/static/"
+
+
+def test_the_server_is_a_thread_of_the_kernel_not_another_process(viewer):
+    import threading
+
+    assert psutil.Process().children() == []
+    assert [t.name for t in threading.enumerate() if t.name.startswith("snakekit viewer server")] != []
+    assert "serving http://127.0.0.1:" in repr(viewer)
 
 
 def test_page_and_javascript_are_served_locally(viewer):
@@ -207,9 +215,8 @@ def test_page_and_javascript_are_served_locally(viewer):
 
 def test_all_interfaces_only_when_asked():
     with Viewer(host="0.0.0.0") as v:
-        addrs = listening(v.server_pid)
-        assert ("0.0.0.0", v.port) in addrs
-        assert all(ip == "127.0.0.1" for ip, port in addrs if port != v.port)  # ZeroMQ stays local
+        addrs = listening(v.port, zmq_port(v))
+        assert addrs == sorted([("0.0.0.0", v.port), ("127.0.0.1", zmq_port(v))])  # ZeroMQ stays local
         assert v.url == f"http://localhost:{v.port}/static/"
 
 
@@ -225,37 +232,61 @@ def test_port_in_use_is_reported():
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        with pytest.raises(ViewerError, match=rf"{port}.*in use"):
+        with pytest.raises(ViewerError, match=rf"{port}.*in use.*choose another port="):
             Viewer(port=port)
 
 
 def test_close_stops_the_server_and_frees_the_port():
+    import threading
+
     v = Viewer()
-    pid, port = v.server_pid, v.port
-    assert port_open(port)
+    ports = v.port, zmq_port(v)
+    assert port_open(ports[0])
     v.close()
     v.close()  # twice is fine
-    assert wait_gone(pid, port, 1.0)
+    assert wait_closed(*ports, timeout=1.0)
+    assert not [t for t in threading.enumerate() if t.name.startswith(f"snakekit viewer server (127.0.0.1:0")
+                and t.is_alive() and str(ports[0]) in t.name]
     with pytest.raises(ViewerError, match="closed"):
         v.show(np.zeros(5))
 
 
+def test_closing_a_viewer_with_a_page_open_closes_the_page_connection():
+    websocket = need("tornado.websocket")
+    import asyncio
+
+    v = Viewer()
+
+    async def page_socket_closed() -> bool:
+        ws = await websocket.websocket_connect(f"ws://127.0.0.1:{v.port}/", connect_timeout=5)
+        v.close()  # from the kernel's thread, while the page is connected
+        while (message := await asyncio.wait_for(ws.read_message(), 5)) is not None:
+            assert isinstance(message, bytes)  # the scene, sent on connecting
+        return True  # None: the server closed the connection
+
+    assert asyncio.run(page_socket_closed())
+    assert wait_closed(v.port, timeout=1.0)
+
+
 def test_context_manager_stops_the_server():
     with Viewer() as v:
-        pid, port = v.server_pid, v.port
-    assert v.closed and wait_gone(pid, port, 1.0)
+        port = v.port
+    assert v.closed and wait_closed(port, timeout=1.0)
 
 
 def test_a_stuck_server_raises_instead_of_hanging():
+    import threading
+
     v = Viewer(timeout=0.5)
+    release = threading.Event()
     try:
-        psutil.Process(v.server_pid).suspend()
+        v._server.loop.add_callback(release.wait, 5.0)  # the server's loop busy for up to 5 s
         t0 = time.monotonic()
-        with pytest.raises(ViewerError, match="did not answer within 0.5 s"):
+        with pytest.raises(ViewerError, match=r"did not answer within 0.5 s \(it is still running\)"):
             v.show(np.zeros(5))
         assert time.monotonic() - t0 < 2.0
     finally:
-        psutil.Process(v.server_pid).resume()
+        release.set()
         v.close()
 
 
@@ -263,7 +294,7 @@ CHILD = textwrap.dedent("""
     import os, signal, sys
     from snakekit.viewer import Viewer
     v = Viewer()
-    print(v.server_pid, v.port, flush=True)
+    print(v.port, v.zmq_url.rsplit(":", 1)[1], flush=True)
     if sys.argv[1] == "kill":
         os.kill(os.getpid(), signal.SIGKILL)   # no atexit, no finalizer: like a killed kernel
     sys.exit(0)                                # a normal exit without close(): atexit
@@ -272,10 +303,21 @@ CHILD = textwrap.dedent("""
 
 @pytest.mark.parametrize("how", ["exit", "kill"])
 def test_server_never_outlives_its_process(how):
-    proc = subprocess.run([sys.executable, "-c", CHILD, how], capture_output=True, text=True, timeout=60)
-    assert proc.returncode == (-signal.SIGKILL if how == "kill" else 0), proc.stderr
-    pid, port = map(int, proc.stdout.split())
-    assert wait_gone(pid, port, 5.0), f"meshcat server {pid} outlived its parent ({how})"
+    proc = subprocess.Popen([sys.executable, "-c", CHILD, how], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == (-signal.SIGKILL if how == "kill" else 0), err
+    ports = [int(p) for p in out.split()]
+    assert wait_closed(*ports, timeout=5.0), f"the viewer's ports {ports} outlived their process ({how})"
+    leftover = [p for p in psutil.process_iter(["pid"]) if _session(p) == proc.pid]
+    assert leftover == [], f"processes left behind by the kernel: {leftover}"
+
+
+def _session(p) -> int | None:
+    try:
+        return os.getsid(p.pid)
+    except OSError:
+        return None
 
 
 def test_running_the_viewer_cell_twice_in_a_kernel_leaves_one_server(tmp_path):
@@ -285,23 +327,24 @@ def test_running_the_viewer_cell_twice_in_a_kernel_leaves_one_server(tmp_path):
     cell = "from snakekit.viewer import Viewer\nviewer = Viewer()\nviewer"
     nb = nbformat.v4.new_notebook(cells=[
         nbformat.v4.new_code_cell(cell),
-        nbformat.v4.new_code_cell("first = viewer.server_pid, viewer.port"),
+        nbformat.v4.new_code_cell("first = viewer.port, viewer.zmq_url"),
         nbformat.v4.new_code_cell(cell),  # the same cell, run again
-        nbformat.v4.new_code_cell("import os\nprint(first[0], first[1], viewer.server_pid, os.getpid())"),
+        nbformat.v4.new_code_cell(
+            "import os, threading\n"
+            "servers = [t for t in threading.enumerate() if t.name.startswith('snakekit viewer server')]\n"
+            "print(first[0], first[1].rsplit(':', 1)[1], viewer.port, len(servers), os.getpid())"),
     ])
     client = nbclient.NotebookClient(nb, timeout=60, kernel_name="python3",
                                      resources={"metadata": {"path": str(tmp_path)}})
     with client.setup_kernel():
-        client.execute_cell(nb.cells[0], 0)
-        client.execute_cell(nb.cells[1], 1)
-        client.execute_cell(nb.cells[2], 2)
-        client.execute_cell(nb.cells[3], 3)
-        old_pid, old_port, new_pid, kernel_pid = map(int, nb.cells[3].outputs[0]["text"].split())
-        assert new_pid != old_pid
-        assert wait_gone(old_pid, old_port), "the first viewer's server is still running"
-        assert psutil.pid_exists(new_pid)
-        servers = [p for p in psutil.Process(kernel_pid).children() if p.pid in (old_pid, new_pid)]
-        assert [p.pid for p in servers] == [new_pid]
+        for i in range(4):
+            client.execute_cell(nb.cells[i], i)
+        old_port, old_zmq, new_port, servers, kernel_pid = map(int, nb.cells[3].outputs[0]["text"].split())
+        assert new_port != old_port
+        assert wait_closed(old_port, old_zmq), "the first viewer's server is still listening"
+        assert port_open(new_port)
+        assert servers == 1
+        assert psutil.Process(kernel_pid).children() == []  # no server process either
 
 
 # --- meshcat's kernel side, imported without its server --------------------------------------
@@ -312,7 +355,7 @@ def _python(code: str) -> str:
     return r.stdout
 
 
-def test_the_kernel_does_not_import_meshcats_web_server_but_meshcat_still_works_as_documented():
+def test_importing_the_viewer_imports_no_web_server_and_meshcat_still_works_as_documented():
     out = _python("""
         import os, sys
         from snakekit.viewer import Viewer
@@ -324,7 +367,7 @@ def test_the_kernel_does_not_import_meshcats_web_server_but_meshcat_still_works_
         print(ZMQWebSocketBridge.__module__, "tornado.web" in sys.modules)
         print(sys.modules["meshcat.servers.zmqserver"].start_zmq_server_as_subprocess.__module__)
     """).splitlines()
-    assert out[0] == "[]", "importing the viewer imported meshcat's server: " + out[0]
+    assert out[0] == "[]", "importing the viewer imported a web server: " + out[0]  # only Viewer() does
     assert out[1] == "True"
     assert "'index.html'" in out[2] and "'main.min.js'" in out[2], out[2]
     assert out[3] == "meshcat.servers.zmqserver True"

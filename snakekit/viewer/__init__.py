@@ -6,7 +6,7 @@
 ...     viewer                                      # the last line of a cell shows it
 
 Modules: :mod:`.scene` (:class:`Viewer`: the arm, goals, marks, playback),
-:mod:`.server` (the meshcat server process), :mod:`.urdf_visuals` (the boxes drawn, read
+:mod:`.server` (the meshcat server, a thread of the kernel), :mod:`.urdf_visuals` (the boxes drawn, read
 from the generated URDF). The workspace boundary is computed in
 :func:`snakekit.kinematics.workspace_boundary`.
 """

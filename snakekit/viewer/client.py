@@ -1,11 +1,12 @@
 """meshcat's kernel side, imported without meshcat's own server.
 
 The kernel needs meshcat's scene description (geometry, commands, animation) and its
-``Visualizer``, which sends commands over ZeroMQ to the server process the kit starts
-(:mod:`snakekit.viewer.server`). Importing ``meshcat`` the usual way also imports the server
-it never runs in the kernel: its package ``__init__`` imports ``meshcat.visualizer``, which
-imports ``meshcat.servers.zmqserver`` and with it tornado's web server, asyncio and ssl (about
-8 MB resident in a lesson kernel).
+``Visualizer``, which sends commands over ZeroMQ to the server the kit starts in a thread
+(:mod:`snakekit.viewer.server`). Importing ``meshcat`` the usual way also imports that server:
+its package ``__init__`` imports ``meshcat.visualizer``, which imports
+``meshcat.servers.zmqserver`` and with it tornado's web server, asyncio and ssl (about 8 MB
+resident). Here they are imported when a :class:`~snakekit.viewer.Viewer` is made, so a
+lesson or a grading run that imports the kit but opens no view does not pay for them.
 
 :func:`load` imports the same modules from the installed meshcat, unmodified, with two
 differences that a user does not see:
@@ -33,7 +34,7 @@ from ..errors import MissingDependencyError
 _SERVER_MODULE = "meshcat.servers.zmqserver"
 
 
-def _server() -> types.ModuleType:
+def server_module() -> types.ModuleType:
     """The real ``meshcat.servers.zmqserver``, in place of the placeholder from now on."""
     if sys.modules.get(_SERVER_MODULE) is _placeholder:
         del sys.modules[_SERVER_MODULE]
@@ -42,7 +43,7 @@ def _server() -> types.ModuleType:
 
 def _start_zmq_server_as_subprocess(*args, **kwargs):
     """meshcat's own server launcher, imported on its first call (the kit never calls it)."""
-    return _server().start_zmq_server_as_subprocess(*args, **kwargs)
+    return server_module().start_zmq_server_as_subprocess(*args, **kwargs)
 
 
 _placeholder = types.ModuleType(_SERVER_MODULE, "meshcat's server, imported on first use")
@@ -54,7 +55,7 @@ def _server_attribute(name: str):
     probes, like ``__path__``, are answered by the placeholder)."""
     if name.startswith("__"):
         raise AttributeError(name)
-    return getattr(_server(), name)
+    return getattr(server_module(), name)
 
 
 _placeholder.__getattr__ = _server_attribute

@@ -4,8 +4,8 @@ The arm is drawn from the visual boxes of the generated URDF (``snakekit/assets/
 and posed with :func:`snakekit.kinematics.joint_frames`, so the picture always matches the
 robot description.
 
-meshcat's viewer is a web page (three.js) fed by a small server process over a websocket
-(:mod:`snakekit.viewer.server` starts and stops it). Here:
+meshcat's viewer is a web page (three.js) fed by a small server over a websocket; the server
+is a thread of the kernel (:mod:`snakekit.viewer.server` starts and stops it). Here:
 
 * the web server binds ``127.0.0.1`` unless told otherwise (``host="0.0.0.0"`` inside a
   container whose port is published), and the ZeroMQ socket always binds ``127.0.0.1``;
@@ -15,8 +15,8 @@ meshcat's viewer is a web page (three.js) fed by a small server process over a w
 * the page and its JavaScript come from the meshcat package itself: nothing is fetched from
   the internet;
 * the server stops with :meth:`Viewer.close`, at the end of a ``with`` block, when the
-  viewer is garbage collected, at interpreter exit, and - if the kernel dies without any of
-  those (``kill -9``) - on its own within a second, because it watches its parent;
+  viewer is garbage collected, at interpreter exit, and with the kernel however it ends
+  (``kill -9`` included), because it is part of it;
 * no call waits for a browser: every request to the server times out with a
   :class:`ViewerError` instead of hanging a headless notebook run.
 
@@ -82,7 +82,7 @@ def _in_kernel() -> bool:
     return bool(shell and shell.InteractiveShell.initialized())
 
 
-#: the longest wait for the server process to start and report its address [s]
+#: the longest wait for the server to start and report its address [s]
 STARTUP_TIMEOUT = 10.0
 
 
@@ -106,7 +106,7 @@ class Viewer:
             ``localhost`` when listening on every interface).
         height: height of the view in a notebook cell [px].
         timeout: longest wait for the server to answer a request [s]; starting it may take
-            up to ``max(timeout, STARTUP_TIMEOUT)`` (a busy machine can be slow to start a process).
+            up to ``max(timeout, STARTUP_TIMEOUT)`` (a busy machine can be slow).
         spec: the arm to draw.
         replace: close the viewers made before in this process first. The default is yes
             inside a notebook kernel, so running a cell again replaces its view instead of
@@ -132,16 +132,16 @@ class Viewer:
         self.host = host
         self.height = int(height)
         if port is None and os.environ.get("SNAKEKIT_VIEWER_PORTS"):
-            self._proc, zmq_url, self.port = start_in_range(host, os.environ["SNAKEKIT_VIEWER_PORTS"],
-                                                            max(timeout, STARTUP_TIMEOUT))
+            self._server = start_in_range(host, os.environ["SNAKEKIT_VIEWER_PORTS"], max(timeout, STARTUP_TIMEOUT))
         else:
-            self._proc, zmq_url, self.port = start_server(host, port or 0, max(timeout, STARTUP_TIMEOUT))
+            self._server = start_server(host, port or 0, max(timeout, STARTUP_TIMEOUT))
+        self.port = self._server.port
         shown = url_host or ("localhost" if host in ("0.0.0.0", "", "::") else host)
         if ":" in shown and not shown.startswith("["):
             shown = f"[{shown}]"
         self.url = f"http://{shown}:{self.port}/static/"
-        self._window = Window(zmq_url, self.url, self._proc, timeout)
-        self._finalizer = weakref.finalize(self, stop_server, self._proc, self._window.zmq_socket)
+        self._window = Window(self.url, self._server, timeout)
+        self._finalizer = weakref.finalize(self, stop_server, self._server, self._window.zmq_socket)
         LIVE.add(self)
         self.vis = meshcat.Visualizer(window=self._window)
         self._boxes = visual_boxes(urdf(spec))
@@ -154,9 +154,9 @@ class Viewer:
     # --- life cycle ------------------------------------------------------------------------
 
     @property
-    def server_pid(self) -> int:
-        """Process id of the meshcat server."""
-        return self._proc.pid
+    def zmq_url(self) -> str:
+        """Where the kernel sends the server its drawing commands (ZeroMQ, on 127.0.0.1)."""
+        return self._server.zmq_url
 
     @property
     def closed(self) -> bool:
@@ -179,7 +179,7 @@ class Viewer:
             raise ViewerError("this viewer is closed; make a new one with snakekit.viewer.Viewer()")
 
     def __repr__(self) -> str:
-        state = "closed" if self.closed else f"serving {self.url} (server pid {self.server_pid})"
+        state = "closed" if self.closed else f"serving {self.url}"
         return f"<snakekit Viewer {state}>"
 
     # --- notebook display ------------------------------------------------------------------

@@ -1,15 +1,21 @@
-"""The meshcat server process: started by the kernel, bound to one host, gone with the kernel.
+"""The meshcat server: a thread of the kernel, bound to one host, gone with the kernel.
 
-meshcat's viewer is a web page (three.js) fed by a small server process over a websocket; the
-kernel talks to that server over ZeroMQ. The server is started here rather than through
-meshcat's launcher, because that launcher listens on every network interface and leaves the
-server running when the kernel is killed. Here:
+meshcat's viewer is a web page (three.js) fed over a websocket by a small server (meshcat's
+own ``ZMQWebSocketBridge``, on tornado); the kernel sends it drawing commands over ZeroMQ.
+meshcat's launcher runs that server as a separate Python process, listening on every network
+interface and left running when the kernel is killed. Here it runs in a thread of the kernel
+itself, on its own event loop:
 
+* no second Python process: a kernel with a viewer is 30-35 MB smaller (a Python process with
+  tornado and ZeroMQ is about 31 MB resident), and starting a viewer starts no interpreter;
 * the web server binds the host asked for (``127.0.0.1`` by default), and the ZeroMQ socket
   always binds ``127.0.0.1``;
 * the server stops when :func:`stop_server` is called, at interpreter exit (for the viewers
-  registered in :data:`LIVE`), and - if the kernel dies without either (``kill -9``) - on its
-  own within a second, because it watches its parent and its stdin;
+  registered in :data:`LIVE`), and with the kernel however it ends (``kill -9`` included),
+  because it is part of it; a cell's Ctrl-C does not reach it (only the main thread gets
+  KeyboardInterrupt);
+* the kernel's busy cells do not stop it: Python hands the thread the interpreter lock every
+  few milliseconds, and while a cell waits (a real-time move, ``time.sleep``) it runs freely;
 * no request waits for a browser: every request times out with a
   :class:`~snakekit.errors.ViewerError` instead of hanging a headless notebook run.
 """
@@ -17,13 +23,8 @@ server running when the kernel is killed. Here:
 from __future__ import annotations
 
 import atexit
-import os
-import selectors
 import socket
-import subprocess
-import sys
-import time
-import warnings
+import threading
 import weakref
 
 from ..errors import MissingDependencyError, ViewerError
@@ -32,87 +33,148 @@ try:
     import zmq
 
     from .client import load as _load_meshcat
+    from .client import server_module as _server_module
 
     ViewerWindow = _load_meshcat().visualizer.ViewerWindow
 except ImportError as _e:  # pragma: no cover - the kit's environment has meshcat
     raise MissingDependencyError(f"snakekit.viewer needs meshcat ({_e}); install the kit's environment "
                       "with tools/setup (or `pip install meshcat`)") from _e
 
-
-# Run with ``python -c`` so the server process imports meshcat's server module, tornado and
-# ZeroMQ only (not Pinocchio or MuJoCo): it stays small. The ``meshcat`` package's own
-# __init__ is not run: it loads the kernel side (numpy, IPython, PIL, the geometry and
-# visualizer modules), which the server never uses - that halves the server's memory
-# (53 MB -> 31 MB resident). Arguments: host, port (0 = any free one).
-_SERVER = r'''
-import importlib.util, os, sys, threading, time, types
-spec = importlib.util.find_spec("meshcat")
-package = types.ModuleType("meshcat")
-package.__path__ = list(spec.submodule_search_locations)
-sys.modules["meshcat"] = package  # the package without its __init__: only the server is used
-import tornado.httpserver, tornado.netutil, zmq
-from meshcat.servers.zmqserver import ZMQWebSocketBridge
-
-host, port = sys.argv[1], int(sys.argv[2])
-parent = os.getppid()
-
-def watch_stdin():
-    # The kernel holds the other end of stdin: EOF means it is gone, however it ended.
-    while sys.stdin.buffer.read(4096):
-        pass
-    os._exit(0)
-
-def watch_parent():
-    while os.getppid() == parent:
-        time.sleep(0.5)
-    os._exit(0)
-
-class Bridge(ZMQWebSocketBridge):
-    def make_app(self):
-        app = super().make_app()
-        def listen(port, **kwargs):
-            # meshcat's own listen() binds every interface; bind only the host asked for.
-            sockets = tornado.netutil.bind_sockets(port, address=self.host)
-            tornado.httpserver.HTTPServer(app).add_sockets(sockets)
-            self.bound_port = sockets[0].getsockname()[1]
-        app.listen = listen
-        return app
-
-threading.Thread(target=watch_stdin, daemon=True).start()
-threading.Thread(target=watch_parent, daemon=True).start()
-bridge = Bridge(zmq_url="tcp://127.0.0.1:*", host=host, port=port)
-endpoint = bridge.zmq_socket.getsockopt(zmq.LAST_ENDPOINT).decode()
-print(f"zmq_url={endpoint}", flush=True)
-print(f"web_port={bridge.bound_port}", flush=True)
-null = os.open(os.devnull, os.O_WRONLY)
-os.dup2(null, 1)
-os.dup2(null, 2)
-bridge.run()
-'''
-
 #: the open viewers (anything with a close()), closed at interpreter exit
 LIVE: weakref.WeakSet = weakref.WeakSet()
 
 
-def stop_server(proc: subprocess.Popen, socket) -> None:
-    """Close the ZeroMQ socket and end the server process (wait for it, so no zombie stays)."""
+def _bridge_class():
+    """meshcat's bridge, listening on the host asked for only (meshcat's own listen() binds
+    every interface), remembering its HTTP server so that it can be stopped, and quiet: in
+    the kernel, anything it printed would land in a notebook cell."""
+    import tornado.httpserver
+    import tornado.netutil
+    import tornado.web
+    import tornado.websocket
+
+    meshcat_server = _server_module()
+
+    class PageSocket(meshcat_server.WebSocketHandler):
+        def open(self):  # meshcat's, without printing "opened: <handler>"
+            self.bridge.websocket_pool.add(self)
+            self.bridge.send_scene(self)
+
+        def on_close(self):  # meshcat's, without printing "closed: <handler>"
+            self.bridge.websocket_pool.discard(self)
+
+    class Bridge(meshcat_server.ZMQWebSocketBridge):
+        def make_app(self):
+            app = tornado.web.Application([  # meshcat's two routes: the page and its websocket
+                (r"/static/(.*)", meshcat_server.StaticFileHandlerNoCache,
+                 {"path": meshcat_server.VIEWER_ROOT, "default_filename": meshcat_server.VIEWER_HTML}),
+                (r"/", PageSocket, {"bridge": self}),
+            ], log_function=lambda handler: None)  # no access log
+
+            def listen(port, **kwargs):
+                sockets = tornado.netutil.bind_sockets(port, address=self.host)
+                self.http_server = tornado.httpserver.HTTPServer(app)
+                self.http_server.add_sockets(sockets)
+                self.bound_port = sockets[0].getsockname()[1]
+
+            app.listen = listen
+            return app
+
+        def forward_to_websockets(self, frames):  # meshcat's, skipping a page that just left
+            for page in list(self.websocket_pool):
+                try:
+                    page.write_message(frames[2], binary=True)
+                except tornado.websocket.WebSocketClosedError:
+                    self.websocket_pool.discard(page)
+
+    return Bridge
+
+
+class Server:
+    """meshcat's bridge served by a daemon thread of this process, on its own event loop.
+
+    After :meth:`start`: ``zmq_url`` (where the kernel sends commands) and ``port`` (the web
+    page's). ``alive`` tells whether it still serves, ``error`` why it stopped if it failed.
+    """
+
+    def __init__(self, host: str, port: int):
+        self.host, self.requested_port = host, port
+        self.zmq_url, self.port = "", 0
+        self.error: BaseException | None = None
+        self.loop = None  # the bridge's tornado IOLoop, once started
+        self._bridge = None
+        self._ready = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"snakekit viewer server ({host}:{port})",
+                                        daemon=True)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive() and self.error is None
+
+    def start(self, timeout: float) -> "Server":
+        self._thread.start()
+        if not self._ready.wait(timeout):
+            raise ViewerError(f"the meshcat server could not start on {self.host}:{self.requested_port or 'any port'}: "
+                              f"it did not report its address within {timeout:g} s. Make a new viewer; if this "
+                              "repeats, restart the kernel.")
+        if self.error is not None:
+            why = f"{type(self.error).__name__}: {self.error}"
+            hint = (f"Port {self.requested_port} may be in use: choose another port= or leave it unset for a free one."
+                    if self.requested_port and "in use" in str(self.error) else
+                    "Check that meshcat is installed in this environment (tools/setup).")
+            raise ViewerError(f"the meshcat server could not start on {self.host}:{self.requested_port or 'any port'}: "
+                              f"{why}. {hint}")
+        return self
+
+    def _run(self) -> None:
+        import asyncio  # with tornado, only once a viewer is made: importing the module costs nothing
+
+        asyncio.set_event_loop(asyncio.new_event_loop())
+        try:
+            bridge = _bridge_class()(zmq_url="tcp://127.0.0.1:*", host=self.host, port=self.requested_port)
+            self.zmq_url = bridge.zmq_socket.getsockopt(zmq.LAST_ENDPOINT).decode()
+            self.port = bridge.bound_port
+        except BaseException as e:  # reported by start(), in the kernel's thread
+            self.error = e
+            asyncio.get_event_loop().close()
+            self._ready.set()
+            return
+        self._bridge, self.loop = bridge, bridge.ioloop
+        self._ready.set()
+        try:
+            bridge.ioloop.start()
+        except BaseException as e:  # pragma: no cover - tornado's loop does not raise
+            self.error = e
+        finally:
+            bridge.zmq_stream.close(linger=0)
+            bridge.ioloop.close(all_fds=True)  # the listening sockets and every connection
+
+    def _shutdown(self) -> None:
+        """On the server's own loop: stop listening, say goodbye to the pages, stop the loop."""
+        bridge = self._bridge
+        server = getattr(bridge, "http_server", None)
+        if server is not None:
+            server.stop()
+        for ws in list(bridge.websocket_pool):
+            ws.close()
+        self.loop.stop()
+
+    def stop(self, timeout: float = 3.0) -> None:
+        if self._thread.is_alive() and self.loop is not None:
+            try:
+                self.loop.add_callback(self._shutdown)
+            except RuntimeError:  # the loop is already closed
+                pass
+            self._thread.join(timeout)
+
+
+def stop_server(server: Server, socket) -> None:
+    """Close the kernel's ZeroMQ socket and stop the server (its port is free on return)."""
     try:
         socket.close(linger=0)
     except Exception:
         pass
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout=3)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=3)
-    for f in (proc.stdin, proc.stdout, proc.stderr):
-        if f is not None:
-            try:
-                f.close()
-            except Exception:
-                pass
+    server.stop()
 
 
 @atexit.register
@@ -121,48 +183,12 @@ def _close_all() -> None:
         viewer.close()
 
 
-def start_server(host: str, port: int, timeout: float) -> tuple[subprocess.Popen, str, int]:
-    """Start the server; return the process, its ZeroMQ address and its web port."""
-    proc = subprocess.Popen([sys.executable, "-u", "-c", _SERVER, host, str(port)],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)  # a cell's Ctrl-C must not reach it
-    lines: dict[str, str] = {}
-    buf = b""
-    deadline = time.monotonic() + timeout
-    with selectors.DefaultSelector() as sel:
-        sel.register(proc.stdout, selectors.EVENT_READ)
-        while len(lines) < 2:
-            left = deadline - time.monotonic()
-            if left <= 0 or proc.poll() is not None:
-                break
-            if sel.select(timeout=min(left, 0.2)):
-                chunk = os.read(proc.stdout.fileno(), 4096)
-                if not chunk:
-                    break
-                buf += chunk
-                *done, buf = buf.split(b"\n")
-                for line in done:
-                    key, _, value = line.decode().strip().partition("=")
-                    if key in ("zmq_url", "web_port"):
-                        lines[key] = value
-    if len(lines) < 2:
-        running = proc.poll() is None
-        if running:
-            proc.kill()
-        proc.wait()
-        err = proc.stderr.read().decode(errors="replace").strip().splitlines()
-        for f in (proc.stdin, proc.stdout, proc.stderr):
-            f.close()
-        why = (f"it did not report its address within {timeout:g} s" if running
-               else f"it exited with code {proc.returncode}: {err[-1] if err else 'no message'}")
-        hint = (f"Port {port} may be in use: choose another port= or leave it unset for a free one."
-                if port and any("in use" in e for e in err) else
-                "Check that meshcat is installed in this environment (tools/setup).")
-        raise ViewerError(f"the meshcat server could not start on {host}:{port or 'any port'}: {why}. {hint}")
-    return proc, lines["zmq_url"], int(lines["web_port"])
+def start_server(host: str, port: int, timeout: float) -> Server:
+    """Start the server on ``host``:``port`` (0: any free port); it serves once this returns."""
+    return Server(host, port).start(timeout)
 
 
-def start_in_range(host: str, ports: str, timeout: float) -> tuple[subprocess.Popen, str, int]:
+def start_in_range(host: str, ports: str, timeout: float) -> Server:
     """Start the server on the first free port of a range ``"LOW-HIGH"`` (or one port)."""
     low, _, high = ports.partition("-")
     try:
@@ -189,9 +215,9 @@ def start_in_range(host: str, ports: str, timeout: float) -> tuple[subprocess.Po
 class Window(ViewerWindow):
     """meshcat's window on a server started by :func:`start_server`, with request timeouts."""
 
-    def __init__(self, zmq_url: str, web_url: str, proc: subprocess.Popen, timeout: float):
-        self.server_proc = proc
-        self.zmq_url = zmq_url
+    def __init__(self, web_url: str, server: Server, timeout: float):
+        self.server = server
+        self.zmq_url = server.zmq_url
         self.web_url = web_url
         self.timeout_ms = int(timeout * 1000)
         self.connect_zmq()
@@ -211,10 +237,10 @@ class Window(ViewerWindow):
             # A REQ socket that missed its answer cannot be reused: start over.
             self.zmq_socket.close(linger=0)
             self.connect_zmq()
-            alive = self.server_proc.poll() is None
+            state = ("it is still running" if self.server.alive else
+                     f"it stopped: {self.server.error}" if self.server.error else "it stopped")
             raise ViewerError(
-                f"the meshcat server did not answer within {self.timeout_ms / 1000:g} s "
-                f"({'it is still running' if alive else f'it exited with code {self.server_proc.returncode}'}). "
+                f"the meshcat server did not answer within {self.timeout_ms / 1000:g} s ({state}). "
                 "Close this viewer and make a new one with snakekit.viewer.Viewer().") from e
 
     def send(self, command):
