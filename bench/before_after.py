@@ -1,19 +1,18 @@
-"""This round's speed and memory changes, each measured before and after, side by side in one run.
+"""This round's memory changes, each measured before and after, side by side in one run.
 
-"Before" is the library (snakekit/) and the Makefile at ``--rev`` (the commit before the
-changes), taken from git into a temporary folder; "after" is this tree. Both run with the same
-Python environment, alternating, so a busy moment of the machine hits both alike:
+"Before" is the library (snakekit/) at a commit before a change, taken from git into a
+temporary folder and put first on the path; "after" is this tree. Every variant runs with the
+same Python environment and the same benchmark code, alternating, so a busy moment of the
+machine hits all alike:
 
-* the viewer's server process no longer runs meshcat's package __init__ (numpy, IPython,
-  PIL and the kernel-side modules it never uses): its resident memory, and Task 1's CPU and
-  peak RAM (kernel + server, as bench/interactive.py measures them);
-* ``make lab`` starts JupyterLab without rfc3987-syntax's grammar compilation: the time to
-  JupyterLab ready;
-* the workspace boundary (drawn in Task 1) fills a preallocated array instead of a list of
-  ~24,000 small pose arrays: Task 1's peak RAM against ``--boundary-rev``, in the same
-  alternating Task 1 run.
+* the kernel imports meshcat's scene modules without meshcat's web server (tornado, asyncio,
+  ssl): ``--rev`` (before) against ``--mid-rev`` (after), in Task 1's peak RAM;
+* the viewer's server runs in a thread of the kernel instead of a second Python process:
+  ``--mid-rev`` against this tree, in Task 1's CPU and peak RAM (kernel + server process
+  before, kernel alone after, as bench/interactive.py counts them), and in the time
+  ``Viewer()`` takes to return;
 
-Run: ``.venv/bin/python bench/before_after.py [--rev COMMIT] [--repeats 3] [--json PATH]``
+Run: ``.venv/bin/python bench/before_after.py [--rev COMMIT] [--mid-rev COMMIT] [--repeats 3] [--json PATH]``
 """
 
 from __future__ import annotations
@@ -32,20 +31,20 @@ REPO = HERE.parent
 sys.path.insert(0, str(HERE))
 from _common import add_json_argument, spread, write_json  # noqa: E402
 
-#: main before this round's changes to the viewer server and the lab target
-BEFORE_REV = "73152ed020794eccb8cfcc2b3b685d001d3bd3bc"
-#: main before the workspace boundary's in-place fill
-BOUNDARY_REV = "92804c2c02388daf02acfaea5f8761146289e480"
+#: main before this round's changes to the viewer
+BEFORE_REV = "989a46192ec7189aea356c9d6913e93d8058e4f1"
+#: main with the kernel-side meshcat import trimmed, the server still a separate process
+MID_REV = "23725f5ef16d476070068146032fc3f07444b61c"
 
-SERVER_RSS = r"""
-import os, sys, time, psutil
+VIEWER_START = r"""
+import os, sys, time
 os.environ.setdefault("MUJOCO_GL", "egl")
 from snakekit.viewer import Viewer
-with Viewer() as v:
-    time.sleep(1.0)
-    print(psutil.Process(v.server_pid).memory_info().rss)
+t0 = time.perf_counter()
+v = Viewer()
+print(time.perf_counter() - t0)
+v.close()
 """
-
 
 def export(rev: str, dest: Path) -> None:
     """snakekit/ and the Makefile at ``rev`` into ``dest``."""
@@ -63,9 +62,9 @@ def env_with(path: Path | None) -> dict:
     return env
 
 
-def server_rss(env: dict) -> float:
-    out = subprocess.run([sys.executable, "-P", "-c", SERVER_RSS], env=env, capture_output=True, text=True, check=True)
-    return int(out.stdout.strip().splitlines()[-1]) / 1e6
+def viewer_start(env: dict) -> float:
+    out = subprocess.run([sys.executable, "-P", "-c", VIEWER_START], env=env, capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
 
 
 def effect(before: float, after: float, unit: str, f: str = "{:.2f}") -> str:
@@ -76,12 +75,11 @@ def effect(before: float, after: float, unit: str, f: str = "{:.2f}") -> str:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rev", default=BEFORE_REV)
-    parser.add_argument("--boundary-rev", default=BOUNDARY_REV)
+    parser.add_argument("--mid-rev", default=MID_REV)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-browser", action="store_true")
     add_json_argument(parser)
     args = parser.parse_args(argv)
-
     try:
         return measure_all(args)
     except Exception as e:  # noqa: BLE001 - e.g. the old library no longer runs in today's environment
@@ -93,73 +91,58 @@ def main(argv=None) -> int:
 
 def measure_all(args) -> int:
     import interactive
-    import setups
 
     with tempfile.TemporaryDirectory(prefix="snakekit-before-") as tmp:
-        old, old_boundary = Path(tmp) / "round", Path(tmp) / "boundary"
+        old, mid = Path(tmp) / "before", Path(tmp) / "mid"
         try:
-            for rev, dest in ((args.rev, old), (args.boundary_rev, old_boundary)):
+            for rev, dest in ((args.rev, old), (args.mid_rev, mid)):
                 dest.mkdir()
                 export(rev, dest)
         except RuntimeError as e:
             print(f"not measured: {e}")
             write_json(args.json, {"not_measured": str(e), "before_rev": args.rev[:10], "rows": []})
             return 0
-        envs = {"before": env_with(old), "after": env_with(None)}
-        # check that "before" really imports the old library
-        where = subprocess.run([sys.executable, "-P", "-c", "import snakekit; print(snakekit.__file__)"],
-                               env=envs["before"], capture_output=True, text=True, check=True).stdout
-        assert where.startswith(str(old)), where
+        envs = {"before": env_with(old), "mid": env_with(mid), "after": env_with(None)}
+        for name in ("before", "mid"):  # check that the old libraries are the ones imported
+            where = subprocess.run([sys.executable, "-P", "-c", "import snakekit; print(snakekit.__file__)"],
+                                   env=envs[name], capture_output=True, text=True, check=True).stdout
+            assert where.startswith(str(old if name == "before" else mid)), where
 
-        rss = {k: [] for k in envs}
-        lab = {k: [] for k in envs}
-        commands = {"before": ["make", "-s", "-f", str(old / "Makefile"), "lab"], "after": ["make", "-s", "lab"]}
+        start = {k: [] for k in ("mid", "after")}
         for _ in range(args.repeats):
-            for k in envs:
-                rss[k].append(server_rss(envs[k]))
-                port = setups.free_port()
-                lab[k].append(setups.time_to_lab(commands[k] + [f"LAB_PORT={port}"], port=port))
-        task1 = interactive.run_repeats(args.repeats, browser=not args.no_browser,
-                                        variants={**{k: {"env": e} for k, e in envs.items()},
-                                                  "boundary_before": {"env": env_with(old_boundary)}})
+            for k in start:
+                start[k].append(viewer_start(envs[k]))
+        task1 = interactive.run_repeats(args.repeats, browser=not args.no_browser, variants={
+            "before": {"env": envs["before"]}, "mid": {"env": envs["mid"]}, "after": {"env": envs["after"]}})
 
-    m = {k: statistics.median(v) for k, v in rss.items()}
-    lm = {k: statistics.median(v) for k, v in lab.items()}
     t1 = {k: {x: statistics.median(r[x] for r in v) for x in ("cpu", "rss", "pss")} for k, v in task1.items()}
-    b = t1["boundary_before"]
+    st = {k: statistics.median(v) for k, v in start.items()}
+
+    def row(change, figure, a, b, key, unit, f):
+        return {"change": change, "figure": figure, "before": f"{f.format(t1[a][key])}{unit}",
+                "after": f"{f.format(t1[b][key])}{unit}", "effect": effect(t1[a][key], t1[b][key], unit, f)}
+
     rows = [
-        {"change": "viewer server without meshcat's package __init__", "figure": "viewer server RSS",
-         "before": f"{m['before']:.1f} MB", "after": f"{m['after']:.1f} MB", "effect": effect(m["before"], m["after"], " MB", "{:.1f}")},
-        {"change": "(the same, seen in Task 1)", "figure": "Task 1 peak RSS, kernel + server",
-         "before": f"{t1['before']['rss']:.0f} MB", "after": f"{t1['after']['rss']:.0f} MB",
-         "effect": effect(t1["before"]["rss"], t1["after"]["rss"], " MB", "{:.0f}")},
-        {"change": "(the same, seen in Task 1)", "figure": "Task 1 peak PSS, kernel + server",
-         "before": f"{t1['before']['pss']:.0f} MB", "after": f"{t1['after']['pss']:.0f} MB",
-         "effect": effect(t1["before"]["pss"], t1["after"]["pss"], " MB", "{:.0f}")},
-        {"change": "(the same, seen in Task 1)", "figure": "Task 1 CPU, kernel + server",
-         "before": f"{t1['before']['cpu']:.2f} %", "after": f"{t1['after']['cpu']:.2f} %",
-         "effect": effect(t1["before"]["cpu"], t1["after"]["cpu"], " %")},
-        {"change": "workspace boundary filled in place", "figure": "Task 1 peak RSS, kernel + server",
-         "before": f"{b['rss']:.0f} MB", "after": f"{t1['after']['rss']:.0f} MB",
-         "effect": effect(b["rss"], t1["after"]["rss"], " MB", "{:.0f}")},
-        {"change": "(the same, seen in Task 1)", "figure": "Task 1 peak PSS, kernel + server",
-         "before": f"{b['pss']:.0f} MB", "after": f"{t1['after']['pss']:.0f} MB",
-         "effect": effect(b["pss"], t1["after"]["pss"], " MB", "{:.0f}")},
-        {"change": "`make lab` without rfc3987-syntax's import", "figure": "`make lab` to JupyterLab ready",
-         "before": f"{lm['before']:.2f} s", "after": f"{lm['after']:.2f} s", "effect": effect(lm["before"], lm["after"], " s")},
+        row("kernel imports meshcat without its web server", "Task 1 peak RSS, kernel + server",
+            "before", "mid", "rss", " MB", "{:.0f}"),
+        row("(the same, seen in Task 1)", "Task 1 peak PSS, kernel + server", "before", "mid", "pss", " MB", "{:.0f}"),
+        row("viewer server in a thread of the kernel, not a second process", "Task 1 peak RSS, kernel + server",
+            "mid", "after", "rss", " MB", "{:.0f}"),
+        row("(the same, seen in Task 1)", "Task 1 peak PSS, kernel + server", "mid", "after", "pss", " MB", "{:.0f}"),
+        row("(the same, seen in Task 1)", "Task 1 CPU, kernel + server", "mid", "after", "cpu", " %", "{:.2f}"),
+        {"change": "(the same)", "figure": "`Viewer()` to a served scene",
+         "before": f"{st['mid']:.2f} s", "after": f"{st['after']:.2f} s", "effect": effect(st["mid"], st["after"], " s")},
+        row("both changes together", "Task 1 peak RSS, kernel + server", "before", "after", "rss", " MB", "{:.0f}"),
     ]
-    print(f"before = {args.rev[:10]} (snakekit/ and Makefile; the boundary row: {args.boundary_rev[:10]}), "
-          f"after = this tree; medians of {args.repeats}, alternating")
+    print(f"before = {args.rev[:10]}, mid = {args.mid_rev[:10]} (snakekit/), after = this tree; "
+          f"medians of {args.repeats}, alternating")
     for r in rows:
-        print(f"{r['change']:52s} {r['figure']:34s} {r['before']:>10s} -> {r['after']:>10s}  {r['effect']}")
-    middle = lambda runs: sorted(runs, key=lambda r: r["cpu"])[len(runs) // 2]["series"]  # noqa: E731
+        print(f"{r['change']:62s} {r['figure']:34s} {r['before']:>10s} -> {r['after']:>10s}  {r['effect']}")
     write_json(args.json, {
-        "before_rev": args.rev[:10], "boundary_rev": args.boundary_rev[:10], "repeats": args.repeats, "rows": rows,
-        "server_rss_mb": {k: spread(v) for k, v in rss.items()}, "lab_s": {k: spread(v) for k, v in lab.items()},
-        "task1": {"before": {x: spread(r[x] for r in task1["before"]) for x in ("cpu", "rss", "pss")},
-                  "after": {x: spread(r[x] for r in task1["after"]) for x in ("cpu", "rss", "pss")},
-                  "boundary_before": {x: spread(r[x] for r in task1["boundary_before"]) for x in ("cpu", "rss", "pss")},
-                  "before_series": middle(task1["before"])}})
+        "before_rev": args.rev[:10], "mid_rev": args.mid_rev[:10], "repeats": args.repeats, "rows": rows,
+        "viewer_start_s": {k: spread(v) for k, v in start.items()},
+        "task1": {**{k: {x: spread(r[x] for r in v) for x in ("cpu", "rss", "pss")} for k, v in task1.items()},
+                  "before_series": sorted(task1["before"], key=lambda r: r["cpu"])[len(task1["before"]) // 2]["series"]}})
     return 0
 
 

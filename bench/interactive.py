@@ -19,8 +19,8 @@ import time
 from pathlib import Path
 
 # The worker plays a lesson kernel, so this module imports nothing at its top but what the
-# worker needs: the benchmark's own helpers (statistics, urllib, ssl: about 9 MB resident)
-# are imported where they are used, in the measuring process only.
+# worker needs: the benchmark's own helpers are imported where they are used, in the
+# measuring process only.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 TARGETS = [(0.25, 0.10, 0.3), (0.12, 0.22, 1.6), (0.28, -0.08, -0.4)]  # x [m], y [m], heading [rad]

@@ -59,7 +59,7 @@ def steps(submissions: int) -> list[Step]:
         Step("sim", "Task 2: fast vs bare MuJoCo, and in real time", ["sim.py"], 85),
         Step("interactive", "Task 1 through the control panel and viewer", ["interactive.py", "--repeats", "3"], 60),
         Step("setups", "time to a lesson kernel and to JupyterLab; install size", ["setups.py", "--repeats", "3"], 40),
-        Step("optimisations", "this round's changes, before and after", ["before_after.py"], 110),
+        Step("optimisations", "this round's changes, before and after", ["before_after.py"], 170),
         Step("grading", f"{submissions} submissions: snakekit grade vs nbgrader vs bare",
              ["run.py", "--grading-step", str(submissions)], 30 + 7 * submissions),
         Step("container", "the container and compose set-ups (starts the private Docker engine if needed)",
@@ -241,7 +241,7 @@ def series_of(results: dict, task: str) -> list[tuple[str, dict | None, str]]:
     out = []
     if task == "task1":
         r = results.get("interactive")
-        out.append(("local venv: kernel + viewer server", r and r.get("series"), "-"))
+        out.append(("local venv: kernel (serving the view)", r and r.get("series"), "-"))
         before = results.get("optimisations", {}).get("task1", {}).get("before_series")
         if before:
             out.append(("local venv before this round's changes", before, "--"))
@@ -400,9 +400,10 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     elif o:
         add("## This round's changes, each measured before and after in one run")
         add("")
-        add(f"Before = the library and Makefile at commit `{o['before_rev']}`"
-            + (f" (for the workspace boundary's row: at commit `{o['boundary_rev']}`)" if o.get("boundary_rev") else "")
-            + ", after = this tree; they alternate within the run (same machine, same moment), medians of the repeats.")
+        add(f"Before = the library at commit `{o['before_rev']}`"
+            + (f"; the first change alone = the library at commit `{o['mid_rev']}`" if o.get("mid_rev") else "")
+            + "; after = this tree. They alternate within the run (same machine, same moment), with the same "
+            "benchmark code; medians of the repeats.")
         add("")
         add("| change | figure | before | after | effect |")
         add("|---|---|---|---|---|")
