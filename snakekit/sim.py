@@ -8,6 +8,7 @@ and rotor inertia on the joint (numbers in :class:`snakekit.model.ServoSpec`).
 
 from __future__ import annotations
 
+import copy
 import os
 import time
 
@@ -18,6 +19,7 @@ import numpy as np  # noqa: E402
 from mujoco import rollout  # noqa: E402
 
 from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf  # noqa: E402
+from .progress import LONG_RUN, TextProgress  # noqa: E402
 from .robot import JointState, Robot, Run  # noqa: E402
 from .trajectory import Trajectory  # noqa: E402
 from .validate import as_configuration, check_limits, number  # noqa: E402
@@ -91,12 +93,17 @@ class SimRobot(Robot):
     def _send(self, q: np.ndarray) -> None:
         self._ref = (self._steps, self.planner.step_velocities(self._steps, self.dt, [self._steps], [q]))
 
+    def _pace_from_now(self) -> None:
+        """Real time counts from now: a run or step after an idle spell is paced from its own
+        start, instead of racing through the robot time that passed while nothing ran."""
+        self._wall_origin = (time.perf_counter(), self._now())
+
     def _advance(self, t: float) -> None:
         target = int(np.ceil(t / self.dt - 1e-6))
         m, d = self.model, self.data
         k0, ctrl = self._ref
         if self.realtime and self._wall_origin is None:
-            self._wall_origin = (time.perf_counter(), self._now())
+            self._pace_from_now()
         while self._steps < target:
             i = self._steps - k0
             if i < len(ctrl):
@@ -117,12 +124,16 @@ class SimRobot(Robot):
             progress: bool | None = None) -> Run:
         """Send each point of ``trajectory`` at its time and record the motion.
 
-        In real time this is :meth:`Robot.run`. As fast as possible, the controls for the
-        whole run are computed first and stepped by ``mujoco.rollout``; the result is the
-        same motion, with the same checks before anything moves.
+        The controls of the whole run are computed first, from every goal at once (the
+        profile generator's arithmetic, as :meth:`Robot.run` would do goal by goal). As fast
+        as possible, ``mujoco.rollout`` steps them; in real time, they are stepped in pace with
+        the wall clock, from the run's start, and the state recorded as the robot clock
+        passes each record time. Both give the same motion, with the same checks before
+        anything moves. Interrupted (Ctrl-C), a real-time run stops sending: the arm goes on
+        to the last goal sent, as the servos would.
         """
         if self.realtime:
-            return super().run(trajectory, record_rate=record_rate, settle=settle, progress=progress)
+            return self._run_paced(trajectory, record_rate, settle, progress)
         self._check_trajectory(trajectory)
         wall0 = time.perf_counter()
         m, d, dt, n = self.model, self.data, self.dt, self.spec.n_joints
@@ -163,11 +174,52 @@ class SimRobot(Robot):
                    Trajectory(rec_steps * dt + offset, rec_p, rec_v, n_joints=n),
                    rec_e, self.backend, time.perf_counter() - wall0, False, self.spec)
 
+    def _run_paced(self, trajectory: Trajectory, record_rate: float, settle: float, progress) -> Run:
+        """:meth:`run` in real time: precomputed controls, stepped in pace with the wall clock."""
+        self._check_trajectory(trajectory)
+        wall0 = time.perf_counter()
+        d, dt, n = self.data, self.dt, self.spec.n_joints
+        k0 = self._steps
+        times = trajectory.times - trajectory.times[0]
+        record_at = self._record_times(trajectory, record_rate, settle)
+        goal_steps = np.ceil(times / dt - 1e-6).astype(int)
+        rec_steps = np.ceil(record_at / dt - 1e-6).astype(int)
+        before = copy.deepcopy(self.planner)  # to replay the goals sent so far, if interrupted
+        self._ref = (k0, self.planner.step_velocities(k0, dt, k0 + goal_steps, trajectory.positions))
+        rec_p = np.empty((len(rec_steps), n))
+        rec_v, rec_e = np.empty_like(rec_p), np.empty_like(rec_p)
+        if progress is None:
+            progress = record_at[-1] > LONG_RUN
+        bar = TextProgress(record_at[-1], f"running on the {self.backend} robot") if progress else None
+        self._pace_from_now()
+        complete = False
+        try:
+            for r, step in enumerate(rec_steps.tolist()):
+                self._advance((k0 + step) * dt)
+                rec_p[r], rec_v[r], rec_e[r] = d.qpos, d.qvel, d.actuator_force
+                if bar is not None:
+                    bar.update(record_at[r])
+            complete = True
+        finally:
+            if bar is not None:
+                bar.close(complete=complete)
+            if not complete:  # only the goals whose time has come were sent
+                sent = int(np.searchsorted(k0 + goal_steps, self._steps, side="right"))
+                self.planner = before
+                self._ref = (k0, self.planner.step_velocities(k0, dt, k0 + goal_steps[:sent],
+                                                              trajectory.positions[:sent]))
+        offset = trajectory.times[0]
+        return Run(Trajectory(goal_steps * dt + offset, trajectory.positions, n_joints=n),
+                   Trajectory(rec_steps * dt + offset, rec_p, rec_v, n_joints=n),
+                   rec_e, self.backend, time.perf_counter() - wall0, True, self.spec)
+
     def step(self, duration: float) -> None:
         """Let the simulation run for ``duration`` [s] holding the present goals."""
         duration = number(duration, "duration", "s", at_least=0,
                           hint="It is how long the simulation runs holding the present goals")
         self._check_open()
+        if self.realtime:
+            self._pace_from_now()
         self._advance(self._now() + duration)
 
     # --- the servos' side, for the bus emulator ------------------------------------------------

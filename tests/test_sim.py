@@ -168,6 +168,60 @@ def test_joint_state_is_read_only():
         s.positions[0] = 1.0
 
 
+def test_a_real_time_move_after_an_idle_spell_is_still_paced():
+    """The robot clock stands still between runs; the next run must not race to catch up."""
+    with SimRobot(realtime=True) as robot:
+        robot.move_to([0.2, 0, 0, 0, 0], 0.4, settle=0.1)
+        time.sleep(0.6)  # a student looks at the result
+        t0 = time.perf_counter()
+        run = robot.move_to([0, 0, 0, 0, 0], 0.4, settle=0.1)
+        wall = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        robot.step(0.3)
+        step_wall = time.perf_counter() - t0
+    robot_time = run.measured.times[-1] - run.measured.times[0]
+    assert robot_time == pytest.approx(0.5, abs=0.011)
+    assert wall >= robot_time - 0.02, f"{robot_time:.2f} s of motion ran in {wall:.2f} s"
+    assert step_wall >= 0.3 - 0.02
+
+
+def test_an_interrupted_real_time_run_goes_on_to_the_last_goal_sent(monkeypatch):
+    """Ctrl-C in a real-time run: goals after it are never sent; the arm ends at the last one sent."""
+    import snakekit.sim as sim
+
+    tr = joint_trajectory(np.zeros(5), [0.4, 0, 0, 0, 0], 1.0, rate=10)
+    real_sleep, calls = time.sleep, []
+
+    def sleep(seconds):
+        calls.append(seconds)
+        if len(calls) == 40:  # about 0.4 s into the run
+            raise KeyboardInterrupt
+        real_sleep(seconds)
+
+    with SimRobot(realtime=True) as robot:
+        monkeypatch.setattr(sim.time, "sleep", sleep)
+        with pytest.raises(KeyboardInterrupt):
+            robot.run(tr)
+        monkeypatch.setattr(sim.time, "sleep", real_sleep)
+        stopped = robot.time
+        sent = tr.positions[tr.times <= stopped + 1e-9][-1]
+        assert 0.2 < stopped < 0.7 and 0.0 < sent[0] < 0.4
+        np.testing.assert_allclose(robot.planner.goals, sent, atol=1e-12)
+        robot_fast = SimRobot()  # the same goals sent by hand, one by one, as the servos get them
+        for t, q in zip(tr.times, tr.positions):
+            if t > stopped + 1e-9:
+                break
+            robot_fast.advance_to(t)
+            robot_fast.set_servo_goals(q)
+        robot_fast.advance_to(stopped)
+        np.testing.assert_allclose(robot.read().positions, robot_fast.read().positions, atol=1e-9)
+        robot.step(1.5)
+        robot_fast.step(1.5)
+        np.testing.assert_allclose(robot.read().positions, robot_fast.read().positions, atol=1e-9)
+        np.testing.assert_allclose(robot.read().positions, sent, atol=5e-3)
+        robot_fast.close()
+
+
 def test_real_time_and_fast_modes_give_the_same_motion():
     tr = joint_trajectory(np.zeros(5), [0.3, -0.2, 0.1, 0.25, -0.3], 0.6, rate=10)
     runs = []
