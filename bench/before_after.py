@@ -8,11 +8,14 @@ machine hits all alike:
 * the kernel imports meshcat's scene modules without meshcat's web server (tornado, asyncio,
   ssl): ``--rev`` (before) against ``--mid-rev`` (after), in Task 1's peak RAM;
 * the viewer's server runs in a thread of the kernel instead of a second Python process:
-  ``--mid-rev`` against this tree, in Task 1's CPU and peak RAM (kernel + server process
-  before, kernel alone after, as bench/interactive.py counts them), and in the time
+  ``--mid-rev`` against ``--thread-rev``, in Task 1's CPU and peak RAM (kernel + server
+  process before, kernel alone after, as bench/interactive.py counts them), and in the time
   ``Viewer()`` takes to return;
+* a real-time run steps controls computed once for the whole run, paced from its own start
+  (before, each goal was planned as it was sent, and a run after an idle spell raced through
+  the time that had passed): ``--thread-rev`` against this tree, in Task 1's CPU and length.
 
-Run: ``.venv/bin/python bench/before_after.py [--rev COMMIT] [--mid-rev COMMIT] [--repeats 3] [--json PATH]``
+Run: ``.venv/bin/python bench/before_after.py [--rev C] [--mid-rev C] [--thread-rev C] [--repeats 3] [--json PATH]``
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ from _common import add_json_argument, spread, write_json  # noqa: E402
 BEFORE_REV = "989a46192ec7189aea356c9d6913e93d8058e4f1"
 #: main with the kernel-side meshcat import trimmed, the server still a separate process
 MID_REV = "23725f5ef16d476070068146032fc3f07444b61c"
+#: main with the viewer's server in a thread, before the real-time runs' change
+THREAD_REV = "37fa09114e87c0819fd514ae1d6affa41e0508a7"
 
 VIEWER_START = r"""
 import os, sys, time
@@ -76,6 +81,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rev", default=BEFORE_REV)
     parser.add_argument("--mid-rev", default=MID_REV)
+    parser.add_argument("--thread-rev", default=THREAD_REV)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-browser", action="store_true")
     add_json_argument(parser)
@@ -93,29 +99,34 @@ def measure_all(args) -> int:
     import interactive
 
     with tempfile.TemporaryDirectory(prefix="snakekit-before-") as tmp:
-        old, mid = Path(tmp) / "before", Path(tmp) / "mid"
+        old, mid, thread = Path(tmp) / "before", Path(tmp) / "mid", Path(tmp) / "thread"
         try:
-            for rev, dest in ((args.rev, old), (args.mid_rev, mid)):
+            for rev, dest in ((args.rev, old), (args.mid_rev, mid), (args.thread_rev, thread)):
                 dest.mkdir()
                 export(rev, dest)
         except RuntimeError as e:
             print(f"not measured: {e}")
             write_json(args.json, {"not_measured": str(e), "before_rev": args.rev[:10], "rows": []})
             return 0
-        envs = {"before": env_with(old), "mid": env_with(mid), "after": env_with(None)}
-        for name in ("before", "mid"):  # check that the old libraries are the ones imported
+        folders = {"before": old, "mid": mid, "thread": thread}
+        envs = {**{k: env_with(v) for k, v in folders.items()}, "after": env_with(None)}
+        for name, folder in folders.items():  # check that the old libraries are the ones imported
             where = subprocess.run([sys.executable, "-P", "-c", "import snakekit; print(snakekit.__file__)"],
                                    env=envs[name], capture_output=True, text=True, check=True).stdout
-            assert where.startswith(str(old if name == "before" else mid)), where
+            assert where.startswith(str(folder)), where
 
-        start = {k: [] for k in ("mid", "after")}
+        start = {k: [] for k in ("mid", "thread")}
         for _ in range(args.repeats):
             for k in start:
                 start[k].append(viewer_start(envs[k]))
         task1 = interactive.run_repeats(args.repeats, browser=not args.no_browser, variants={
-            "before": {"env": envs["before"]}, "mid": {"env": envs["mid"]}, "after": {"env": envs["after"]}})
+            k: {"env": e} for k, e in envs.items()})
 
-    t1 = {k: {x: statistics.median(r[x] for r in v) for x in ("cpu", "rss", "pss")} for k, v in task1.items()}
+    for runs in task1.values():
+        for r in runs:
+            r["cpu_s"] = r["cpu"] * r["wall"] / 100  # CPU seconds over the task
+    t1 = {k: {x: statistics.median(r[x] for r in v) for x in ("cpu", "rss", "pss", "wall", "cpu_s")}
+          for k, v in task1.items()}
     st = {k: statistics.median(v) for k, v in start.items()}
 
     def row(change, figure, a, b, key, unit, f):
@@ -127,21 +138,28 @@ def measure_all(args) -> int:
             "before", "mid", "rss", " MB", "{:.0f}"),
         row("(the same, seen in Task 1)", "Task 1 peak PSS, kernel + server", "before", "mid", "pss", " MB", "{:.0f}"),
         row("viewer server in a thread of the kernel, not a second process", "Task 1 peak RSS, kernel + server",
-            "mid", "after", "rss", " MB", "{:.0f}"),
-        row("(the same, seen in Task 1)", "Task 1 peak PSS, kernel + server", "mid", "after", "pss", " MB", "{:.0f}"),
-        row("(the same, seen in Task 1)", "Task 1 CPU, kernel + server", "mid", "after", "cpu", " %", "{:.2f}"),
+            "mid", "thread", "rss", " MB", "{:.0f}"),
+        row("(the same, seen in Task 1)", "Task 1 peak PSS, kernel + server", "mid", "thread", "pss", " MB", "{:.0f}"),
+        row("(the same, seen in Task 1)", "Task 1 CPU, kernel + server", "mid", "thread", "cpu", " %", "{:.2f}"),
         {"change": "(the same)", "figure": "`Viewer()` to a served scene",
-         "before": f"{st['mid']:.2f} s", "after": f"{st['after']:.2f} s", "effect": effect(st["mid"], st["after"], " s")},
-        row("both changes together", "Task 1 peak RSS, kernel + server", "before", "after", "rss", " MB", "{:.0f}"),
+         "before": f"{st['mid']:.2f} s", "after": f"{st['thread']:.2f} s", "effect": effect(st["mid"], st["thread"], " s")},
+        row("real-time runs: controls computed once, paced from the run's start", "Task 1 CPU, kernel",
+            "thread", "after", "cpu", " %", "{:.2f}"),
+        row("(the same: the moves now take their real time)", "Task 1 length (3 moves, 0.5 s pauses)",
+            "thread", "after", "wall", " s", "{:.1f}"),
+        row("(the same, whatever the length)", "Task 1 CPU time, kernel", "thread", "after", "cpu_s", " s", "{:.3f}"),
+        row("all three changes", "Task 1 peak RSS, kernel + server", "before", "after", "rss", " MB", "{:.0f}"),
+        row("(the same)", "Task 1 CPU, kernel + server", "before", "after", "cpu", " %", "{:.2f}"),
     ]
-    print(f"before = {args.rev[:10]}, mid = {args.mid_rev[:10]} (snakekit/), after = this tree; "
+    print(f"before = {args.rev[:10]}, mid = {args.mid_rev[:10]}, thread = {args.thread_rev[:10]} (snakekit/), after = this tree; "
           f"medians of {args.repeats}, alternating")
     for r in rows:
         print(f"{r['change']:62s} {r['figure']:34s} {r['before']:>10s} -> {r['after']:>10s}  {r['effect']}")
     write_json(args.json, {
-        "before_rev": args.rev[:10], "mid_rev": args.mid_rev[:10], "repeats": args.repeats, "rows": rows,
+        "before_rev": args.rev[:10], "mid_rev": args.mid_rev[:10], "thread_rev": args.thread_rev[:10],
+        "repeats": args.repeats, "rows": rows,
         "viewer_start_s": {k: spread(v) for k, v in start.items()},
-        "task1": {**{k: {x: spread(r[x] for r in v) for x in ("cpu", "rss", "pss")} for k, v in task1.items()},
+        "task1": {**{k: {x: spread(r[x] for r in v) for x in ("cpu", "rss", "pss", "wall")} for k, v in task1.items()},
                   "before_series": sorted(task1["before"], key=lambda r: r["cpu"])[len(task1["before"]) // 2]["series"]}})
     return 0
 
