@@ -132,20 +132,30 @@ class SimRobot(Robot):
         anything moves. Interrupted (Ctrl-C), a real-time run stops sending: the arm goes on
         to the last goal sent, as the servos would.
         """
-        if self.realtime:
-            return self._run_paced(trajectory, record_rate, settle, progress)
         self._check_trajectory(trajectory)
         wall0 = time.perf_counter()
-        m, d, dt, n = self.model, self.data, self.dt, self.spec.n_joints
+        dt, n = self.dt, self.spec.n_joints
         k0 = self._steps
-        times = trajectory.times - trajectory.times[0]
         record_at = self._record_times(trajectory, record_rate, settle)
-        goal_steps = np.ceil(times / dt - 1e-6).astype(int)
+        goal_steps = np.ceil((trajectory.times - trajectory.times[0]) / dt - 1e-6).astype(int)
         rec_steps = np.ceil(record_at / dt - 1e-6).astype(int)
-        total = int(rec_steps[-1])
-
+        before = copy.deepcopy(self.planner) if self.realtime else None  # to replay, if interrupted
         # The controls of the whole run, in one pass (and what follows, for later steps).
         ctrl = self.planner.step_velocities(k0, dt, k0 + goal_steps, trajectory.positions)
+        if self.realtime:
+            rec = self._step_paced(k0, ctrl, goal_steps, rec_steps, record_at, trajectory, before, progress)
+        else:
+            rec = self._step_rollout(k0, ctrl, rec_steps)
+        offset = trajectory.times[0]
+        return Run(Trajectory(goal_steps * dt + offset, trajectory.positions, n_joints=n),
+                   Trajectory(rec_steps * dt + offset, rec[0], rec[1], n_joints=n),
+                   rec[2], self.backend, time.perf_counter() - wall0, self.realtime, self.spec)
+
+    def _step_rollout(self, k0: int, ctrl: np.ndarray, rec_steps: np.ndarray):
+        """Step the whole run in one ``mujoco.rollout`` call; (positions, velocities, efforts)
+        at the record steps."""
+        m, d, n = self.model, self.data, self.spec.n_joints
+        total = int(rec_steps[-1])
         if len(ctrl) < total:
             ctrl = np.vstack([ctrl, np.zeros((total - len(ctrl), n))])
         self._ref = (k0 + total, ctrl[total:])
@@ -169,24 +179,15 @@ class SimRobot(Robot):
             rec_p[~at_start] = state[later, 1: 1 + n]
             rec_v[~at_start] = state[later, 1 + n: 1 + 2 * n]
             rec_e[~at_start] = sensors[later]
-        offset = trajectory.times[0]
-        return Run(Trajectory(goal_steps * dt + offset, trajectory.positions, n_joints=n),
-                   Trajectory(rec_steps * dt + offset, rec_p, rec_v, n_joints=n),
-                   rec_e, self.backend, time.perf_counter() - wall0, False, self.spec)
+        return rec_p, rec_v, rec_e
 
-    def _run_paced(self, trajectory: Trajectory, record_rate: float, settle: float, progress) -> Run:
-        """:meth:`run` in real time: precomputed controls, stepped in pace with the wall clock."""
-        self._check_trajectory(trajectory)
-        wall0 = time.perf_counter()
-        d, dt, n = self.data, self.dt, self.spec.n_joints
-        k0 = self._steps
-        times = trajectory.times - trajectory.times[0]
-        record_at = self._record_times(trajectory, record_rate, settle)
-        goal_steps = np.ceil(times / dt - 1e-6).astype(int)
-        rec_steps = np.ceil(record_at / dt - 1e-6).astype(int)
-        before = copy.deepcopy(self.planner)  # to replay the goals sent so far, if interrupted
-        self._ref = (k0, self.planner.step_velocities(k0, dt, k0 + goal_steps, trajectory.positions))
-        rec_p = np.empty((len(rec_steps), n))
+    def _step_paced(self, k0, ctrl, goal_steps, rec_steps, record_at, trajectory, before, progress):
+        """Step the run in pace with the wall clock, recording as the robot clock passes each
+        record time; (positions, velocities, efforts). Interrupted, only the goals whose time
+        has come stay sent (the planner is replayed from ``before`` with them)."""
+        d, dt = self.data, self.dt
+        self._ref = (k0, ctrl)
+        rec_p = np.empty((len(rec_steps), self.spec.n_joints))
         rec_v, rec_e = np.empty_like(rec_p), np.empty_like(rec_p)
         if progress is None:
             progress = record_at[-1] > LONG_RUN
@@ -203,15 +204,12 @@ class SimRobot(Robot):
         finally:
             if bar is not None:
                 bar.close(complete=complete)
-            if not complete:  # only the goals whose time has come were sent
+            if not complete:
                 sent = int(np.searchsorted(k0 + goal_steps, self._steps, side="right"))
                 self.planner = before
                 self._ref = (k0, self.planner.step_velocities(k0, dt, k0 + goal_steps[:sent],
                                                               trajectory.positions[:sent]))
-        offset = trajectory.times[0]
-        return Run(Trajectory(goal_steps * dt + offset, trajectory.positions, n_joints=n),
-                   Trajectory(rec_steps * dt + offset, rec_p, rec_v, n_joints=n),
-                   rec_e, self.backend, time.perf_counter() - wall0, True, self.spec)
+        return rec_p, rec_v, rec_e
 
     def step(self, duration: float) -> None:
         """Let the simulation run for ``duration`` [s] holding the present goals."""
