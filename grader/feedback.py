@@ -10,10 +10,12 @@ output that repeats a line of hidden test code is removed too.
 from __future__ import annotations
 
 import base64
+import hashlib
 import html
 import io
 import re
 import threading
+from collections import OrderedDict
 from pathlib import Path
 
 import nbformat
@@ -83,22 +85,52 @@ def hidden_lines(sources) -> set[str]:
     return out
 
 
+_plots: OrderedDict[bytes, bytes] = OrderedDict()  # recent plots by a digest of what they draw
+_plots_lock = threading.Lock()
+PLOT_CACHE = 16  # plots kept; each is a few hundred kB
+
+
 def plot_png(curves: dict, title: str) -> bytes:
     """The student's run against the reference, one row per joint, as PNG bytes.
 
     Left: the whole run. Right: 5 s around the largest difference between the student's
     curve and the reference (or the start, when they agree), where one can see it. The
     reference is drawn wide and grey underneath, the student's curves in colour on top.
+
+    The simulator repeats a run bit for bit, so every student whose sweep is right hands in
+    the same curves: a plot of the same title and arrays is drawn once and its bytes reused.
     """
+    digest = hashlib.blake2b(title.encode(), digest_size=20)
+    for name in sorted(curves):
+        for a in curves[name]:
+            a = np.ascontiguousarray(a)
+            digest.update(f"{name}|{a.dtype.str}|{a.shape}|".encode())
+            digest.update(a.data)
+    key = digest.digest()
+    with _plots_lock:
+        if key in _plots:
+            _plots.move_to_end(key)
+            return _plots[key]
+    png = _draw(curves, title)
+    with _plots_lock:
+        _plots[key] = png
+        while len(_plots) > PLOT_CACHE:
+            _plots.popitem(last=False)
+    return png
+
+
+def _draw(curves: dict, title: str) -> bytes:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     n = next(iter(curves.values()))[1].shape[1]
     height = 1.45 * n + 1.0
     fig = Figure(figsize=(10, height), dpi=72)  # fixed margins: a layout engine would double the drawing time
-    fig.subplots_adjust(left=0.07, right=0.99, bottom=0.5 / height, top=1 - 0.75 / height, wspace=0.04, hspace=0.25)
+    fig.subplots_adjust(left=0.07, right=0.99, bottom=0.5 / height, top=1 - 0.75 / height, wspace=0.04, hspace=0.15)
     FigureCanvasAgg(fig)
-    axes = np.atleast_2d(fig.subplots(n, 2, sharey="row", width_ratios=(2, 1)))
+    # shared axes: the inner rows draw no tick labels (most of a panel's drawing time is its ticks)
+    axes = np.atleast_2d(fig.subplots(n, 2, sharex="col", sharey="row", width_ratios=(2, 1)))
     styles = {"reference measured": dict(color="0.7", lw=3.5, zorder=1),
               "reference commanded": dict(color="0.35", lw=1, ls=":", zorder=2),
               "commanded": dict(color="C0", lw=1, ls="--", zorder=3),
@@ -129,6 +161,7 @@ def plot_png(curves: dict, title: str) -> bytes:
         for col in (0, 1):
             axes[j, col].grid(alpha=0.3)
             axes[j, col].tick_params(labelsize=7)
+        axes[j, 0].yaxis.set_major_locator(MaxNLocator(4, steps=[1, 2, 5, 10]))
     axes[-1, 0].set_xlabel("time from the first point [s]", fontsize=8)
     axes[-1, 1].set_xlabel(f"zoom: {lo:.1f} to {lo + 5:.1f} s", fontsize=8)
     axes[0, 1].set_title(worst or "your curves match the reference", fontsize=8)
@@ -218,18 +251,56 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
 _exporters = threading.local()
 
 
+def _memo(fn, size: int = 4096):
+    """``fn`` of strings with its recent results kept (each feedback page repeats the lesson's cells)."""
+    import functools
+
+    cached = functools.lru_cache(maxsize=size)(lambda args, kw: fn(*args, **dict(kw)))
+
+    def call(*args, **kw):
+        key = tuple(sorted((k, _frozen(v)) for k, v in kw.items()))
+        try:
+            hash((args, key))
+        except TypeError:  # an argument that cannot be a key
+            return fn(*args, **kw)
+        return cached(args, key)
+    return call
+
+
+def _frozen(v):
+    if isinstance(v, dict):
+        return tuple(sorted((k, _frozen(x)) for k, x in v.items()))
+    if isinstance(v, list | set):
+        return tuple(_frozen(x) for x in v)
+    return v
+
+
 def _exporter():
-    """One HTML exporter per thread (its templates load once; an exporter is not shared between threads)."""
+    """One HTML exporter per thread (its templates load once; an exporter is not shared between threads).
+
+    Every page of a class shows the same lesson text and test cells, so the exporter keeps
+    the results of its per-cell filters (syntax highlighting, HTML sanitising) for reuse.
+    """
     if not hasattr(_exporters, "html"):
         from nbconvert import HTMLExporter
+        from nbconvert.filters.highlight import Highlight2HTML
         from traitlets.config import Config
+
+        class FeedbackExporter(HTMLExporter):
+            def default_filters(self):
+                for name, fn in super().default_filters():
+                    yield name, (_memo(fn) if name == "clean_html" else fn)
 
         c = Config()
         c.TagRemovePreprocessor.remove_input_tags = {"grader-verdict"}
         c.TagRemovePreprocessor.enabled = True
         c.HTMLExporter.exclude_input_prompt = True
         c.HTMLExporter.exclude_output_prompt = True
-        _exporters.html = HTMLExporter(config=c)
+        exporter = FeedbackExporter(config=c)
+        # the feedback notebook's language is Python (build() sets it), so one highlighter serves every page
+        exporter.filters = {**exporter.filters, "highlight_code": _memo(Highlight2HTML(pygments_lexer="python",
+                                                                                      parent=exporter))}
+        _exporters.html = exporter
     return _exporters.html
 
 

@@ -67,6 +67,10 @@ def _preload() -> None:
     ax.plot([0, 1])
     fig.savefig(io.BytesIO(), format="png")
     plt.close(fig)
+    from nbformat import v4, validator
+
+    for relax in (False, True):  # the notebook schema, compiled (70 ms) once, not in every sandbox
+        validator.get_validator(4, v4.nbformat_minor, relax_add_props=relax)
     if threading.active_count() != 1:
         raise RuntimeError(f"a preloaded module started threads ({threading.enumerate()}); forking would be unsafe")
 

@@ -305,6 +305,74 @@ def test_kernel_verdict_hides_a_hidden_tests_message():
     assert Grader._kernel_score("t", info, nb).score == 2.0
 
 
+def test_only_the_sandboxs_own_gradebook_copy_skips_waiting_for_the_disk(tmp_path):
+    """The worker's course copy is deleted after the run: its SQLite need not sync; a fresh process still does."""
+    code = ("import sys, sqlalchemy as sa\n"
+            "if sys.argv[1] == 'worker':\n    from grader.worker import _throwaway_gradebook; _throwaway_gradebook()\n"
+            "with sa.create_engine(f'sqlite:///{sys.argv[2]}').connect() as c:\n"
+            "    print(c.exec_driver_sql('PRAGMA synchronous').scalar(), c.exec_driver_sql('PRAGMA journal_mode').scalar())")
+    out = {who: subprocess.run([sys.executable, "-c", code, who, str(tmp_path / f"{who}.db")], capture_output=True,
+                               text=True, cwd=REPO, check=True).stdout.split() for who in ("worker", "grader")}
+    assert out == {"worker": ["0", "memory"], "grader": ["2", "delete"]}  # OFF / MEMORY; SQLite's FULL / DELETE
+
+
+def test_feedback_plot_drawn_once_for_the_same_run_and_again_for_any_other(monkeypatch):
+    from collections import OrderedDict
+
+    from grader import feedback
+
+    drawn = []
+    draw = feedback._draw
+    monkeypatch.setattr(feedback, "_draw", lambda curves, title: drawn.append(title) or draw(curves, title))
+    monkeypatch.setattr(feedback, "_plots", OrderedDict())
+    monkeypatch.setattr(feedback, "PLOT_CACHE", 2)
+    t = np.arange(60) / 10.0
+    q = 0.2 * np.sin(t)[:, None] * np.ones((1, 5))
+    first = feedback.plot_png({"measured": (t, q), "reference measured": (t, q.copy())}, "ex")
+    again = feedback.plot_png({"measured": (t.copy(), q.copy()), "reference measured": (t, q)}, "ex")
+    assert first[:8] == b"\x89PNG\r\n\x1a\n" and again == first and drawn == ["ex"]
+    moved = q.copy()
+    moved[40, 3] = np.nextafter(moved[40, 3], 1.0)  # one joint, one sample, one bit
+    feedback.plot_png({"measured": (t, moved), "reference measured": (t, q)}, "ex")
+    assert drawn == ["ex", "ex"]
+    moved[40, 3] += 0.05
+    other = feedback.plot_png({"measured": (t, moved), "reference measured": (t, q)}, "ex")
+    assert drawn == ["ex", "ex", "ex"] and other != first  # its zoom now points at joint 4
+    assert len(feedback._plots) == 2  # the oldest plot let go: drawing it again below draws it anew
+    assert feedback.plot_png({"measured": (t, q), "reference measured": (t, q)}, "ex") == first
+    assert drawn == ["ex", "ex", "ex", "ex"]
+
+
+def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
+    """The feedback exporter keeps its filters' results between pages; the pages stay nbconvert's."""
+    from nbconvert import HTMLExporter
+    from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
+    from traitlets.config import Config
+
+    from grader import feedback
+
+    def page(student):
+        code = new_code_cell(f"x = np.arange(3)  # {student}\nprint(x)", execution_count=1)
+        code.outputs = [new_output("display_data", data={"text/html": f"<b>{student}</b>"})]
+        verdict = new_code_cell("", metadata={"tags": ["grader-verdict"]})
+        verdict.outputs = [new_output("display_data", data={"text/html": "<div>Grader: 1 / 2 points</div>"})]
+        nb = new_notebook(cells=[new_markdown_cell("# Lesson\n\n$q_1$ and `code`"), code, verdict])
+        nb.metadata = {"language_info": {"name": "python"}}
+        return nb
+
+    c = Config()
+    c.TagRemovePreprocessor.remove_input_tags = {"grader-verdict"}
+    c.TagRemovePreprocessor.enabled = True
+    c.HTMLExporter.exclude_input_prompt = True
+    c.HTMLExporter.exclude_output_prompt = True
+    plain = HTMLExporter(config=c)
+    for student in ("ann", "ben", "ann"):
+        nb = page(student)
+        written = feedback.write_html(nb, tmp_path / f"{student}.html").read_text()
+        assert written == plain.from_notebook_node(nb)[0]
+        assert f"<b>{student}</b>" in written and f"# {student}" in written
+
+
 # --- grader.exercises: rules that recompute what a hidden test judges ---------------------------
 
 
