@@ -123,7 +123,8 @@ def _execute(path: str, tests: dict[str, str]) -> None:
         if gid in tests:
             c.source = tests[gid]
     client = nbclient.NotebookClient(nb, timeout=120, kernel_name="python3", allow_errors=True,
-                                     resources={"metadata": {"path": str(Path(path).parent)}})
+                                     resources={"metadata": {"path": str(Path(path).parent)}},
+                                     extra_arguments=["--IPKernelApp.log_level=ERROR"])  # no start-up warning per kernel
     try:
         client.execute()
     except Exception:  # noqa: BLE001 - a dead kernel ends that notebook
