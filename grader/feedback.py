@@ -275,6 +275,18 @@ def _frozen(v):
     return v
 
 
+def exporter_config():
+    """nbconvert's settings for a feedback page: the verdict cells show their output only, no prompts."""
+    from traitlets.config import Config
+
+    c = Config()
+    c.TagRemovePreprocessor.remove_input_tags = {"grader-verdict"}
+    c.TagRemovePreprocessor.enabled = True
+    c.HTMLExporter.exclude_input_prompt = True
+    c.HTMLExporter.exclude_output_prompt = True
+    return c
+
+
 def _exporter():
     """One HTML exporter per thread (its templates load once; an exporter is not shared between threads).
 
@@ -284,19 +296,13 @@ def _exporter():
     if not hasattr(_exporters, "html"):
         from nbconvert import HTMLExporter
         from nbconvert.filters.highlight import Highlight2HTML
-        from traitlets.config import Config
 
         class FeedbackExporter(HTMLExporter):
             def default_filters(self):
                 for name, fn in super().default_filters():
                     yield name, (_memo(fn) if name == "clean_html" else fn)
 
-        c = Config()
-        c.TagRemovePreprocessor.remove_input_tags = {"grader-verdict"}
-        c.TagRemovePreprocessor.enabled = True
-        c.HTMLExporter.exclude_input_prompt = True
-        c.HTMLExporter.exclude_output_prompt = True
-        exporter = FeedbackExporter(config=c)
+        exporter = FeedbackExporter(config=exporter_config())
         # the feedback notebook's language is Python (build() sets it), so one highlighter serves every page
         exporter.filters = {**exporter.filters, "highlight_code": _memo(Highlight2HTML(pygments_lexer="python",
                                                                                       parent=exporter))}

@@ -347,7 +347,6 @@ def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
     """The feedback exporter keeps its filters' results between pages; the pages stay nbconvert's."""
     from nbconvert import HTMLExporter
     from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
-    from traitlets.config import Config
 
     from grader import feedback
 
@@ -360,12 +359,7 @@ def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
         nb.metadata = {"language_info": {"name": "python"}}
         return nb
 
-    c = Config()
-    c.TagRemovePreprocessor.remove_input_tags = {"grader-verdict"}
-    c.TagRemovePreprocessor.enabled = True
-    c.HTMLExporter.exclude_input_prompt = True
-    c.HTMLExporter.exclude_output_prompt = True
-    plain = HTMLExporter(config=c)
+    plain = HTMLExporter(config=feedback.exporter_config())  # nbconvert's own, with no results kept
     for student in ("ann", "ben", "ann"):
         nb = page(student)
         written = feedback.write_html(nb, tmp_path / f"{student}.html").read_text()
