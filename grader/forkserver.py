@@ -128,8 +128,9 @@ def _supervise(cfg: dict, report_fd: int) -> int:
     report.sendall(f"pid {os.getpid()}\n".encode())
     pid = os.fork()
     if pid == 0:  # PID 1 of the new namespace
-        code = 125
-        try:
+        from .warmkernel import exit_child  # preloaded: already imported
+
+        def sandbox() -> int:
             libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)  # the supervisor only waits for it
             report.close()
             from . import _sandbox_init, worker
@@ -138,23 +139,11 @@ def _supervise(cfg: dict, report_fd: int) -> int:
                 _sandbox_init.enter(cfg)
             except Exception as e:  # noqa: BLE001 - as the exec'd sandbox: status 125
                 print(f"sandbox: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
-                os._exit(125)
+                return 125
             os.environ.clear()
             os.environ.update(cfg["env"])
-            code = worker.main(cfg["argv"][3:], warm=True)
-        except SystemExit as e:
-            code = e.code if isinstance(e.code, int) else 1
-        except BaseException:  # noqa: BLE001
-            import traceback
-
-            traceback.print_exc()
-            code = 1
-        finally:
-            try:
-                sys.stdout.flush()
-                sys.stderr.flush()
-            finally:
-                os._exit(code)
+            return worker.main(cfg["argv"][3:], warm=True)
+        exit_child(sandbox)
     _, status = os.waitpid(pid, 0)
     report.sendall(f"exit {os.waitstatus_to_exitcode(status)}\n".encode())
     return 0

@@ -23,10 +23,34 @@ import os
 import signal
 import sys
 import time
+from typing import NoReturn
 
 from jupyter_client.manager import AsyncKernelManager
 
 _waiting: list["_WaitingKernel"] = []
+
+
+def exit_child(body) -> NoReturn:
+    """End a forked child with ``body()``'s exit code, never unwinding into the parent's stack.
+
+    ``sys.exit`` gives its code; any other error is printed (to the child's stderr) and exits 1.
+    """
+    code = 1
+    try:
+        code = body()
+    except SystemExit as e:
+        code = e.code if isinstance(e.code, int) else 1
+    except BaseException:  # noqa: BLE001 - report, then leave
+        import traceback
+
+        traceback.print_exc()
+        code = 1
+    finally:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(code)
 
 
 class ForkedProcess:
@@ -77,23 +101,13 @@ class _WaitingKernel:
         r, w = os.pipe()
         pid = os.fork()
         if pid == 0:  # the child: wait, then become the kernel; never return into the caller
-            code = 1
-            try:
+            def child() -> int:
                 os.close(w)
                 for other in _waiting:  # the other waiting kernels' pipes are not this kernel's to write
                     os.close(other._pipe)
                 _waiting.clear()
-                code = _become_kernel(r)
-            except BaseException:  # noqa: BLE001 - report, then leave without unwinding the parent's stack
-                import traceback
-
-                traceback.print_exc()
-            finally:
-                try:
-                    sys.stdout.flush()
-                    sys.stderr.flush()
-                finally:
-                    os._exit(code)
+                return _become_kernel(r)
+            exit_child(child)
         os.close(r)
         self.pid, self._pipe = pid, w
 
