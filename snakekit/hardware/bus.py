@@ -18,6 +18,8 @@ from ..errors import BackendError, MissingDependencyError
 try:
     import dynamixel_sdk as sdk
     import serial
+    from dynamixel_sdk.protocol2_packet_handler import (PKT_ERROR, PKT_ID, PKT_INSTRUCTION, PKT_LENGTH_H,
+                                                        PKT_LENGTH_L, PKT_PARAMETER0)
 except ImportError as e:  # pragma: no cover - the kit's environment has it
     raise MissingDependencyError("the hardware backend needs dynamixel-sdk: install the kit's environment "
                                  "with tools/setup (or `pip install dynamixel-sdk`)") from e
@@ -28,6 +30,8 @@ COMM_RESULTS = {
     sdk.COMM_RX_WAITING: "status packet incomplete", sdk.COMM_RX_TIMEOUT: "timed out",
     sdk.COMM_RX_CORRUPT: "corrupt status packet", sdk.COMM_NOT_AVAILABLE: "not available",
 }
+#: the longest lag [s] of a late status packet the bus waits out after a failure
+MAX_LATENESS = 0.4
 SUPPORTED_BAUD_RATES = "57600, 1000000, 2000000, 3000000 or 4000000"
 
 
@@ -81,13 +85,89 @@ class Port(sdk.PortHandler):
         return ser.read(length)
 
 
-class SyncRead(sdk.GroupSyncRead):
-    """The SDK's SyncRead, keeping each status packet's error byte (the SDK drops it)."""
+def status_params(rxpacket) -> int:
+    """How many parameter bytes a (de-stuffed) status packet carries: LEN - 4."""
+    return sdk.DXL_MAKEWORD(rxpacket[PKT_LENGTH_L],
+                            rxpacket[PKT_LENGTH_H]) - 4
 
-    def __init__(self, *args):
+
+def expected_params(txpacket) -> int:
+    """How many parameter bytes the status answering ``txpacket`` must carry: the block asked
+    for by a READ, 3 for a PING (model number, firmware), none for anything else."""
+    inst = txpacket[PKT_INSTRUCTION]
+    if inst == sdk.INST_READ:
+        return sdk.DXL_MAKEWORD(txpacket[PKT_PARAMETER0 + 2], txpacket[PKT_PARAMETER0 + 3])
+    return 3 if inst == sdk.INST_PING else 0
+
+
+class CheckedPacketHandler(sdk.Protocol2PacketHandler):
+    """The SDK's Protocol 2.0 packet handler, taking a status packet only when it answers
+    this request: the servo id asked, and the length of the block asked for.
+
+    The SDK itself checks the header, the status instruction (0x55) and the CRC, but it
+    passes over a status from another id without a word, and cuts a longer block to the
+    length asked for. A status packet that arrives late (the answer to an earlier, given-up
+    request) then reads as this request's answer: a 35-byte status block cut to the 10
+    bytes of the joint state gave -3.14 rad and 3143 rad/s on every joint. Here anything
+    else than the answer is ``COMM_RX_CORRUPT``, counted in :attr:`rejected`, and the
+    caller (:meth:`Bus.retry`) drains the line and asks again.
+    """
+
+    def __init__(self):
+        super().__init__()
+        #: status packets refused as not the answer (wrong id or block length)
+        self.rejected = 0
+
+    def _answers(self, rxpacket, servo_id: int, params: int) -> bool:
+        ok = (rxpacket[PKT_ID] == servo_id and status_params(rxpacket) == params)
+        if not ok:
+            self.rejected += 1
+        return ok
+
+    def txRxPacket(self, port, txpacket):
+        """One instruction and its status packet (the SDK's, without skipping other ids)."""
+        result = self.txPacket(port, txpacket)
+        if result != sdk.COMM_SUCCESS:
+            return None, result, 0
+        inst = txpacket[PKT_INSTRUCTION]
+        if inst in (sdk.INST_BULK_READ, sdk.INST_SYNC_READ):
+            return None, sdk.COMM_NOT_AVAILABLE, 0
+        if txpacket[PKT_ID] == sdk.BROADCAST_ID or inst == sdk.INST_ACTION:
+            port.is_using = False
+            return None, result, 0
+        params = expected_params(txpacket)
+        port.setPacketTimeout(params + 11)
+        rxpacket, result = self.rxPacket(port, False)
+        if result == sdk.COMM_SUCCESS and not self._answers(rxpacket, txpacket[PKT_ID], params):
+            result = sdk.COMM_RX_CORRUPT
+        error = rxpacket[PKT_ERROR] if result == sdk.COMM_SUCCESS else 0
+        return rxpacket, result, error
+
+    def readRx(self, port, dxl_id, length):
+        """One status packet of a SyncRead: the block of servo ``dxl_id``, ``length`` bytes."""
+        rxpacket, result = self.rxPacket(port, False)
+        if result == sdk.COMM_SUCCESS and not self._answers(rxpacket, dxl_id, length):
+            result = sdk.COMM_RX_CORRUPT
+        if result != sdk.COMM_SUCCESS:
+            return [], result, 0
+        return rxpacket[PKT_PARAMETER0 + 1:PKT_PARAMETER0 + 1 + length], result, rxpacket[PKT_ERROR]
+
+
+class SyncRead(sdk.GroupSyncRead):
+    """The SDK's SyncRead, keeping each status packet's error byte (the SDK drops it).
+
+    Args:
+        check: optional ``check(servo_id, data) -> str | None``: a reason when a servo's
+            block cannot be a true reading (the exchange then counts as corrupt).
+    """
+
+    def __init__(self, *args, check=None):
         super().__init__(*args)
         self.errors: dict[int, int] = {}
         self.failed_id: int | None = None
+        self.check = check
+        #: why the last exchange's data was refused, when a check refused it
+        self.implausible: str | None = None
 
     def rxPacket(self):
         self.last_result = False
@@ -95,8 +175,6 @@ class SyncRead(sdk.GroupSyncRead):
         result = sdk.COMM_RX_FAIL
         for dxl_id in self.data_dict:
             self.data_dict[dxl_id], result, self.errors[dxl_id] = self.ph.readRx(self.port, dxl_id, self.data_length)
-            if result == sdk.COMM_SUCCESS and len(self.data_dict[dxl_id]) != self.data_length:
-                result = sdk.COMM_RX_CORRUPT  # a late status packet of another request
             if result != sdk.COMM_SUCCESS:
                 self.failed_id = dxl_id
                 return result
@@ -104,11 +182,19 @@ class SyncRead(sdk.GroupSyncRead):
         return result
 
     def exchange(self) -> tuple[int, None]:
-        """One SyncRead, for :meth:`Bus.retry`: corrupt unless every servo's whole block arrived."""
+        """One SyncRead, for :meth:`Bus.retry`: corrupt unless every servo's whole block arrived
+        and passed the check."""
+        self.implausible = None
         result = self.txRxPacket()
         if result == sdk.COMM_SUCCESS and not all(self.isAvailable(i, self.start_address, self.data_length)
                                                   for i in self.data_dict):
             result = sdk.COMM_RX_CORRUPT
+        if result == sdk.COMM_SUCCESS and self.check is not None:
+            for i in self.data_dict:
+                why = self.check(i, bytes(self.data_dict[i]))
+                if why:
+                    self.failed_id, self.implausible = i, why
+                    return sdk.COMM_RX_CORRUPT, None
         return result, None
 
 
@@ -129,11 +215,19 @@ class Bus:
         self.retries = int(retries)
         #: packets sent again after a loss or corruption, since the bus was opened
         self.retried = 0
+        #: bytes thrown away because no request of ours was waiting for them (late or stray)
+        self.stray_bytes = 0
+        #: answers refused because more bytes followed them (a late status read as the answer)
+        self.leftovers = 0
+        self._suspect = False  # an exchange failed: late bytes may still come
+        self._failed_at = 0.0  # when the last failed exchange began (perf_counter [s])
+        #: the longest that late bytes were seen to lag behind a failed request [s]
+        self.lateness = 0.0
         #: when the bus last carried a packet (time.perf_counter() [s])
         self.last_used = time.perf_counter()
         self._lock = threading.RLock()
         self.port = Port(self.name)
-        self.ph = sdk.PacketHandler(2.0)
+        self.ph = CheckedPacketHandler()
         try:
             opened = self.port.openPort()
         except Exception as e:  # pyserial raises SerialException (an OSError) for a bad path
@@ -164,54 +258,107 @@ class Bus:
                 self.port.is_using = False
                 self.last_used = time.perf_counter()
 
-    def drain(self, quiet: float, longest: float = 0.5) -> None:
-        """Throw away bytes until the line has been quiet for ``quiet`` [s] (at most ``longest`` [s]):
-        a status packet that arrives after the SDK gave up must not be taken as the next answer."""
+    def _byte_within(self, seconds: float) -> bool:
+        """Whether a byte arrives on the line within ``seconds`` [s] (or is waiting already)."""
+        ser = self.port.ser
+        return bool(ser.in_waiting) or bool(select.select([ser.fileno()], [], [], seconds)[0])
+
+    def _discard(self) -> None:
+        """Throw away (and count) what is waiting on the line: nothing an earlier request left
+        is read as the answer to the next one."""
+        ser = self.port.ser
+        waiting = ser.in_waiting
+        if waiting:
+            self.stray_bytes += len(ser.read(waiting))
+        self.port.clearPort()
+
+    def drain(self, quiet: float, longest: float = 0.5, since: float | None = None) -> None:
+        """Throw away (and count) bytes until the line has been quiet for ``quiet`` [s] (at most
+        ``longest`` [s]): a status packet that arrives after the SDK gave up must not be taken
+        as the next answer. ``since``: when the failed request was sent (perf_counter [s]), to learn
+        how late bytes come (:attr:`lateness`)."""
         ser = self.port.ser
         end = time.perf_counter() + longest
         while time.perf_counter() < end:
-            if not select.select([ser.fileno()], [], [], quiet)[0]:
+            if not self._byte_within(quiet):
                 return
-            ser.read(4096)
+            self.stray_bytes += len(ser.read(max(ser.in_waiting, 1)))
+            if since is not None:
+                self.lateness = min(max(self.lateness, time.perf_counter() - since), MAX_LATENESS)
 
-    def retry(self, call: Callable[[], tuple[int, object]]) -> tuple[int, object]:
-        """Run ``call()`` (one packet exchange, returning ``(result, value)``) with the bus held,
-        again after each failure, at most ``retries + 1`` times. Returns the last
-        ``(result, value)``: ``result`` is ``COMM_SUCCESS`` unless every try failed.
+    @property
+    def quiet_time(self) -> float:
+        """How long the line must stay quiet after a failed exchange [s]: twice the SDK's packet
+        timeout, at least 50 ms, and a quarter longer than late bytes were seen to lag behind a
+        failed request on this bus (:attr:`lateness`)."""
+        return max(2 * self.port.packet_timeout / 1000.0, 0.05, 1.25 * self.lateness)
+
+    def attempt(self, call: Callable[[], tuple[int, object]], *, answered: bool = True) -> tuple[int, object]:
+        """One packet exchange ``call()`` with the bus held, taken only when nothing else came.
+
+        Before it, what waits on the line is thrown away (and counted). After a successful
+        exchange, a byte left on the line means the "answer" may have been a late status of an
+        earlier request with the true answer behind it: the exchange counts as corrupt. After
+        any failure the next exchanges must also leave the line quiet for :attr:`quiet_time`
+        until one does (late packets arrive in order, so a late one read as an answer is always
+        followed by the true one). A failed exchange drains the line. ``answered=False``: an
+        instruction no servo answers (SyncWrite), sent after the clean-up, checked for nothing.
         """
-        for attempt in range(self.retries + 1):
-            with self.hold():
-                self.port.clearPort()  # nothing left over from an earlier, failed exchange
-                try:
-                    result, value = call()
-                except IndexError:  # the SDK read a stale, shorter status packet as the answer
-                    result, value = sdk.COMM_RX_CORRUPT, None
-                if result != sdk.COMM_SUCCESS:
-                    self.drain(max(2 * self.port.packet_timeout, 50.0) / 1000.0)  # ms -> s
+        with self.hold():
+            self._discard()
+            started = time.perf_counter()
+            try:
+                result, value = call()
+            except IndexError:  # the SDK indexed a status packet too short for what it wanted
+                result, value = sdk.COMM_RX_CORRUPT, None
+            if not answered:
+                return result, value
+            since = started
+            if result == sdk.COMM_SUCCESS and self._byte_within(self.quiet_time if self._suspect else 0.0):
+                result = sdk.COMM_RX_CORRUPT  # the "answer" was late bytes of the failed request before
+                self.leftovers += 1
+                since = self._failed_at
+            if result == sdk.COMM_SUCCESS:
+                self._suspect = False
+            else:
+                self._failed_at = started
+                self._suspect = True
+                self.drain(self.quiet_time, longest=2 * MAX_LATENESS, since=since)
+        return result, value
+
+    def retry(self, call: Callable[[], tuple[int, object]], *, answered: bool = True,
+              tries: int | None = None) -> tuple[int, object]:
+        """:meth:`attempt` ``call()`` (one packet exchange, returning ``(result, value)``), again
+        after each failure, at most ``retries + 1`` times (``tries + 1`` when given). Returns the last ``(result, value)``:
+        ``result`` is ``COMM_SUCCESS`` unless every try failed.
+        """
+        retries = self.retries if tries is None else tries
+        for attempt in range(retries + 1):
+            result, value = self.attempt(call, answered=answered)
             if result == sdk.COMM_SUCCESS:
                 break
-            if attempt < self.retries:
+            if attempt < retries:
                 self.retried += 1
         return result, value
 
-    def read(self, servo_id: int, address: int, size: int) -> tuple[int, int, int]:
-        """One READ with retries: ``(result, value, error byte)``; the value is unsigned."""
+    def read(self, servo_id: int, address: int, size: int, *, tries: int | None = None) -> tuple[int, int, int]:
+        """One READ with retries (``tries``: how many, default :attr:`retries`): ``(result, value,
+        error byte)``; the value is unsigned."""
 
         def once():
             data, result, error = self.ph.readTxRx(self.port, servo_id, address, size)
-            if result == sdk.COMM_SUCCESS and len(data) != size:
-                result = sdk.COMM_RX_CORRUPT  # the status of another request, arriving late
             return result, (int.from_bytes(bytes(data), "little") if result == sdk.COMM_SUCCESS else 0, error)
 
-        result, value = self.retry(once)
+        result, value = self.retry(once, tries=tries)
         value, error = value if value is not None else (0, 0)
         return result, value, error
 
-    def write(self, servo_id: int, address: int, size: int, value: int) -> tuple[int, int]:
+    def write(self, servo_id: int, address: int, size: int, value: int, *,
+              tries: int | None = None) -> tuple[int, int]:
         """One WRITE with retries (negative values written as two's complement): ``(result, error byte)``."""
         fn = {1: self.ph.write1ByteTxRx, 2: self.ph.write2ByteTxRx, 4: self.ph.write4ByteTxRx}[size]
         value = value & ((1 << 8 * size) - 1)
-        return self.retry(lambda: fn(self.port, servo_id, address, value))
+        return self.retry(lambda: fn(self.port, servo_id, address, value), tries=tries)
 
     def ping(self, servo_id: int) -> tuple[int, int, int]:
         """One PING with retries: ``(result, model number, error byte)``."""
@@ -230,9 +377,11 @@ class Bus:
 
     def ping_once(self, servo_id: int) -> int:
         """One PING, no retry (for waiting on a rebooting servo): the result."""
-        with self.hold():
+        def once():
             _, result, _ = self.ph.ping(self.port, servo_id)
-        return result
+            return result, None
+
+        return self.attempt(once)[0]
 
     def close(self) -> None:
         if self.port.is_open:

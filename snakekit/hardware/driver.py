@@ -45,7 +45,8 @@ from .bus import Bus, SyncRead, describe, sdk
 from .keepalive import STATUS_BLOCK, KeepAlive, WatchdogMixin
 from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_ERROR_STATUS, PACKET_ERRORS,
                         PRESENT_POSITION, PROFILE_ACCELERATION, PROFILE_VELOCITY, STATE_BLOCK, TORQUE_ENABLE,
-                        decode_hardware_error, decode_state, load_to_torque, position_bytes, position_limit_ticks,
+                        decode_hardware_error, decode_state, implausible_state, load_to_torque, position_bytes,
+                        position_limit_ticks, TICKS_PER_RAD,
                         radians_to_ticks, ticks_to_radians, to_signed, velocity_to_radians_per_second)
 from .options import ON_CLOSE, check_options
 from .startup import check_eeprom
@@ -135,7 +136,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
         self.bus = Bus(self.port_name, self.baudrate, retries)
         self.closed = False
         _OPEN[key] = self
-        self._reader = SyncRead(self.port, self.bus.ph, *STATE_BLOCK)
+        self._reader = SyncRead(self.port, self.bus.ph, *STATE_BLOCK, check=lambda _, raw: implausible_state(raw))
         self._status = SyncRead(self.port, self.bus.ph, *STATUS_BLOCK)
         self._writer = sdk.GroupSyncWrite(self.port, self.bus.ph, GOAL_POSITION, 4)
         for i in ids:
@@ -284,6 +285,9 @@ class DynamixelSnake(WatchdogMixin, Robot):
         reader = self._reader
         t_sent = self._now()
         result, _ = self.bus.retry(reader.exchange)
+        if result != sdk.COMM_SUCCESS and reader.implausible:
+            self._fail(f"servo {reader.failed_id} on {self.port_name} reported {reader.implausible}, which no "
+                       f"true reading holds: a corrupt or misread reply ({self._tries()})", result)
         if result != sdk.COMM_SUCCESS:
             self._fail(f"servo {reader.failed_id} on {self.port_name} did not answer the SyncRead of the "
                        f"joint state ({describe(result)}, {self._tries()})", result)
@@ -312,7 +316,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
         """One SyncWrite of the five goals, clamped to the position limits in ticks."""
         self._load_goals(q)
         writer = self._writer
-        result, _ = self.bus.retry(lambda: (writer.txPacket(), None))
+        result, _ = self.bus.retry(lambda: (writer.txPacket(), None), answered=False)
         if result != sdk.COMM_SUCCESS:
             self._fail(f"the SyncWrite of goal positions could not be sent on {self.port_name} "
                        f"({describe(result)}, {self._tries()})", result)
@@ -408,39 +412,76 @@ class DynamixelSnake(WatchdogMixin, Robot):
         return (f"Torque off was sent, but servo(s) {', '.join(map(str, still_on))} did not confirm it: "
                 "they may still have torque on. Switch the arm's power off before touching it.")
 
-    def _torque_off_safely(self) -> list[int]:
-        """Broadcast torque off and read it back; the ids that did not confirm it."""
+    def _torque_off_safely(self, ids=None) -> list[int]:
+        """Torque off (broadcast, or to each of ``ids``) and read it back; the ids that did not confirm it."""
         ph, port = self.bus.ph, self.port
-        still_on = list(self.ids)
+        ids = list(self.ids if ids is None else ids)
+        still_on = ids
         for attempt in range(self.retries + 1):
             try:
                 port.clearPort()
-                ph.write1ByteTxOnly(port, sdk.BROADCAST_ID, TORQUE_ENABLE, 0)
+                for target in ([sdk.BROADCAST_ID] if ids == list(self.ids) else ids):
+                    ph.write1ByteTxOnly(port, target, TORQUE_ENABLE, 0)
+                    port.is_using = False
             except Exception:
                 pass
             port.is_using = False
             still_on = []
-            for i in self.ids:
+            for i in ids:
                 value, result, _ = ph.read1ByteTxRx(port, i, TORQUE_ENABLE)
                 port.is_using = False
                 if result != sdk.COMM_SUCCESS or value != 0:
                     still_on.append(i)
             if not still_on:
                 break
-        self.torque_enabled = bool(still_on)
+        self.torque_enabled = bool(still_on) or len(ids) < len(self.ids)
         return still_on
 
     def _hold_safely(self) -> str:
-        if self._last_positions is None:
-            return "The arm holds its last goal (no position was read yet)."
-        self._load_goals(self._last_positions)
-        try:
-            self._writer.txPacket()
-        except Exception:
-            return "The arm was to hold where it is, but the goals could not be sent: it holds its last goal."
-        finally:
-            self.port.is_using = False
-        return "The arm was told to hold where it was last read (a SyncWrite is not answered: not confirmed)."
+        """Hold each servo where it is, by a goal that cannot be far from it; torque off where in doubt.
+
+        A servo's goal becomes its present position only when two READs of it, each the checked
+        answer to its own request, agree within what the joint can move between them, inside
+        the joint's limits; the goal is then written with an answered WRITE. A servo that fails
+        any of this is not sent a goal at all: its torque is turned off (and read back), so no
+        goal is ever made from a reading that was not verified.
+        """
+        held, limp = [], []
+        for i in self.ids:
+            (held if self._hold_servo(i) else limp).append(i)
+        parts = []
+        if held:
+            parts.append(f"servo(s) {', '.join(map(str, held))} hold where they are (goal = present position, "
+                         "read twice and written with an answer)")
+        if limp:
+            still_on = self._torque_off_safely(limp)
+            off = [i for i in limp if i not in still_on]
+            if off:
+                parts.append(f"servo(s) {', '.join(map(str, off))} could not be read reliably, so their torque was "
+                             "turned off instead (read back)")
+            if still_on:
+                parts.append(f"servo(s) {', '.join(map(str, still_on))} could not be read reliably and did not "
+                             "confirm torque off: they may still move to their last goal. Switch the arm's power "
+                             "off before touching it")
+        return "The arm was stopped: " + "; ".join(parts) + "."
+
+    def _hold_servo(self, servo_id: int) -> bool:
+        """Goal = present position of one servo, from two verified READs that agree; False if not done."""
+        lo, hi = self.tick_limits
+        tries = min(self.retries, 1)
+        readings = []
+        for _ in range(2):
+            t = time.perf_counter()
+            result, value, error = self.bus.read(servo_id, PRESENT_POSITION, 4, tries=tries)
+            if result != sdk.COMM_SUCCESS or error & 0x7F:
+                return False
+            readings.append((t, to_signed(value, 4)))
+        (t1, a), (t2, b) = readings
+        reach = (self.spec.velocity_limit * 1.5 * (t2 - t1 + 0.01)) * TICKS_PER_RAD + 2  # ticks it can move
+        if not (lo <= b <= hi) or abs(b - a) > reach:
+            return False
+        result, error = self.bus.write(servo_id, GOAL_POSITION, 4, b, tries=tries)
+        return result == sdk.COMM_SUCCESS and not error & 0x7F
 
     def _reboot(self, servo_id: int, timeout: float = 2.0) -> None:
         result, error = self.bus.reboot(servo_id)

@@ -96,9 +96,7 @@ class WatchdogMixin:
         """What the keep-alive thread sends: a status read (never stops the arm); what it reads
         is kept for :meth:`command` to check without a packet of its own."""
         if not self.closed:
-            with self.bus.hold():
-                ok = self._status.txRxPacket() == sdk.COMM_SUCCESS
-            if ok:
+            if self.bus.attempt(self._status.exchange)[0] == sdk.COMM_SUCCESS:
                 self._last_status = {i: (self._status.data_dict[i][0] == 1, to_signed(self._status.data_dict[i][-1], 1))
                                      for i in self.ids}
 

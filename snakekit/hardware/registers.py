@@ -34,6 +34,10 @@ PROFILE_ACCELERATION, PROFILE_VELOCITY, GOAL_POSITION = 108, 112, 116
 PRESENT_LOAD, PRESENT_POSITION = 126, 132
 STATE_BLOCK = (PRESENT_LOAD, 10)  # Present Load (2), Velocity (4), Position (4): one SyncRead
 _STATE = struct.Struct("<hii")  # that block, signed little-endian
+NO_LOAD_SPEED = 5.76  # rad/s: the MX-28's 55 rev/min at 12 V, unloaded
+#: the largest Present Velocity a true reading holds: the no-load speed and half again
+MAX_PRESENT_VELOCITY = math.ceil(1.5 * NO_LOAD_SPEED / VELOCITY_UNIT)
+MAX_PRESENT_LOAD = 1000  # 0.1 % units: 100 % of the stall torque
 POSITION_MODE = 3  # Operating Mode value
 FULL_PWM = 885  # PWM Limit's factory value: the whole supply voltage (the MX-28 has no current limit)
 
@@ -96,6 +100,30 @@ def decode_state(raw: bytes) -> tuple[int, int, int]:
     (-1000, -1, 2048)
     """
     return _STATE.unpack(raw)
+
+
+def implausible_state(raw: bytes) -> str | None:
+    """Why one servo's :data:`STATE_BLOCK` cannot be a true reading, or None when it can be.
+
+    In position mode Present Position stays within one turn (0..4095), no joint turns faster
+    than the servo's no-load speed (:data:`MAX_PRESENT_VELOCITY`, with a margin), and Present
+    Load counts at most 100 % of the stall torque. A value beyond these is a corrupt or
+    misread packet, never the arm's state.
+
+    >>> implausible_state(bytes([0, 0, 0, 0, 0, 0, 0x00, 0x08, 0, 0])) is None
+    True
+    >>> implausible_state(bytes([0, 0, 0x3B, 0x02, 0, 0, 0x00, 0x08, 0, 0]))
+    'Present Velocity 571 (13.7 rad/s; the MX-28 turns at most 5.8 rad/s)'
+    """
+    load, velocity, position = decode_state(raw)
+    if not 0 <= position < TICKS_PER_TURN:
+        return f"Present Position {position} (outside the one turn of position mode, 0..{TICKS_PER_TURN - 1})"
+    if abs(velocity) > MAX_PRESENT_VELOCITY:
+        return (f"Present Velocity {velocity} ({abs(velocity) * VELOCITY_UNIT:.1f} rad/s; the MX-28 turns at most "
+                f"{NO_LOAD_SPEED:.1f} rad/s)")
+    if abs(load) > MAX_PRESENT_LOAD:
+        return f"Present Load {load} (beyond {MAX_PRESENT_LOAD}, 100 % of the stall torque)"
+    return None
 
 
 def position_bytes(tick: int) -> list[int]:

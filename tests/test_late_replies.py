@@ -1,0 +1,202 @@
+"""Only what the servos said: late, dropped and corrupted replies are never read as the arm's state,
+and nothing the driver sends is made from a reading it could not verify.
+
+Every reading is compared with the emulator's own true state over the time the request was on
+the bus, and every goal the emulator received with the path the test asked for.
+"""
+
+import math
+import multiprocessing
+import time
+
+import numpy as np
+import pytest
+
+import snakekit
+from snakekit.emulator import BusEmulator, Faults, make_emulated_robot
+from snakekit.emulator.motion import ProfileMotion
+from tests.conftest import need
+
+sdk = need("dynamixel_sdk")
+from snakekit import hardware as hw  # noqa: E402
+
+pytestmark = pytest.mark.filterwarnings("ignore:the kit wrote its EEPROM settings")
+
+TICK = 2 * math.pi / 4096
+PATH_LO, PATH_HI = 0.0, 0.3  # the joint angles the test commands [rad]
+
+
+def true_range(bus, t_a, t_b, samples=40):
+    """The lowest and highest true joint angles of the emulated arm between ``t_a`` and ``t_b``
+    (emulator clock [s])."""
+    qs = np.array([bus.motion.state(t)[0] for t in np.linspace(t_a, t_b, samples)])
+    return qs.min(axis=0), qs.max(axis=0)
+
+
+def drive_and_read(robot, n, gap):
+    """Command a slow back-and-forth inside [PATH_LO, PATH_HI] and read after each goal.
+
+    Returns (wrong readings, communication errors, readings checked)."""
+    bus = robot.emulator
+    wrong, errors, checked = [], 0, 0
+    for k in range(n):
+        q = np.full(5, PATH_LO + (PATH_HI - PATH_LO) * 0.5 * (1 - math.cos(2 * math.pi * k / 20)))
+        try:
+            robot.command(q)
+            t_a = bus.now()
+            s = robot.read()
+            t_b = bus.now()
+        except snakekit.CommunicationError:
+            errors += 1
+            try:
+                robot.torque_on()  # the error stopped the arm; a student would start again
+            except snakekit.CommunicationError:
+                errors += 1
+            continue
+        lo, hi = true_range(bus, t_a - 1e-3, t_b)
+        off = np.maximum(lo - s.positions, s.positions - hi)
+        if off.max() > 2 * TICK or np.abs(s.velocities).max() > 2.0:
+            wrong.append((k, s.positions.round(4).tolist(), s.velocities.round(3).tolist()))
+        checked += 1
+        time.sleep(gap)  # longer than a quarter of the watchdog: the keep-alive reads in between
+    return wrong, errors, checked
+
+
+def goals_off_the_path(bus):
+    """Goal Position writes outside [PATH_LO, PATH_HI] (the start-up's goal = present = home aside)."""
+    lo, hi = hw.radians_to_ticks(PATH_LO) - 2, hw.radians_to_ticks(PATH_HI) + 2
+    return [(round(w.time, 3), w.servo_id, w.value) for w in bus.writes(116, 4) if not lo <= w.value <= hi]
+
+
+@pytest.mark.parametrize("faults", [
+    Faults(delay=0.3, delay_time=0.1, seed=5),
+    Faults(delay=0.15, delay_time=0.06, seed=11),
+    Faults(corrupt=0.08, seed=3),
+    Faults(drop=0.1, seed=4),
+    Faults(drop=0.05, corrupt=0.05, delay=0.1, delay_time=0.08, seed=8),
+], ids=lambda f: f.describe())
+def test_no_reading_differs_from_the_arms_true_state(faults):
+    robot = make_emulated_robot(motion="profile", on_close="hold", watchdog=0.5)
+    bus = robot.emulator
+    try:
+        bus.faults = faults
+        wrong, errors, checked = drive_and_read(robot, 60, gap=0.13)
+        robot.close()
+        assert wrong == [], f"readings that were not the arm's state: {wrong[:3]}"
+        assert checked >= 45, f"only {checked} of 60 reads answered ({errors} communication errors)"
+        assert goals_off_the_path(bus) == []
+    finally:
+        robot.close()
+
+
+def test_late_status_packets_are_drained_and_counted():
+    robot = make_emulated_robot(motion="profile", watchdog=0.5)
+    try:
+        robot.emulator.faults = Faults(delay=0.3, delay_time=0.1, seed=5)
+        wrong, _, _ = drive_and_read(robot, 30, gap=0.13)
+        assert wrong == []
+        assert robot.bus.stray_bytes > 0  # the late replies arrived, and were thrown away
+        assert robot.bus.lateness == pytest.approx(0.1, abs=0.03)  # learnt from them
+    finally:
+        robot.close()
+
+
+def _emulator_process(conn, faults):
+    """A bus emulator in a process of its own (as `snakekit emulator` runs): its port out, then,
+    when asked, every servo's torque and goal and every goal written."""
+    bus = BusEmulator(motion="profile").start()
+    conn.send(bus.port)
+    conn.recv()  # the robot has started
+    bus.faults = faults
+    conn.recv()
+    conn.send(([(bus.servo(i).memory.get("Torque Enable"), bus.servo(i).memory.get("Goal Position"))
+                for i in bus.ids], [w.value for w in bus.writes(116, 4)]))
+    bus.stop()
+
+
+def test_close_with_hold_under_late_replies_never_sends_a_far_goal():
+    """The issue's case: the arm at rest at 0, 30 % of replies 100 ms late (the emulator in its
+    own process), readings between the keep-alive's; close(hold) had sent every joint to
+    -1.57 rad from a misread state."""
+    ctx = multiprocessing.get_context("fork")
+    for seed in (5, 6):
+        here, there = ctx.Pipe()
+        proc = ctx.Process(target=_emulator_process, args=(there, Faults(delay=0.3, delay_time=0.1, seed=seed)))
+        proc.start()
+        try:
+            robot = hw.DynamixelSnake(here.recv(), on_close="hold")
+            here.send("faults on")
+            for _ in range(40):
+                try:
+                    robot.read()
+                except snakekit.CommunicationError:
+                    robot.torque_on()
+                time.sleep(0.13)
+            robot.close()
+            here.send("report")
+            servos, goals = here.recv()
+            for i, (torque, goal) in enumerate(servos, start=1):
+                assert torque == 0 or abs(goal - 2048) <= 2, f"servo {i}: goal {goal} with torque on"
+            assert [g for g in goals if abs(g - 2048) > 2] == []
+        finally:
+            proc.join(timeout=10)
+            proc.kill()
+
+
+def test_hold_says_which_servos_hold_and_which_went_limp():
+    robot = make_emulated_robot(motion="profile", on_close="hold", watchdog=0)
+    bus = robot.emulator
+    try:
+        robot.move_to(np.full(5, 0.2), duration=0.4)
+        bus.faults = Faults(missing=(3,))
+        message = robot.stop()
+        assert "servo(s) 1, 2, 4, 5 hold where they are" in message
+        assert "servo(s) 3 could not be read reliably" in message
+        for i in (1, 2, 4, 5):
+            m = bus.servo(i).memory
+            assert m.get("Torque Enable") == 1 and m.get("Goal Position") == m.get("Present Position")
+    finally:
+        bus.faults = Faults()
+        robot.close()
+
+
+class _Racing(ProfileMotion):
+    """A servo that reports joint 2 turning at 20 rad/s: no MX-28 does."""
+
+    def state(self, t):
+        pos, vel, eff = super().state(t)
+        vel[1] = 20.0
+        return pos, vel, eff
+
+
+def test_a_reading_no_servo_can_give_is_a_communication_error_naming_servo_and_value():
+    bus = BusEmulator(motion=_Racing(np.zeros(5))).start()
+    try:
+        robot = hw.DynamixelSnake(bus.port, watchdog=0, retries=1)
+        robot._release.append(bus.stop)
+        with pytest.raises(snakekit.CommunicationError) as e:
+            robot.read()
+        assert "servo 2" in str(e.value)
+        assert "Present Velocity 834 (20.0 rad/s; the MX-28 turns at most 5.8 rad/s)" in str(e.value)
+        robot.close()
+    finally:
+        bus.stop()
+
+
+def test_a_status_from_another_request_is_refused():
+    """A 35-byte status block read where a 10-byte one was asked: refused, not cut to 10 bytes."""
+    bus = BusEmulator(motion="profile").start()
+    try:
+        robot = hw.DynamixelSnake(bus.port, watchdog=0)
+        robot._release.append(bus.stop)
+        ph, port = robot.bus.ph, robot.port
+        # a status block of servo 1, answered late, comes when the joint state is asked for
+        bus.faults = Faults(delay=1.0, delay_time=0.01, count=1)
+        ph.readTx(port, 1, 64, 35)
+        port.is_using = False
+        data, result, _ = ph.readTxRx(port, 1, 126, 10)
+        assert result == sdk.COMM_RX_CORRUPT and data == []
+        assert ph.rejected == 1
+        robot.close()
+    finally:
+        bus.stop()
