@@ -65,7 +65,7 @@ def drive_and_read(robot, n, gap):
 def goals_off_the_path(bus):
     """Goal Position writes outside [PATH_LO, PATH_HI] (the start-up's goal = present = home aside)."""
     lo, hi = hw.radians_to_ticks(PATH_LO) - 2, hw.radians_to_ticks(PATH_HI) + 2
-    return [(round(w.time, 3), w.servo_id, w.value) for w in bus.writes(116, 4) if not lo <= w.value <= hi]
+    return [(round(w.time, 3), w.id, w.value) for w in bus.writes(116, 4) if not lo <= w.value <= hi]
 
 
 @pytest.mark.parametrize("faults", [
@@ -80,10 +80,10 @@ def test_no_reading_differs_from_the_arms_true_state(faults):
     bus = robot.emulator
     try:
         bus.faults = faults
-        wrong, errors, checked = drive_and_read(robot, 60, gap=0.13)
+        wrong, errors, checked = drive_and_read(robot, 40, gap=0.13)
         robot.close()
         assert wrong == [], f"readings that were not the arm's state: {wrong[:3]}"
-        assert checked >= 45, f"only {checked} of 60 reads answered ({errors} communication errors)"
+        assert checked >= 30, f"only {checked} of 40 reads answered ({errors} communication errors)"
         assert goals_off_the_path(bus) == []
     finally:
         robot.close()

@@ -478,3 +478,53 @@ def test_reboot_of_a_servo_not_on_the_arm(servo):
     with make_emulated_robot(motion="profile", watchdog=0) as robot:
         with pytest.raises(ConfigurationError, match=r"is not on this arm; ids: 1, 2, 3, 4, 5"):
             robot.reboot(servo)
+
+
+# --- late goals and joints outside their limits ---------------------------------------------------
+
+def test_after_a_host_stall_the_run_goes_on_from_where_it_was_never_catching_up():
+    """A stall of the host mid-run (a busy laptop): the goals after it keep their planned
+    spacing (the rest of the run comes later), so no joint is asked to catch up; the arm's
+    measured speed stays under the limit."""
+    robot = make_emulated_robot(watchdog=0)  # the MuJoCo arm: it would overshoot a catch-up
+    bus = robot.emulator
+    try:
+        times = np.arange(31) * 0.1
+        q = np.zeros((31, 5))
+        q[:, 0] = 0.9 * np.sin(np.pi * times / 3.0) ** 2  # peaks at 0.94 rad/s, within the limit
+        advance = robot._advance
+
+        def stalled(t, _done=[]):
+            if t > 1.0 and not _done:  # the host freezes for 0.5 s before the goal at 1.0 s
+                _done.append(1)
+                time.sleep(0.5)
+            advance(t)
+
+        robot._advance = stalled
+        bus.clear_record()
+        run = robot.run(Trajectory(times, q))
+        sent = np.array([w.time for w in bus.writes(116, 4) if w.id == 1])
+        assert len(sent) == 31
+        assert np.diff(sent).min() > 0.04  # planned 0.1 s apart: no overdue goals sent in a burst
+        assert robot.late_shifts >= 1
+        assert run.measured.times[-1] >= 3.0 + 0.5 + 0.4  # the run came later by the stall
+        assert run.peak_speeds().max() <= 1.5
+    finally:
+        robot.close()
+
+
+def test_torque_on_with_a_joint_outside_its_limits_says_so_and_moves_it_in_slowly():
+    q0 = np.array([0.0, 0.0, -1.8, 0.0, 0.0])  # joint 3 turned past its limit by hand
+    with pytest.warns(UserWarning, match=r"joint 3 \(servo 3\) was at -1\.80 rad, goes to -1\.57 rad.*1\.32 rad/s"):
+        robot = make_emulated_robot(motion="profile", q0=q0, watchdog=0)
+    try:
+        bus = robot.emulator
+        assert bus.servo(3).memory.get("Goal Position") == 1025
+        peak = 0.0
+        for _ in range(40):
+            peak = max(peak, float(np.abs(robot.read().velocities).max()))
+            time.sleep(0.01)
+        assert 0.5 < peak <= 1.5
+        assert robot.read().positions[2] == pytest.approx(-1.57, abs=0.01)
+    finally:
+        robot.close()

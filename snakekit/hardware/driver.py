@@ -44,10 +44,10 @@ from ..robot import JointState, Robot
 from .bus import Bus, SyncRead, describe, sdk
 from .keepalive import STATUS_BLOCK, KeepAlive, WatchdogMixin
 from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_ERROR_STATUS, PACKET_ERRORS,
-                        PRESENT_POSITION, PROFILE_ACCELERATION, PROFILE_VELOCITY, STATE_BLOCK, TORQUE_ENABLE,
-                        decode_hardware_error, decode_state, implausible_state, load_to_torque, position_bytes,
-                        position_limit_ticks, TICKS_PER_RAD,
-                        radians_to_ticks, ticks_to_radians, to_signed, velocity_to_radians_per_second)
+                        PRESENT_POSITION, PROFILE_ACCELERATION, PROFILE_VELOCITY, STATE_BLOCK, TICKS_PER_RAD,
+                        TORQUE_ENABLE, VELOCITY_UNIT, decode_hardware_error, decode_state, implausible_state,
+                        load_to_torque, position_bytes, position_limit_ticks, radians_to_ticks, ticks_to_radians,
+                        to_signed, velocity_to_radians_per_second)
 from .options import ON_CLOSE, check_options
 from .startup import check_eeprom
 
@@ -373,21 +373,38 @@ class DynamixelSnake(WatchdogMixin, Robot):
         self.torque_enabled = on
         self._last_status = {i: (on, 0) for i in self.ids}  # every servo acknowledged the write
 
-    def _hold_here(self, servo_id: int) -> None:
-        """Goal = present position (clamped into the limits), so torque-on doesn't jump."""
+    def _hold_here(self, servo_id: int) -> tuple[int, int]:
+        """Goal = present position (clamped into the limits), so torque-on doesn't jump.
+        Returns (present, goal) ticks: they differ when the joint is outside its limits."""
         lo, hi = self.tick_limits
         present = to_signed(self._read(servo_id, PRESENT_POSITION, 4), 4)
-        self._write(servo_id, GOAL_POSITION, 4, min(max(present, lo), hi))
+        goal = min(max(present, lo), hi)
+        self._write(servo_id, GOAL_POSITION, 4, goal)
+        return present, goal
 
     def torque_on(self) -> None:
         """Goal = present position on every servo, then torque on (the arm holds still), then
-        the Bus Watchdog armed (a stop by the watchdog is cleared)."""
+        the Bus Watchdog armed (a stop by the watchdog is cleared).
+
+        A joint found outside its limits (turned there by hand with torque off) gets the nearest
+        limit as its goal: torque-on moves it in at the profile speed, with a warning naming
+        the joint, where it was and where it goes.
+        """
         self._check_open()
-        for i in self.ids:
+        outside = []
+        for j, i in enumerate(self.ids):
             self._write(i, BUS_WATCHDOG, 1, 0)  # a stopped servo refuses goals until cleared
-            self._hold_here(i)
+            present, goal = self._hold_here(i)
+            if present != goal:
+                outside.append(f"joint {j + 1} (servo {i}) was at {float(ticks_to_radians(present)):+.2f} rad, "
+                               f"goes to {float(ticks_to_radians(goal)):+.2f} rad")
         self._torque(True)
         self._arm_watchdog()
+        if outside:
+            speed = self.profile_velocity * VELOCITY_UNIT
+            warnings.warn("torque on with joints outside their limits (turned there by hand?): "
+                          + "; ".join(outside) + f". They move in at the profile speed, {speed:.2f} rad/s.",
+                          UserWarning, stacklevel=2)
 
     def torque_off(self) -> None:
         """Torque off on every servo: the arm goes limp."""
