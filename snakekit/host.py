@@ -16,7 +16,7 @@ locked packages are not installed.
 
 from __future__ import annotations
 
-import ctypes.util
+import ctypes
 import importlib.util
 import os
 import platform as _platform
@@ -39,9 +39,9 @@ LESSON_PACKAGES = {"jupyterlab": "jupyterlab", "nbgrader": "nbgrader", "pinocchi
 #: Linux shared libraries the locked wheels load from the system -> the Debian package with it
 #: (tools/setup installs the same packages): EGL and Mesa for offscreen MuJoCo, GCC's OpenMP
 #: and quad-precision run-times for Pinocchio's wheels (quadmath exists on x86 only)
-LINUX_LIBRARIES = {"EGL": "libegl1", "EGL_mesa": "libegl-mesa0", "GLESv2": "libgles2", "gomp": "libgomp1",
-                   "quadmath": "libquadmath0"}
-_EGL_LIBRARIES = ("EGL", "EGL_mesa", "GLESv2")
+LINUX_LIBRARIES = {"libEGL.so.1": "libegl1", "libEGL_mesa.so.0": "libegl-mesa0", "libGLESv2.so.2": "libgles2",
+                   "libgomp.so.1": "libgomp1", "libquadmath.so.0": "libquadmath0"}
+_EGL_LIBRARIES = ("libEGL.so.1", "libEGL_mesa.so.0", "libGLESv2.so.2")
 _QUADMATH_MACHINES = ("x86_64", "amd64", "i386", "i686", "ppc64le")
 
 CONTAINER = "docker compose -f docker/compose.yaml up lab"
@@ -96,6 +96,16 @@ def describe(platform: str | None = None, machine: str | None = None) -> str:
     return f"{name} {machine or _platform.machine()}"
 
 
+def loadable(library: str) -> bool:
+    """Whether the dynamic loader finds and loads ``library`` (a file name such as
+    ``libEGL.so.1``), as it will when a wheel's extension needs it."""
+    try:
+        ctypes.CDLL(library)
+    except OSError:
+        return False
+    return True
+
+
 def _install_python(sysname: str) -> str:
     if sysname == "darwin":
         return ("install Python 3.11 or newer (the installer from python.org, or `brew install python@3.12`), "
@@ -109,7 +119,7 @@ def _install_python(sysname: str) -> str:
 def missing(*, platform: str | None = None, machine: str | None = None, python: tuple[int, int] | None = None,
             environ: MutableMapping[str, str] | None = None,
             find_spec: Callable[[str], object] = importlib.util.find_spec,
-            find_library: Callable[[str], str | None] = ctypes.util.find_library) -> list[Need]:
+            load_library: Callable[[str], bool] = loadable) -> list[Need]:
     """What this system lacks to run the lessons natively (empty when nothing).
 
     Args:
@@ -118,7 +128,7 @@ def missing(*, platform: str | None = None, machine: str | None = None, python: 
         python: the Python version (default: the running one).
         environ: its environment (default: ``os.environ``).
         find_spec: finds an importable module (default: ``importlib.util.find_spec``).
-        find_library: finds a shared library (default: ``ctypes.util.find_library``).
+        load_library: whether a shared library loads (default: :func:`loadable`; Linux only).
     """
     sysname = system(platform)
     machine = (machine or _platform.machine()).lower()
@@ -159,13 +169,13 @@ def missing(*, platform: str | None = None, machine: str | None = None, python: 
                           "run `make setup` (tools/setup) in the kit's folder: it installs environment.lock "
                           "into .venv; then start with `make lab` or `.venv/bin/snakekit start`"))
     if sysname == "linux":
-        libraries = [n for n in LINUX_LIBRARIES if n != "quadmath" or machine in _QUADMATH_MACHINES]
+        libraries = [n for n in LINUX_LIBRARIES if not n.startswith("libquadmath") or machine in _QUADMATH_MACHINES]
         if gl != "egl":
             libraries = [n for n in libraries if n not in _EGL_LIBRARIES]
-        lacking = [n for n in libraries if find_library(n) is None]
+        lacking = [n for n in libraries if not load_library(n)]
         if lacking:
             packages = " ".join(LINUX_LIBRARIES[n] for n in lacking)
-            needs.append(Need("these system libraries are missing: " + ", ".join(f"lib{n}" for n in lacking),
+            needs.append(Need("these system libraries are missing: " + ", ".join(lacking),
                               f"on Debian or Ubuntu: `sudo apt-get install {packages}` (`make setup` does it "
                               "as root); elsewhere, your distribution's packages of the same libraries"))
     return needs

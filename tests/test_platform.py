@@ -104,12 +104,12 @@ def test_start_without_the_lessons_folder_says_so(tmp_path):
 
 
 def no_library_lookup(name):
-    raise AssertionError(f"looked for lib{name} on a system that does not need it")
+    raise AssertionError(f"looked for {name} on a system that does not need it")
 
 
 def test_windows_is_pointed_to_the_container_and_the_bridge():
     needs = host.missing(platform="win32", machine="AMD64", python=(3, 11), environ={},
-                         find_library=no_library_lookup, find_spec=lambda name: object())
+                         load_library=no_library_lookup, find_spec=lambda name: object())
     assert [n.what for n in needs] == ["Pinocchio publishes no Windows wheels, so the kit does not run natively "
                                        "on Windows"]
     assert needs[0].fix == ("use the container (Docker Desktop): `docker compose -f docker/compose.yaml up lab`; "
@@ -118,24 +118,30 @@ def test_windows_is_pointed_to_the_container_and_the_bridge():
 
 def test_macos_needs_no_system_libraries():
     assert host.missing(platform="darwin", machine="arm64", python=(3, 11), environ={},
-                        find_library=no_library_lookup, find_spec=lambda name: object()) == []
+                        load_library=no_library_lookup, find_spec=lambda name: object()) == []
 
 
-@pytest.mark.parametrize("machine, packages", [("x86_64", "libegl1 libgomp1 libquadmath0"),
-                                               ("aarch64", "libegl1 libgomp1")])  # no quadmath on arm64
-def test_linux_names_the_debian_packages_of_missing_libraries(machine, packages):
-    absent = {"EGL", "gomp", "quadmath"}
+@pytest.mark.parametrize("machine, libraries, packages", [
+    ("x86_64", "libEGL.so.1, libgomp.so.1, libquadmath.so.0", "libegl1 libgomp1 libquadmath0"),
+    ("aarch64", "libEGL.so.1, libgomp.so.1", "libegl1 libgomp1"),  # no quad-precision library on arm64
+])
+def test_linux_names_the_debian_packages_of_missing_libraries(machine, libraries, packages):
+    absent = {"libEGL.so.1", "libgomp.so.1", "libquadmath.so.0"}
     needs = host.missing(platform="linux", machine=machine, python=(3, 11), environ={"MUJOCO_GL": "egl"},
-                         find_spec=lambda name: object(),
-                         find_library=lambda name: None if name in absent else f"lib{name}.so")
-    assert len(needs) == 1
+                         find_spec=lambda name: object(), load_library=lambda name: name not in absent)
+    assert [n.what for n in needs] == [f"these system libraries are missing: {libraries}"]
     assert needs[0].fix.startswith(f"on Debian or Ubuntu: `sudo apt-get install {packages}`")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the Linux loader")
+def test_this_linux_has_the_libraries_it_needs():
+    """The real loader on this machine (tools/setup installed the packages): nothing missing."""
+    assert host.missing(platform="linux", environ={"MUJOCO_GL": "egl"}) == []
 
 
 def test_linux_without_egl_does_not_ask_for_the_egl_libraries():
     needs = host.missing(platform="linux", machine="x86_64", python=(3, 11), environ={"MUJOCO_GL": "osmesa"},
-                         find_spec=lambda name: object(),
-                         find_library=lambda name: None if name.startswith(("EGL", "GLES")) else f"lib{name}.so")
+                         find_spec=lambda name: object(), load_library=lambda name: not name.startswith(("libEGL", "libGLES")))
     assert needs == []
 
 
@@ -145,7 +151,7 @@ def test_linux_without_egl_does_not_ask_for_the_egl_libraries():
 ])
 def test_an_old_python_gets_install_advice_for_its_system(platform, advice):
     needs = host.missing(platform=platform, machine="arm64", python=(3, 9), environ={},
-                         find_spec=lambda name: object(), find_library=lambda name: "lib.so")
+                         find_spec=lambda name: object(), load_library=lambda name: True)
     assert [n.what for n in needs] == ["this is Python 3.9; the kit needs 3.11 or newer"]
     assert advice in needs[0].fix
 
