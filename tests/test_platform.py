@@ -242,7 +242,8 @@ def unreachable(r: subprocess.CompletedProcess) -> None:
         pytest.skip(f"PyPI's index is not reachable: {r.stderr.strip().splitlines()[-1]}")
 
 
-def resolve(platform: str, tmp_path: Path, exclude=frozenset(), *, deps: bool) -> subprocess.CompletedProcess:
+def resolve(platform: str, tmp_path: Path, exclude=frozenset(), *, deps: bool,
+            python: str = "3.11") -> subprocess.CompletedProcess:
     """uv's wheel-only dry-run install of environment.lock (less ``exclude``) for ``platform``,
     hashes required (so a dependency the lock lacks for that system fails it)."""
     blocks = re.split(r"\n(?=[A-Za-z0-9])", (ROOT / "environment.lock").read_text())
@@ -251,7 +252,7 @@ def resolve(platform: str, tmp_path: Path, exclude=frozenset(), *, deps: bool) -
     req.write_text("\n".join(kept))
     env = {**os.environ, "MACOSX_DEPLOYMENT_TARGET": "11.0"}
     return uv("pip", "install", "--dry-run", "--require-hashes", "--only-binary", ":all:", *([] if deps else ["--no-deps"]),
-              "--python-platform", platform, "--python-version", "3.11", "--python", sys.executable,
+              "--python-platform", platform, "--python-version", python, "--python", sys.executable,
               "--target", str(tmp_path / "target"), "-r", str(req), env=env)
 
 
@@ -287,3 +288,15 @@ def test_the_lock_has_wheels_where_the_platform_table_says(column, tmp_path):
             unreachable(r)
             assert r.returncode == 0, r.stderr
             assert re.search(r"Would install \d+ packages", r.stderr), r.stderr
+
+
+def test_the_python_setup_advises_on_a_mac_installs_the_whole_lock_from_wheels(tmp_path):
+    """tools/setup and `snakekit start` tell a Mac user to install Python 3.12 (3.11's security
+    releases come as source only, without python.org installers): the lock must install there
+    from wheels too."""
+    advice = host.missing(platform="darwin", machine="arm64", python=(3, 9), environ={},
+                          find_spec=lambda name: object())[0].fix
+    assert "python@3.12" in advice and "python@3.12" in (ROOT / "tools" / "setup").read_text()
+    r = resolve("aarch64-apple-darwin", tmp_path, deps=True, python="3.12")
+    unreachable(r)
+    assert r.returncode == 0, r.stderr
