@@ -16,10 +16,8 @@ locked packages are not installed.
 
 from __future__ import annotations
 
-import ctypes
 import importlib.util
 import os
-import platform as _platform
 import sys
 from collections.abc import Callable, MutableMapping
 from dataclasses import dataclass
@@ -90,15 +88,24 @@ def choose_mujoco_gl(environ: MutableMapping[str, str] | None = None, *, platfor
     return environ.get("MUJOCO_GL")
 
 
-def describe(platform: str | None = None, machine: str | None = None) -> str:
+def machine() -> str:
+    """This computer's processor, as ``platform.machine()`` says (``x86_64``, ``arm64``...)."""
+    import platform  # only here: `import snakekit` does not need it
+
+    return platform.machine()
+
+
+def describe(platform: str | None = None, machine_name: str | None = None) -> str:
     """This system in a few words, e.g. ``"macOS arm64"``."""
     name = {"linux": "Linux", "darwin": "macOS", "win32": "Windows"}.get(system(platform), system(platform))
-    return f"{name} {machine or _platform.machine()}"
+    return f"{name} {machine_name or machine()}"
 
 
 def loadable(library: str) -> bool:
     """Whether the dynamic loader finds and loads ``library`` (a file name such as
     ``libEGL.so.1``), as it will when a wheel's extension needs it."""
+    import ctypes
+
     try:
         ctypes.CDLL(library)
     except OSError:
@@ -116,7 +123,7 @@ def _install_python(sysname: str) -> str:
     return f"use the container: `{CONTAINER}`"
 
 
-def missing(*, platform: str | None = None, machine: str | None = None, python: tuple[int, int] | None = None,
+def missing(*, platform: str | None = None, machine_name: str | None = None, python: tuple[int, int] | None = None,
             environ: MutableMapping[str, str] | None = None,
             find_spec: Callable[[str], object] = importlib.util.find_spec,
             load_library: Callable[[str], bool] = loadable) -> list[Need]:
@@ -124,14 +131,14 @@ def missing(*, platform: str | None = None, machine: str | None = None, python: 
 
     Args:
         platform: ``sys.platform`` of the system to check (default: this one).
-        machine: ``platform.machine()`` of it (default: this one).
+        machine_name: ``platform.machine()`` of it (default: this one).
         python: the Python version (default: the running one).
         environ: its environment (default: ``os.environ``).
         find_spec: finds an importable module (default: ``importlib.util.find_spec``).
         load_library: whether a shared library loads (default: :func:`loadable`; Linux only).
     """
     sysname = system(platform)
-    machine = (machine or _platform.machine()).lower()
+    cpu = (machine_name or machine()).lower()
     python = tuple(python or sys.version_info[:2])
     environ = os.environ if environ is None else environ
     needs: list[Need] = []
@@ -145,9 +152,9 @@ def missing(*, platform: str | None = None, machine: str | None = None, python: 
         needs.append(Need("Pinocchio publishes no Windows wheels, so the kit does not run natively on Windows",
                           f"use the container (Docker Desktop): `{CONTAINER}`; for the real arm, run "
                           f"`{BRIDGE}` on Windows (docs/hardware.md)"))
-    elif sysname == "darwin" and machine != "arm64":
+    elif sysname == "darwin" and cpu != "arm64":
         unsupported = {"mujoco"}
-        needs.append(Need(f"this Python is {machine}, and MuJoCo publishes macOS wheels for Apple silicon "
+        needs.append(Need(f"this Python is {cpu}, and MuJoCo publishes macOS wheels for Apple silicon "
                           "(arm64) only",
                           "on an Apple-silicon Mac, use an arm64 Python (python.org's installer, or Homebrew "
                           "in /opt/homebrew) and run `make lab` again; on an Intel Mac, use the container "
@@ -159,7 +166,7 @@ def missing(*, platform: str | None = None, machine: str | None = None, python: 
     valid = MUJOCO_GL_VALUES.get(sysname)
     if valid is not None and gl not in valid + _MUJOCO_GL_SWITCHES:
         default = {"linux": "EGL", "darwin": "MuJoCo's default, CGL", "win32": "MuJoCo's default, GLFW"}[sysname]
-        needs.append(Need(f"MUJOCO_GL={gl} is set, which MuJoCo refuses on {describe(platform, machine)} "
+        needs.append(Need(f"MUJOCO_GL={gl} is set, which MuJoCo refuses on {describe(platform, cpu)} "
                           f"(it takes {', '.join(valid)})",
                           f"unset MUJOCO_GL (`unset MUJOCO_GL`); the kit then uses {default}"))
     absent = [name for name in LESSON_PACKAGES if name not in unsupported and find_spec(name) is None]
@@ -169,7 +176,7 @@ def missing(*, platform: str | None = None, machine: str | None = None, python: 
                           "run `make setup` (tools/setup) in the kit's folder: it installs environment.lock "
                           "into .venv; then start with `make lab` or `.venv/bin/snakekit start`"))
     if sysname == "linux":
-        libraries = [n for n in LINUX_LIBRARIES if not n.startswith("libquadmath") or machine in _QUADMATH_MACHINES]
+        libraries = [n for n in LINUX_LIBRARIES if not n.startswith("libquadmath") or cpu in _QUADMATH_MACHINES]
         if gl != "egl":
             libraries = [n for n in libraries if n not in _EGL_LIBRARIES]
         lacking = [n for n in libraries if not load_library(n)]

@@ -108,7 +108,7 @@ def no_library_lookup(name):
 
 
 def test_windows_is_pointed_to_the_container_and_the_bridge():
-    needs = host.missing(platform="win32", machine="AMD64", python=(3, 11), environ={},
+    needs = host.missing(platform="win32", machine_name="AMD64", python=(3, 11), environ={},
                          load_library=no_library_lookup, find_spec=lambda name: object())
     assert [n.what for n in needs] == ["Pinocchio publishes no Windows wheels, so the kit does not run natively "
                                        "on Windows"]
@@ -117,7 +117,7 @@ def test_windows_is_pointed_to_the_container_and_the_bridge():
 
 
 def test_macos_needs_no_system_libraries():
-    assert host.missing(platform="darwin", machine="arm64", python=(3, 11), environ={},
+    assert host.missing(platform="darwin", machine_name="arm64", python=(3, 11), environ={},
                         load_library=no_library_lookup, find_spec=lambda name: object()) == []
 
 
@@ -127,7 +127,7 @@ def test_macos_needs_no_system_libraries():
 ])
 def test_linux_names_the_debian_packages_of_missing_libraries(machine, libraries, packages):
     absent = {"libEGL.so.1", "libgomp.so.1", "libquadmath.so.0"}
-    needs = host.missing(platform="linux", machine=machine, python=(3, 11), environ={"MUJOCO_GL": "egl"},
+    needs = host.missing(platform="linux", machine_name=machine, python=(3, 11), environ={"MUJOCO_GL": "egl"},
                          find_spec=lambda name: object(), load_library=lambda name: name not in absent)
     assert [n.what for n in needs] == [f"these system libraries are missing: {libraries}"]
     assert needs[0].fix.startswith(f"on Debian or Ubuntu: `sudo apt-get install {packages}`")
@@ -140,7 +140,7 @@ def test_this_linux_has_the_libraries_it_needs():
 
 
 def test_linux_without_egl_does_not_ask_for_the_egl_libraries():
-    needs = host.missing(platform="linux", machine="x86_64", python=(3, 11), environ={"MUJOCO_GL": "osmesa"},
+    needs = host.missing(platform="linux", machine_name="x86_64", python=(3, 11), environ={"MUJOCO_GL": "osmesa"},
                          find_spec=lambda name: object(), load_library=lambda name: not name.startswith(("libEGL", "libGLES")))
     assert needs == []
 
@@ -150,14 +150,14 @@ def test_linux_without_egl_does_not_ask_for_the_egl_libraries():
     ("linux", "`sudo apt-get install python3 python3-venv`"),
 ])
 def test_an_old_python_gets_install_advice_for_its_system(platform, advice):
-    needs = host.missing(platform=platform, machine="arm64", python=(3, 9), environ={},
+    needs = host.missing(platform=platform, machine_name="arm64", python=(3, 9), environ={},
                          find_spec=lambda name: object(), load_library=lambda name: True)
     assert [n.what for n in needs] == ["this is Python 3.9; the kit needs 3.11 or newer"]
     assert advice in needs[0].fix
 
 
 def test_missing_packages_point_to_make_setup():
-    needs = host.missing(platform="darwin", machine="arm64", python=(3, 11), environ={},
+    needs = host.missing(platform="darwin", machine_name="arm64", python=(3, 11), environ={},
                          find_spec=lambda name: None if name in ("mujoco", "pinocchio") else object())
     assert [n.what for n in needs] == ["the kit's Python packages are not installed here: pin, mujoco"]
     assert needs[0].fix.startswith("run `make setup` (tools/setup) in the kit's folder")
@@ -294,7 +294,7 @@ def test_the_python_setup_advises_on_a_mac_installs_the_whole_lock_from_wheels(t
     """tools/setup and `snakekit start` tell a Mac user to install Python 3.12 (3.11's security
     releases come as source only, without python.org installers): the lock must install there
     from wheels too."""
-    advice = host.missing(platform="darwin", machine="arm64", python=(3, 9), environ={},
+    advice = host.missing(platform="darwin", machine_name="arm64", python=(3, 9), environ={},
                           find_spec=lambda name: object())[0].fix
     assert "python@3.12" in advice and "python@3.12" in (ROOT / "tools" / "setup").read_text()
     r = resolve("aarch64-apple-darwin", tmp_path, deps=True, python="3.12")
