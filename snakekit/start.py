@@ -13,7 +13,7 @@ lessons in ``notebooks/``:
   Jupyter never makes, and it compiles 25 Earley grammars on import (about 1.9 s of every
   start, more than half of the time to a ready JupyterLab; see bench/RESULTS.md).
 
-    snakekit start [--ip 127.0.0.1] [--port 8888] [--notebooks DIR] [--check] [-- JUPYTER OPTIONS]
+    snakekit start [--ip 127.0.0.1] [--port 8888] [--notebooks DIR] [--check]
 
 Exit codes: 0 the checks passed (``--check``) or JupyterLab ended normally, 1 the system
 lacks something (printed, with the fix), 2 bad arguments; otherwise JupyterLab's own.
@@ -49,10 +49,10 @@ def lab_arguments(notebooks: Path, *, ip: str, port: int) -> list[str]:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="snakekit start", description="Check this system, then open the lessons in "
-                                "JupyterLab (what `make lab` runs). Options after `--` go to JupyterLab.")
+                                "JupyterLab (what `make lab` runs).")
     p.add_argument("--ip", default="127.0.0.1", help="address JupyterLab listens on (default: 127.0.0.1)")
     p.add_argument("--port", type=int, default=8888, help="its port (default: 8888)")
-    p.add_argument("--notebooks", type=Path, default=KIT / "notebooks",
+    p.add_argument("--notebooks", type=Path, default=KIT / "notebooks", metavar="DIR",
                    help="the folder of lessons to open (default: the kit's notebooks/)")
     p.add_argument("--check", action="store_true", help="only check this system: say what it lacks and exit")
     return p
@@ -61,9 +61,6 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
     argv = sys.argv[1:] if argv is None else list(argv)
-    extra: list[str] = []
-    if "--" in argv:  # the rest is JupyterLab's
-        argv, extra = argv[:argv.index("--")], argv[argv.index("--") + 1:]
     args = build_parser().parse_args(argv)
     if not 0 < args.port < 65536:
         print(f"snakekit start: --port {args.port} is not a TCP port (1-65535)", file=sys.stderr)
@@ -90,7 +87,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     print(f"snakekit: JupyterLab on the lessons in {args.notebooks} (the simulator is the default robot)", file=out)
     out.flush()
     os.environ["JUPYTER_CONFIG_PATH"] = str(STUDENT_LAB_CONFIG)
-    command = [sys.executable, "-c", LAB_MAIN, *lab_arguments(args.notebooks, ip=args.ip, port=args.port), *extra]
+    command = [sys.executable, "-c", LAB_MAIN, *lab_arguments(args.notebooks, ip=args.ip, port=args.port)]
     if os.name == "posix":  # JupyterLab takes this process's place: Ctrl-C and SIGTERM reach it directly
         sys.stderr.flush()
         os.execv(sys.executable, command)
