@@ -200,6 +200,25 @@ def test_setup_on_macos_with_its_own_python_3_9_says_what_to_install(tmp_path):
     assert not (tmp_path / "venv").exists() and not (tmp_path / "called").exists()
 
 
+@pytest.mark.parametrize("arch, quadmath", [("amd64", True), ("arm64", False)])
+def test_setup_asks_for_the_quad_precision_library_only_where_debian_has_it(tmp_path, arch, quadmath):
+    """libquadmath0 exists for x86 (Pinocchio's x86_64 wheels load it), not for arm64, where the
+    container on an Apple-silicon Mac is built: asking apt for it there would fail the build."""
+    bin_ = tmp_path / "bin"
+    bin_.mkdir()
+    (bin_ / "dpkg").write_text(f"#!/bin/sh\necho {arch}\n")
+    (bin_ / "dpkg-query").write_text(f"#!/bin/sh\necho \"$3\" >> {tmp_path / 'asked'}\nprintf 'install ok installed'\n")
+    for f in bin_.iterdir():
+        f.chmod(0o755)
+    env = {**os.environ, "PATH": f"{bin_}:{os.environ['PATH']}"}
+    r = subprocess.run([str(ROOT / "tools" / "setup"), "--runtime", "--debian-only"], env=env, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    asked = (tmp_path / "asked").read_text().split()
+    assert {"libegl1", "libgomp1", "iproute2"} <= set(asked)
+    assert ("libquadmath0" in asked) == quadmath
+
+
 # --- the README's platform table against the lock ---------------------------------------------
 
 #: README column -> the uv platforms it stands for (macOS from 11, the oldest the wheels ask for)
