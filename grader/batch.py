@@ -35,7 +35,7 @@ from pathlib import Path
 import nbformat
 
 from snakekit.errors import SnakekitError
-from snakekit.host import choose_mujoco_gl
+from snakekit.host import mujoco_gl
 
 from . import feedback, sandbox
 from .references import REFERENCES, Reference
@@ -440,15 +440,13 @@ class Grader:
 
     def _env(self, work: Path) -> dict:
         venv_bin = str(Path(os.path.abspath(sys.executable)).parent)
-        env = {"PATH": f"{venv_bin}:/usr/local/bin:/usr/bin:/bin", "HOME": str(work / "home"),
+        return {"PATH": f"{venv_bin}:/usr/local/bin:/usr/bin:/bin", "HOME": str(work / "home"),
                 "SNAKEKIT_HANDIN_DIR": str(work / "handin"), "MPLBACKEND": "Agg",
                 "MPLCONFIGDIR": str(work / "home" / ".mpl"), "JUPYTER_RUNTIME_DIR": str(work / "home" / ".jupyter-runtime"),
                 "IPYTHONDIR": str(work / "home" / ".ipython"), "TMPDIR": "/tmp", "LANG": "C.UTF-8",
-                "PYTHONDONTWRITEBYTECODE": "1", "OMP_NUM_THREADS": "1",
+                "MUJOCO_GL": mujoco_gl("linux"), "PYTHONDONTWRITEBYTECODE": "1", "OMP_NUM_THREADS": "1",  # sandbox: Linux
                 "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MALLOC_ARENA_MAX": "2",
                 "PYDEVD_DISABLE_FILE_VALIDATION": "1", "JUPYTER_PLATFORM_DIRS": "1"}
-        choose_mujoco_gl(env)  # EGL: the grader's sandbox runs on Linux only
-        return env
 
     def _execute(self, work: Path, student: str) -> sandbox.Outcome:
         argv = [os.path.abspath(sys.executable), "-m", "grader.worker", str(work / "course"), self.a.name, student,
