@@ -6,29 +6,19 @@ PY      := $(VENV)/bin/python
 LAB_PORT ?= 8888
 LAB_IP  ?= 127.0.0.1
 export PATH := $(abspath $(VENV))/bin:$(PATH)
-export MUJOCO_GL ?= egl
+# MUJOCO_GL: the kit picks it for each system when it is imported (snakekit.host): EGL on Linux,
+# MuJoCo's own default on macOS. A MUJOCO_GL set in the environment is kept.
 
 .PHONY: setup lab test bench lock generate student check-generated clean references
 
 setup:
 	@tools/setup
 
-# JupyterLab without rfc3987-syntax: jsonschema loads it, when installed, for an "iri" format
-# check Jupyter never makes, and it compiles 25 Earley grammars on import (about 1.9 s of
-# every start, more than half of the time to a ready JupyterLab; see bench/RESULTS.md).
-LAB_MAIN := import sys; sys.modules["rfc3987_syntax"] = None; from jupyterlab.labapp import main; sys.exit(main())
-
-# A student's JupyterLab: nbgrader's Validate button on, its teacher tools (formgrader, create
-# assignment, the exchange's lists) off; tools/student-lab/labconfig/page_config.json hides their UI.
+# A student's JupyterLab on the lessons, on Linux or macOS: `snakekit start` checks the system first
+# (and says what to install when something is missing), then starts JupyterLab with nbgrader's
+# Validate button and without its teacher tools (snakekit/start.py has the options and why).
 lab: setup
-	@echo "snakekit: JupyterLab on the lessons in notebooks/ (the simulator is the default robot)"
-	JUPYTER_CONFIG_PATH=$(CURDIR)/tools/student-lab $(PY) -c '$(LAB_MAIN)' --no-browser --allow-root \
-	    --ip=$(LAB_IP) --port=$(LAB_PORT) \
-	    --ServerApp.root_dir=notebooks --LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate \
-	    --ServerApp.jpserver_extensions nbgrader.server_extensions.validate_assignment=True \
-	    --ServerApp.jpserver_extensions nbgrader.server_extensions.formgrader=False \
-	    --ServerApp.jpserver_extensions nbgrader.server_extensions.course_list=False \
-	    --ServerApp.jpserver_extensions nbgrader.server_extensions.assignment_list=False
+	$(VENV)/bin/snakekit start --ip=$(LAB_IP) --port=$(LAB_PORT)
 
 test: setup
 	$(PY) -m pytest -q $(PYTEST_ARGS)

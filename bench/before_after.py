@@ -43,7 +43,6 @@ THREAD_REV = "37fa09114e87c0819fd514ae1d6affa41e0508a7"
 
 VIEWER_START = r"""
 import os, sys, time
-os.environ.setdefault("MUJOCO_GL", "egl")
 from snakekit.viewer import Viewer
 t0 = time.perf_counter()
 v = Viewer()

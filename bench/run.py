@@ -28,6 +28,8 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
 
+from snakekit.host import choose_mujoco_gl  # noqa: E402
+
 #: the study's figures (ROBOT.md): Windows host, ROS Melodic, RViz/Gazebo GUI - other hardware
 STUDY = [
     # set-up, start to a working shell, image size, Task 1 CPU, Task 2 CPU, RAM
@@ -124,9 +126,10 @@ def fmt(seconds: float) -> str:
 def run_step(step: Step, tmp: Path) -> None:
     out = tmp / f"{step.name}.json"
     t0 = time.perf_counter()
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    choose_mujoco_gl(env)
     proc = subprocess.run([sys.executable, str(HERE / step.args[0]), *step.args[1:], "--json", str(out)],
-                          cwd=REPO, capture_output=True, text=True,
-                          env={**os.environ, "MPLBACKEND": "Agg", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")})
+                          cwd=REPO, capture_output=True, text=True, env=env)
     step.seconds = time.perf_counter() - t0
     step.code = proc.returncode
     step.log = (proc.stdout + ("\n" + proc.stderr if proc.returncode not in (0, 1) else "")).strip()
@@ -416,8 +419,9 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     # --- methodology
     add("## Methodology")
     add("")
+    gl = choose_mujoco_gl(dict(os.environ))
     add(f"- **Machine:** {info['cores']} cores, {info['memory_gb']:.1f} GB memory (above). No GPU, no display "
-        "(MuJoCo is imported with MUJOCO_GL=egl).")
+        f"(MuJoCo is imported with MUJOCO_GL={gl or 'unset: its default'}).")
     add("- **Repetitions:** every figure is the median of its repeats; the spread (min-max) is given here.")
     if inter:
         add(f"  - Task 1: {inter['cpu']['n']} repeats, each in a fresh process; CPU {spread_text(inter['cpu'], ' %')}, "

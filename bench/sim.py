@@ -14,7 +14,6 @@ the study's figures for the ROS set-ups.
 from __future__ import annotations
 
 import json
-import os
 import statistics
 import subprocess
 import sys
@@ -22,13 +21,12 @@ import threading
 import time
 from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import snakekit  # noqa: E402  (first: it sets MUJOCO_GL for this system before MuJoCo loads)
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
-
-import snakekit  # noqa: E402
 from _common import Sampler, add_json_argument, table, write_json  # noqa: E402
 from snakekit.profile_planner import ProfilePlanner  # noqa: E402
 from snakekit.sim import SimRobot  # noqa: E402
@@ -82,8 +80,7 @@ def fast_mode():
 
 
 CHILD = r"""
-import json, os, resource, threading, time
-os.environ.setdefault("MUJOCO_GL", "egl")
+import json, resource, threading, time
 import psutil, snakekit
 me = psutil.Process()
 peak = [me.memory_info().rss]

@@ -35,6 +35,7 @@ from pathlib import Path
 import nbformat
 
 from snakekit.errors import SnakekitError
+from snakekit.host import mujoco_gl
 
 from . import feedback, sandbox
 from .references import REFERENCES, Reference
@@ -443,7 +444,7 @@ class Grader:
                 "SNAKEKIT_HANDIN_DIR": str(work / "handin"), "MPLBACKEND": "Agg",
                 "MPLCONFIGDIR": str(work / "home" / ".mpl"), "JUPYTER_RUNTIME_DIR": str(work / "home" / ".jupyter-runtime"),
                 "IPYTHONDIR": str(work / "home" / ".ipython"), "TMPDIR": "/tmp", "LANG": "C.UTF-8",
-                "MUJOCO_GL": "egl", "PYTHONDONTWRITEBYTECODE": "1", "OMP_NUM_THREADS": "1",
+                "MUJOCO_GL": mujoco_gl("linux"), "PYTHONDONTWRITEBYTECODE": "1", "OMP_NUM_THREADS": "1",  # sandbox: Linux
                 "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MALLOC_ARENA_MAX": "2",
                 "PYDEVD_DISABLE_FILE_VALIDATION": "1", "JUPYTER_PLATFORM_DIRS": "1"}
 

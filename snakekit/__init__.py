@@ -1,16 +1,18 @@
 """snakekit: a Jupyter course kit for a 5-joint planar arm of Dynamixel MX-28 servos.
 
-The kit sets ``MUJOCO_GL=egl`` (offscreen rendering, no display needed) before MuJoCo is
-imported, unless the variable is already set.
+Before MuJoCo is imported, the kit sets ``MUJOCO_GL`` to what this system supports, unless
+the variable is already set: ``egl`` on Linux (offscreen rendering, no display needed);
+on macOS and Windows it leaves MuJoCo its own default (:func:`snakekit.host.choose_mujoco_gl`).
 
 Names are loaded on first use: ``import snakekit`` is quick, and ``snakekit.Trajectory``
 does not load Pinocchio or MuJoCo (``snakekit.forward_kinematics`` loads Pinocchio).
 """
 
 import importlib as _importlib
-import os as _os
 
-_os.environ.setdefault("MUJOCO_GL", "egl")
+from .host import choose_mujoco_gl as _choose_mujoco_gl
+
+_choose_mujoco_gl()
 
 from .errors import (  # noqa: E402
     BackendError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,

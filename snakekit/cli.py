@@ -4,6 +4,7 @@
     snakekit emulator [...]          (an emulated MX-28 bus on a pseudo-terminal)
     snakekit generate [--check]      (the URDF and MJCF from the robot spec)
     snakekit check LESSON.ipynb      (run a lesson's exercise checks: one row per exercise)
+    snakekit start [...]             (check this system, then JupyterLab on the lessons: `make lab`)
     snakekit grade ASSIGNMENT [...]  (grade a class's submissions; see grader/README.md)
 
 Exit codes: 0 success, 1 the robot or a file failed (or a limit was not held), 2 bad
@@ -138,6 +139,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "(snakekit emulator --help for its options)", add_help=False)
     sub.add_parser("grade", help="grade a class's submissions of an assignment "
                                  "(snakekit grade --help for its options)", add_help=False)
+    sub.add_parser("start", help="check this system, then open the lessons in JupyterLab (what `make lab` runs; "
+                                 "snakekit start --help for its options)", add_help=False)
     p = sub.add_parser("generate", help="write the URDF and MJCF from the robot spec")
     p.add_argument("--check", action="store_true", help="only check that the committed files are current")
     p.set_defaults(func=_generate)
@@ -159,6 +162,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
         from grader.cli import main as grade
 
         return grade(argv[1:], out)
+    if argv[:1] == ["start"]:  # JupyterLab takes over the process: no signal handlers of ours
+        from .start import main as start
+
+        return start(argv[1:], out)
     args = build_parser().parse_args(argv)
     terminated = []
 

@@ -9,21 +9,19 @@ and rotor inertia on the joint (numbers in :class:`snakekit.model.ServoSpec`).
 from __future__ import annotations
 
 import copy
-import os
 import time
 
-os.environ.setdefault("MUJOCO_GL", "egl")
+# MUJOCO_GL is chosen for this system by snakekit/__init__.py, which runs before this module
+import mujoco
+import numpy as np
+from mujoco import rollout
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-from mujoco import rollout  # noqa: E402
-
-from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf  # noqa: E402
-from .progress import LONG_RUN, TextProgress  # noqa: E402
-from .robot import JointState, Robot, Run  # noqa: E402
-from .trajectory import Trajectory  # noqa: E402
-from .validate import as_configuration, check_limits, number  # noqa: E402
-from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner  # noqa: E402
+from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf
+from .progress import LONG_RUN, TextProgress
+from .robot import JointState, Robot, Run
+from .trajectory import Trajectory
+from .validate import as_configuration, check_limits, number
+from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner
 
 
 # qpos, qvel and act first, in that order (rows of rollout's state: time, qpos, qvel, act, ...)

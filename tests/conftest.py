@@ -14,7 +14,9 @@ import socket
 
 import pytest
 
-os.environ.setdefault("MUJOCO_GL", "egl")
+from snakekit.host import choose_mujoco_gl
+
+choose_mujoco_gl()  # before anything imports MuJoCo: EGL on Linux
 IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
 
 # A runner that starts the suite in the background (`make test &` in a script) starts it with

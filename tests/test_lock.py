@@ -9,11 +9,13 @@ from packaging.utils import canonicalize_name
 from packaging.version import Version
 
 ROOT = Path(__file__).resolve().parents[1]
+# "name==version \" or, for a package only some systems need, "name==version ; marker \"
+ENTRY = re.compile(r"^([A-Za-z0-9_.\-]+)==([^\s;]+)(?: ; ([^\\\n]+))? \\$", re.M)
 
 
 def locked():
     text = (ROOT / "environment.lock").read_text()
-    pins = {canonicalize_name(m[1]): Version(m[2]) for m in re.finditer(r"^([A-Za-z0-9_.\-]+)==(\S+) \\$", text, re.M)}
+    pins = {canonicalize_name(m[1]): Version(m[2]) for m in ENTRY.finditer(text)}
     blocks = re.split(r"\n(?=[A-Za-z0-9])", text)
     unhashed = [b.split("==")[0] for b in blocks if "==" in b and "--hash=sha256:" not in b]
     return pins, unhashed
@@ -41,6 +43,32 @@ def test_every_pin_has_a_hash():
 def test_numpy_2_for_pinocchio_4():
     pins, _ = locked()
     assert pins["numpy"] >= Version("2") and pins["pin"] >= Version("4")
+
+
+def test_the_lock_is_universal_with_each_systems_packages_under_its_marker():
+    """One lock for Linux, macOS and Windows: what ipykernel needs on macOS (appnope), and
+    what pytest and the terminal need on Windows (colorama, pywinpty), under their markers."""
+    markers = {canonicalize_name(m[1]): m[3] for m in ENTRY.finditer((ROOT / "environment.lock").read_text())}
+    assert markers["appnope"] == "sys_platform == 'darwin'"
+    assert markers["colorama"] == "sys_platform == 'win32'"
+    assert markers["pywinpty"] == "os_name == 'nt'"
+    assert markers["numpy"] is None and markers["pin"] is None
+
+
+def test_the_venv_holds_exactly_what_the_lock_selects_for_this_system():
+    """The markers select, for this system and Python, the packages tools/setup installed:
+    no more, no fewer, same versions (the universal lock changed nothing on Linux)."""
+    from importlib import metadata
+
+    from packaging.markers import Marker
+
+    text = (ROOT / "environment.lock").read_text()
+    selected = {canonicalize_name(m[1]): Version(m[2]) for m in ENTRY.finditer(text)
+                if m[3] is None or Marker(m[3]).evaluate()}
+    installed = {canonicalize_name(d.metadata["Name"]): Version(d.version) for d in metadata.distributions()}
+    for own in {"snakekit", "pip", "setuptools"} - selected.keys():  # the kit; what `python -m venv` brings
+        installed.pop(own, None)
+    assert installed == selected
 
 
 def test_setup_does_nothing_when_the_venv_is_current():
