@@ -14,7 +14,7 @@ _os.environ.setdefault("MUJOCO_GL", "egl")
 
 from .errors import (  # noqa: E402
     BackendError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
-    InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError,
+    InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError, PortLostError,
     ServoMismatchError, ShapeError, ShortcutError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
 from .model import SPEC, SnakeSpec  # noqa: E402
@@ -35,7 +35,7 @@ __all__ = [
     "SPEC", "SnakeSpec", *_LAZY,
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
     "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError", "BackendError",
-    "CommunicationError", "HardwareError", "ServoMismatchError", "InstructionError", "ViewerError",
+    "CommunicationError", "HardwareError", "PortLostError", "ServoMismatchError", "InstructionError", "ViewerError",
     "MissingDependencyError", "PacketError", "CheckFailed", "ShortcutError",
 ]
 

@@ -41,8 +41,10 @@ from ..errors import (CommunicationError, ConfigurationError, HardwareError,
 from ..model import SPEC, SnakeSpec
 from ..profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY
 from ..robot import JointState, Robot
+from ..bridge import is_url
 from .bus import Bus, SyncRead, describe, sdk
 from .keepalive import STATUS_BLOCK, KeepAlive, WatchdogMixin
+from .lost import last_told
 from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_ERROR_STATUS, PACKET_ERRORS,
                         PRESENT_POSITION, PROFILE_ACCELERATION, PROFILE_VELOCITY, STATE_BLOCK, TORQUE_ENABLE,
                         decode_hardware_error, decode_state, load_to_torque, position_bytes, position_limit_ticks,
@@ -75,7 +77,8 @@ class DynamixelSnake(WatchdogMixin, Robot):
     """The arm on a Dynamixel bus (a U2D2 adapter, or the bus emulator's pseudo-terminal).
 
     Args:
-        port: serial port of the bus adapter, e.g. ``"/dev/ttyUSB0"``.
+        port: serial port of the bus adapter, e.g. ``"/dev/ttyUSB0"``, or a pyserial URL such as
+            ``"socket://host.docker.internal:7800"`` (a ``snakekit bridge`` on another computer).
         baudrate: bus speed [baud] (the servos' Baud Rate register must match).
         ids: servo ids from base to tip (default: ``spec.servo_ids``).
         spec: the arm (limits, number of joints, servo ids, the servo model).
@@ -125,7 +128,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
         self._last_positions = None
         self._last_status: dict = {}  # the keep-alive's last status read
 
-        key = os.path.realpath(self.port_name)
+        key = self.port_name if is_url(self.port_name) else os.path.realpath(self.port_name)
         old = _OPEN.get(key)
         if old is not None and not old.closed:
             warnings.warn(f"a robot was already open on {self.port_name}; it was closed first "
@@ -133,6 +136,8 @@ class DynamixelSnake(WatchdogMixin, Robot):
                           UserWarning, stacklevel=2)
             old.close()
         self.bus = Bus(self.port_name, self.baudrate, retries)
+        me = weakref.ref(self)
+        self.bus.port.last_told = lambda: last_told(me())  # for the error if the port goes away
         self.closed = False
         _OPEN[key] = self
         self._reader = SyncRead(self.port, self.bus.ph, *STATE_BLOCK)
