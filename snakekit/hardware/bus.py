@@ -138,6 +138,8 @@ class Port(sdk.PortHandler):
 
 def port_lost_message(port: str, error: Exception, last_told: Callable[[], str] | None = None) -> str:
     """Why the port at ``port`` is gone, what the arm was last told, and what to do."""
+    args = getattr(error, "args", ())
+    error = args[1] if len(args) == 2 and isinstance(args[1], str) else (str(error) or type(error).__name__)
     if is_url(port):
         where = (f"the connection to the servo bus at {port} was lost ({error}): the bridge stopped, its "
                  "adapter was unplugged, or it serves another client (one at a time)")

@@ -37,7 +37,7 @@ def last_told(robot) -> str:
     if goals:
         q = ticks_to_radians([goals.get(i, 0) for i in robot.ids])
         ago = time.perf_counter() - sent[0]
-        told = (f"The arm was last told, {ago:.2f} s before: goal [{', '.join(f'{x:.3f}' for x in q)}] rad "
+        told = (f"The arm was last told, {ago:.2f} s before this was noticed: goal [{', '.join(f'{x:.3f}' for x in q)}] rad "
                 f"(joints 1-{len(q)}, goal {robot.goals_sent} of this robot)")
     else:
         told = "The arm was last told no goal since start-up"
