@@ -78,7 +78,8 @@ class DynamixelSnake(WatchdogMixin, Robot):
 
     Args:
         port: serial port of the bus adapter, e.g. ``"/dev/ttyUSB0"``, or a pyserial URL such as
-            ``"socket://host.docker.internal:7800"`` (a ``snakekit bridge`` on another computer).
+            ``"socket://host.docker.internal:7800"`` (a ``snakekit bridge`` on another computer);
+            default: the ``SNAKEKIT_PORT`` environment variable (the container's ``hardware`` service sets it).
         baudrate: bus speed [baud] (the servos' Baud Rate register must match).
         ids: servo ids from base to tip (default: ``spec.servo_ids``).
         spec: the arm (limits, number of joints, servo ids, the servo model).
@@ -101,7 +102,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
     backend = "hardware"
     realtime = True
 
-    def __init__(self, port: str, baudrate: int = 4_000_000, ids=None, *,
+    def __init__(self, port: str | None = None, baudrate: int = 4_000_000, ids=None, *,
                  spec: SnakeSpec = SPEC, on_close: str = "torque_off",
                  profile_velocity: int = KIT_PROFILE_VELOCITY,
                  profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION,
@@ -113,6 +114,11 @@ class DynamixelSnake(WatchdogMixin, Robot):
         self._release: list = []  # extra clean-ups (e.g. stop an emulator) run by close()
         ids, retries, self.profile_velocity, self.profile_acceleration, self.watchdog = check_options(
             spec, ids, on_close, retries, profile_velocity, profile_acceleration, watchdog)
+        port = os.environ.get("SNAKEKIT_PORT") if port is None else port
+        if not port:
+            raise ConfigurationError("the hardware backend needs the arm's serial port: make_robot('hardware', "
+                                     "port='/dev/ttyUSB0') (macOS: '/dev/cu.usbserial-...', Windows: 'COM3', "
+                                     "through snakekit bridge: 'socket://HOST:7800'), or SNAKEKIT_PORT set")
         self.port_name = str(port)
         self.baudrate = int(baudrate)
         self.ids = ids

@@ -5,13 +5,15 @@ nothing more can reach the servos: they keep the last goal that left the port, w
 torque they had, until their Bus Watchdog stops them. The message of
 :class:`~snakekit.errors.PortLostError` says which goal that was, from the last SyncWrite
 that left the port (:attr:`snakekit.hardware.bus.Port.last_sync_write`), not from what the
-driver meant to send.
+driver meant to send. Through a bridge, a goal that left the port may still have been lost
+on the way, and the message says so.
 """
 
 from __future__ import annotations
 
 import time
 
+from ..bridge import is_url
 from .registers import GOAL_POSITION, ticks_to_radians, to_signed
 
 
@@ -38,7 +40,8 @@ def last_told(robot) -> str:
         q = ticks_to_radians([goals.get(i, 0) for i in robot.ids])
         ago = time.perf_counter() - sent[0]
         told = (f"The arm was last told, {ago:.2f} s before this was noticed: goal [{', '.join(f'{x:.3f}' for x in q)}] rad "
-                f"(joints 1-{len(q)}, goal {robot.goals_sent} of this robot)")
+                f"(joints 1-{len(q)}, goal {robot.goals_sent} of this robot"
+                + ("; it may not have reached the arm)" if is_url(robot.port_name) else ")"))
     else:
         told = "The arm was last told no goal since start-up"
     if not robot.torque_enabled:
