@@ -203,12 +203,22 @@ def open_serial(port: str, baudrate: int = DEFAULT_BAUDRATE, timeout: float = 0.
         raise BridgeError(f"could not open the serial port {port}: {e}; {hint}") from None
 
 
-def _no_delay(sock: socket.socket) -> None:
+def no_delay(sock: socket.socket) -> None:
     """Send small packets at once: a status packet must not wait for the last one's TCP acknowledgement."""
     try:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     except OSError:
         pass
+
+
+def hang_up(sock: socket.socket | None) -> None:
+    """Close a client's connection both ways (its reads end at once)."""
+    if sock is not None:
+        try:
+            sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        sock.close()
 
 
 class Bridge:
@@ -322,7 +332,7 @@ class Bridge:
                 self.log(f"refused {name}: {self._client_name} is connected (one client at a time)")
                 sock.close()
                 continue
-            _no_delay(sock)
+            no_delay(sock)
             try:
                 self.serial.reset_input_buffer()  # nothing left over from the last client
             except PORT_ERRORS as e:
@@ -390,12 +400,7 @@ class Bridge:
     def _drop_client(self) -> None:
         with self._lock:
             client, self._client = self._client, None
-        if client is not None:
-            try:
-                client.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-            client.close()
+        hang_up(client)
 
 
 # --- the command ----------------------------------------------------------------------------

@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import socket
 
-from ..bridge import BridgeError, parse_listen
+from ..bridge import BridgeError, hang_up, no_delay, parse_listen
 from ..errors import ConfigurationError
 
 
@@ -107,18 +107,13 @@ class TcpLine:
             self.refused += 1
             sock.close()  # one client at a time, like the bridge
             return
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        no_delay(sock)
         sock.setblocking(True)
         self.client = sock
 
     def _drop(self) -> None:
         client, self.client = self.client, None
-        if client is not None:
-            try:
-                client.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-            client.close()
+        hang_up(client)
 
     def write(self, data: bytes) -> None:
         client = self.client

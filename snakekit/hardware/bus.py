@@ -7,13 +7,12 @@ retry loop of the hardware backend.
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from contextlib import contextmanager
 from typing import Callable
 
-from ..bridge import PORT_ERRORS, check_latency_timer, is_url
+from ..bridge import PORT_ERRORS, check_latency_timer, is_url, no_delay
 from ..errors import BackendError, MissingDependencyError, PortLostError
 
 try:
@@ -82,7 +81,7 @@ class Port(sdk.PortHandler):
                                          timeout=self.slice, exclusive=True)
         sock = getattr(self.ser, "_socket", None)  # socket://: send each packet at once (no Nagle)
         if sock is not None:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            no_delay(sock)
         self.is_open = True
         self.ser.reset_input_buffer()
         self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
