@@ -13,7 +13,7 @@ import os as _os
 _os.environ.setdefault("MUJOCO_GL", "egl")
 
 from .errors import (  # noqa: E402
-    BackendError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
+    BackendError, BridgeError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
     InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError, PortLostError,
     ServoMismatchError, ShapeError, ShortcutError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
@@ -35,6 +35,7 @@ __all__ = [
     "SPEC", "SnakeSpec", *_LAZY,
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
     "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError", "BackendError",
+    "BridgeError",
     "CommunicationError", "HardwareError", "PortLostError", "ServoMismatchError", "InstructionError", "ViewerError",
     "MissingDependencyError", "PacketError", "CheckFailed", "ShortcutError",
 ]

@@ -166,8 +166,11 @@ def check_latency_timer(port: str, sysfs: str | os.PathLike | None = None, *, ta
 
 # --- the bridge -----------------------------------------------------------------------------
 
-class BridgeError(Exception):
-    """The bridge could not start: the port or the address is not usable (the message says why)."""
+try:  # inside the kit: its error tree; run alone (no kit, or no numpy), a class of its own
+    from snakekit.errors import BridgeError
+except ImportError:
+    class BridgeError(Exception):
+        """The bridge could not start: the port or the address is not usable (the message says why)."""
 
 
 def parse_listen(text: str | None) -> tuple[str, int]:

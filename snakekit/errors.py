@@ -97,6 +97,11 @@ class PortLostError(BackendError):
     the arm was last told; every later call on the robot raises it again."""
 
 
+class BridgeError(ConfigurationError):
+    """``snakekit bridge`` could not start: the serial port or the address to listen on is not
+    usable (missing, in use, a bad ``--listen``); the message says why and what to do."""
+
+
 class HardwareError(BackendError):
     """A servo reported a hardware alert (overload, overheating, voltage...)."""
 

@@ -32,12 +32,10 @@ from .control_table import FIRMWARE_VERSION_ADDRESS, MODEL_NUMBER_ADDRESS, field
 from .faults import NO_FAULTS, Faults
 from .motion import MOTION_SOURCES, MotionSource
 from .servo import OVERLOAD, EmulatedServo
-from .tcp import PtyLine, TcpLine
+from .tcp import FtdiChip, PtyLine, TcpLine
 
 SWITCH_INTERVAL = 0.0005  # s, while an emulator thread runs
 _CLASS_LOCK = threading.Lock()
-#: bytes an FTDI FT232H (the U2D2's chip) sends the host in one USB packet (512, less 2 status bytes)
-CHIP_PACKET = 510
 BAUD_RATES = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
 
 
@@ -99,7 +97,7 @@ class BusEmulator:
             ``socket://HOST:PORT``, which the driver opens as it would ``snakekit bridge``.
         latency_timer: model the USB adapter's FTDI latency timer [ms] (1..255; 0: answer
             at once). The chip holds the replies and sends them to the host when its buffer
-            fills (:data:`CHIP_PACKET` bytes) or at the next expiry of its latency timer; the
+            fills (:data:`~snakekit.emulator.tcp.CHIP_PACKET` bytes) or at the next expiry of its latency timer; the
             timer restarts at every USB transfer, and an idle chip makes one each period.
     """
 
@@ -145,10 +143,8 @@ class BusEmulator:
         self._stop = threading.Event()
         #: the modelled USB latency timer [ms] (0: replies leave at once)
         self.latency_timer = latency_timer
-        self._held = bytearray()  # replies the modelled FTDI chip holds
-        self._tick = time.perf_counter()  # the chip's last USB transfer
-        self._flush_at = math.inf
         self._line = TcpLine(tcp) if tcp is not None else PtyLine()
+        self._chip = FtdiChip(self._line, latency_timer) if latency_timer else None
         self._wake_r, self._wake_w = os.pipe()
         #: what a client opens: the pseudo-terminal (``/dev/pts/N``) or ``socket://HOST:PORT``
         self.port = self._line.port
@@ -258,11 +254,11 @@ class BusEmulator:
         while not self._stop.is_set():
             watching = any(s.watchdog_period for s in self.servos)
             wait = 0.005 if watching else 0.05
-            if self._held:
-                wait = max(0.0, min(wait, self._flush_at - time.perf_counter()))
+            if self._chip is not None:
+                wait = self._chip.wait(wait)
             ready, _, _ = select.select(line.readers() + [self._wake_r], [], [], wait)
-            if self._held and time.perf_counter() >= self._flush_at:
-                self._transfer(len(self._held))
+            if self._chip is not None:
+                self._chip.poll()
             if ready:
                 data = line.receive(ready)
                 if data is None:
@@ -368,23 +364,7 @@ class BusEmulator:
                 s.watchdog_stop(self._heard + period)
 
     def _send(self, data: bytes) -> None:
-        if not self.latency_timer:
-            self._line.write(data)
-            return
-        now, period = time.perf_counter(), self.latency_timer / 1000
-        if not self._held:  # the next expiry of the chip's timer, which restarts at every transfer
-            self._flush_at = self._tick + period * max(1, math.ceil((now - self._tick) / period))
-        self._held += data
-        while len(self._held) >= CHIP_PACKET:  # a full buffer leaves at once
-            self._transfer(CHIP_PACKET)
-
-    def _transfer(self, size: int) -> None:
-        """The modelled FTDI chip sends ``size`` held bytes to the host; its latency timer restarts."""
-        chunk = bytes(self._held[:size])
-        del self._held[:size]
-        self._tick = time.perf_counter()
-        self._flush_at = self._tick + self.latency_timer / 1000 if self._held else math.inf
-        self._line.write(chunk)
+        (self._chip or self._line).write(data)
 
     def _present(self, t: float, servo_id: int) -> EmulatedServo | None:
         s = self._by_id.get(servo_id)

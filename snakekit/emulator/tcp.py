@@ -1,4 +1,5 @@
-"""The lines an emulated bus can be reached on: a pseudo-terminal, or a TCP port.
+"""The lines an emulated bus can be reached on (a pseudo-terminal, or a TCP port), and the USB
+adapter's FTDI chip between the servos and the host.
 
 A line gives the emulator's packet loop what to wait on (:meth:`readers`), the bytes a
 client sent (:meth:`receive`), and a way to send bytes back (:meth:`write`). The TCP line
@@ -9,11 +10,61 @@ arm through the bridge, and no pseudo-terminal is needed.
 
 from __future__ import annotations
 
+import math
 import os
 import socket
+import time
 
 from ..bridge import BridgeError, hang_up, no_delay, parse_listen
 from ..errors import ConfigurationError
+
+
+#: bytes an FTDI FT232H (the U2D2's chip) sends the host in one USB packet (512, less 2 status bytes)
+CHIP_PACKET = 510
+
+
+class FtdiChip:
+    """The U2D2's FTDI chip, in front of a line: it holds what the servos send and passes it on
+    when its buffer fills (:data:`CHIP_PACKET` bytes) or its latency timer expires. The timer
+    restarts at every USB transfer, and an idle chip makes one each period, so a reply waits
+    for the next expiry of that period.
+
+    Args:
+        line: where the bytes go (a :class:`PtyLine` or :class:`TcpLine`).
+        latency_timer: the chip's latency timer [ms].
+    """
+
+    def __init__(self, line, latency_timer: int):
+        self.line = line
+        self.period = latency_timer / 1000
+        self.held = bytearray()
+        self.tick = time.perf_counter()  # the last USB transfer
+        self.flush_at = math.inf
+
+    def write(self, data: bytes) -> None:
+        """Bytes from the servos: held, and sent on when the buffer is full."""
+        now = time.perf_counter()
+        if not self.held:  # the next expiry of the timer, which restarts at every transfer
+            self.flush_at = self.tick + self.period * max(1, math.ceil((now - self.tick) / self.period))
+        self.held += data
+        while len(self.held) >= CHIP_PACKET:  # a full buffer leaves at once
+            self._transfer(CHIP_PACKET)
+
+    def wait(self, longest: float) -> float:
+        """How long the emulator may wait for packets [s] before the chip has something to send."""
+        return max(0.0, min(longest, self.flush_at - time.perf_counter())) if self.held else longest
+
+    def poll(self) -> None:
+        """Send what is held if the timer expired."""
+        if self.held and time.perf_counter() >= self.flush_at:
+            self._transfer(len(self.held))
+
+    def _transfer(self, size: int) -> None:
+        chunk = bytes(self.held[:size])
+        del self.held[:size]
+        self.tick = time.perf_counter()
+        self.flush_at = self.tick + self.period if self.held else math.inf
+        self.line.write(chunk)
 
 
 class PtyLine:

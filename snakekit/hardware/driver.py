@@ -49,7 +49,7 @@ from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_
                         PRESENT_POSITION, PROFILE_ACCELERATION, PROFILE_VELOCITY, STATE_BLOCK, TORQUE_ENABLE,
                         decode_hardware_error, decode_state, load_to_torque, position_bytes, position_limit_ticks,
                         radians_to_ticks, ticks_to_radians, to_signed, velocity_to_radians_per_second)
-from .options import ON_CLOSE, check_options
+from .options import ON_CLOSE, check_options, port_name
 from .startup import check_eeprom
 
 KIT_PROFILE_VELOCITY = DEFAULT_PROFILE_VELOCITY  # the simulator's too (profile_planner says why 55)
@@ -114,12 +114,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
         self._release: list = []  # extra clean-ups (e.g. stop an emulator) run by close()
         ids, retries, self.profile_velocity, self.profile_acceleration, self.watchdog = check_options(
             spec, ids, on_close, retries, profile_velocity, profile_acceleration, watchdog)
-        port = os.environ.get("SNAKEKIT_PORT") if port is None else port
-        if not port:
-            raise ConfigurationError("the hardware backend needs the arm's serial port: make_robot('hardware', "
-                                     "port='/dev/ttyUSB0') (macOS: '/dev/cu.usbserial-...', Windows: 'COM3', "
-                                     "through snakekit bridge: 'socket://HOST:7800'), or SNAKEKIT_PORT set")
-        self.port_name = str(port)
+        self.port_name = port_name(port)
         self.baudrate = int(baudrate)
         self.ids = ids
         self.on_close = on_close
@@ -142,8 +137,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
                           UserWarning, stacklevel=2)
             old.close()
         self.bus = Bus(self.port_name, self.baudrate, retries)
-        me = weakref.ref(self)
-        self.bus.port.last_told = lambda: last_told(me())  # for the error if the port goes away
+        self.bus.port.last_told = lambda me=weakref.ref(self): last_told(me())  # if the port goes away
         self.closed = False
         _OPEN[key] = self
         self._reader = SyncRead(self.port, self.bus.ph, *STATE_BLOCK)
