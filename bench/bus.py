@@ -29,10 +29,11 @@ IDS = (1, 2, 3, 4, 5)
 BLOCK_ADDRESS, BLOCK_SIZE = 126, 10  # Present Load (2) + Velocity (4) + Position (4)
 
 
-def start_emulator(motion: str) -> tuple[subprocess.Popen, str]:
+def start_emulator(motion: str, *options: str) -> tuple[subprocess.Popen, str]:
+    """``snakekit emulator --motion MOTION OPTIONS...`` in its own process: (process, port to open)."""
     proc = subprocess.Popen(
         [sys.executable, "-c", "import sys; from snakekit.emulator import cli; sys.exit(cli(sys.argv[1:]))",
-         "--motion", motion], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+         "--motion", motion, *options], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     line = proc.stdout.readline()
     m = re.search(r" on (\S+) at ", line)
     if not m:
@@ -181,8 +182,8 @@ def main(argv=None) -> int:
         print(f"| {baud:>10} | {words:>23} | {ms:>10.3f} | {hz:>13.0f} |")
     print()
     print("The pty has no wire delay: the measured rates are the software's (client and emulator")
-    print("process share the machine). DynamixelSnake polls the port for 0.3 ms, then sleeps in")
-    print("select() until the reply; the bare SDK spins until it arrives.")
+    print("process share the machine). DynamixelSnake waits in pyserial's read timeout for the")
+    print("reply; the bare SDK spins until it arrives.")
     if missed:
         print(f"MISSED: {', '.join(missed)}")
     if args.json:

@@ -58,6 +58,8 @@ def steps(submissions: int) -> list[Step]:
     return [
         Step("kinematics", "FK, Jacobian, IK vs bare Pinocchio", ["kinematics.py"], 15),
         Step("bus", "control cycle vs the bare Dynamixel SDK", ["bus.py"], 25),
+        Step("bridge", "control cycle through snakekit bridge vs the direct port; the USB latency timer",
+             ["bridge.py"], 40),
         Step("sim", "Task 2: fast vs bare MuJoCo, and in real time", ["sim.py"], 85),
         Step("interactive", "Task 1 through the control panel and viewer", ["interactive.py", "--repeats", "3"], 60),
         Step("setups", "time to a lesson kernel and to JupyterLab; install size", ["setups.py", "--repeats", "3"], 40),
@@ -385,6 +387,16 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     if b:
         add(f"| bus control cycle (SyncRead + SyncWrite, 5 servos, emulated): `DynamixelSnake` vs bare dynamixel-sdk | "
             f"{med(b['ours_hz']):.0f} Hz | {med(b['bare_hz']):.0f} Hz | {b['ratio']:.2f} | >= 0.80 |")
+    br = results.get("bridge")
+    if br:
+        for r in br["bridge"]:
+            timer = f"USB latency timer {r['latency_ms']} ms" if r["latency_ms"] else "answering at once"
+            add(f"| bus control cycle through `snakekit bridge` vs the direct port (emulated, {timer}) | "
+                f"{med(r['bridge_hz']):.0f} Hz | {med(r['direct_hz']):.0f} Hz | {r['ratio']:.2f} | >= 0.80 |")
+        lat = br["latency_hz"]
+        add(f"| bus control cycle with the USB latency timer at 1 ms vs 16 ms (emulated FTDI chip) | "
+            f"{med(lat['1']):.0f} Hz | {med(lat['16']):.0f} Hz | {med(lat['1']) / med(lat['16']):.1f}x | "
+            "16 ms: <= 62.5 Hz |")
     k = results.get("kinematics")
     if k:
         for c in k["calls"]:

@@ -54,7 +54,7 @@ cleanup() {
   [ -z "$RUN" ] || rm -rf "$RUN"
   exit "$rc"
 }
-engine_on_stop() { "${COMPOSE[@]}" --profile grader --profile hardware down --volumes --remove-orphans >/dev/null 2>&1; }
+engine_on_stop() { "${COMPOSE[@]}" --profile grader --profile hardware --profile hardware-usb down --volumes --remove-orphans >/dev/null 2>&1; }
 trap cleanup EXIT
 trap 'exit 130' INT TERM
 
@@ -66,11 +66,11 @@ engine_base
 # --- lint and validate -------------------------------------------------------------------
 "$VENV_BIN/hadolint" docker/Dockerfile || die "hadolint found problems in docker/Dockerfile"
 say "hadolint: docker/Dockerfile is clean"
-for profile in "" "--profile hardware" "--profile grader"; do
+for profile in "" "--profile hardware" "--profile hardware-usb" "--profile grader"; do
   # shellcheck disable=SC2086
   "${COMPOSE[@]}" $profile config -q || die "compose.yaml is invalid ($profile)"
 done
-say "compose $("$VENV_BIN/docker-compose" version --short): compose.yaml is valid (lab, hardware, grader)"
+say "compose $("$VENV_BIN/docker-compose" version --short): compose.yaml is valid (lab, hardware, hardware-usb, grader)"
 
 # --- no CA or secret material in the repository; the build needs none ---------------------
 leaked=$(git -C "$ROOT" grep -l -I -e 'BEGIN [C]ERTIFICATE' -e '[P]RIVATE KEY-----' -- . 2>/dev/null || true)

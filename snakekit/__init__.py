@@ -15,8 +15,8 @@ from .host import choose_mujoco_gl as _choose_mujoco_gl
 _choose_mujoco_gl()
 
 from .errors import (  # noqa: E402
-    BackendError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
-    InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError,
+    BackendError, BridgeError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
+    InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError, PortLostError,
     ServoMismatchError, ShapeError, ShortcutError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
 from .model import SPEC, SnakeSpec  # noqa: E402
@@ -37,7 +37,8 @@ __all__ = [
     "SPEC", "SnakeSpec", *_LAZY,
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
     "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError", "BackendError",
-    "CommunicationError", "HardwareError", "ServoMismatchError", "InstructionError", "ViewerError",
+    "BridgeError",
+    "CommunicationError", "HardwareError", "PortLostError", "ServoMismatchError", "InstructionError", "ViewerError",
     "MissingDependencyError", "PacketError", "CheckFailed", "ShortcutError",
 ]
 

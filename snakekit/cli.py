@@ -1,7 +1,8 @@
 """The ``snakekit`` command.
 
     snakekit sweep [--backend sim] [--realtime] [--out run.npz] [--plot sweep.png]
-    snakekit emulator [...]          (an emulated MX-28 bus on a pseudo-terminal)
+    snakekit emulator [...]          (an emulated MX-28 bus on a pseudo-terminal or a TCP port)
+    snakekit bridge PORT [--listen HOST:PORT]   (serve the arm's serial port over TCP)
     snakekit generate [--check]      (the URDF and MJCF from the robot spec)
     snakekit check LESSON.ipynb      (run a lesson's exercise checks: one row per exercise)
     snakekit start [...]             (check this system, then JupyterLab on the lessons: `make lab`)
@@ -83,10 +84,12 @@ def _sweep(args, out) -> int:
     if args.backend == "sim":
         options["realtime"] = args.realtime
     if args.backend == "hardware":
-        if not args.port:
-            print("snakekit sweep: --backend hardware needs --port (e.g. --port /dev/ttyUSB0)", file=sys.stderr)
+        port = args.port or os.environ.get("SNAKEKIT_PORT")
+        if not port:
+            print("snakekit sweep: --backend hardware needs --port (e.g. --port /dev/ttyUSB0, or "
+                  "socket://HOST:7800 through snakekit bridge) or SNAKEKIT_PORT set", file=sys.stderr)
             return 2
-        options["port"] = args.port
+        options["port"] = port
     trajectory = side_sweep()
     print(f"Task 2: {len(trajectory)} goals at 10 Hz, 50 side-to-side sweeps, on the {args.backend} backend"
           + (" in real time" if args.realtime or args.backend != "sim" else ""), file=out, flush=True)
@@ -131,12 +134,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("sweep", help="run the coded sweep (Task 2) and report how it tracked")
     p.add_argument("--backend", default="sim", choices=list(BACKENDS), help="robot backend (default: sim)")
     p.add_argument("--realtime", action="store_true", help="pace the simulator to the wall clock")
-    p.add_argument("--port", help="serial port of the arm (hardware backend)")
+    p.add_argument("--port", help="serial port of the arm, or socket://HOST:PORT of a snakekit bridge "
+                                  "(hardware backend; default: $SNAKEKIT_PORT)")
     p.add_argument("--out", metavar="RUN.npz", help="save the recorded run")
     p.add_argument("--plot", metavar="PLOT.png", help="plot commanded vs measured angles per joint")
     p.set_defaults(func=_sweep)
     sub.add_parser("emulator", help="emulate the arm's MX-28 bus on a pseudo-terminal "
                                     "(snakekit emulator --help for its options)", add_help=False)
+    sub.add_parser("bridge", help="serve the arm's USB serial port over TCP, for a container or another "
+                                  "computer (snakekit bridge --help for its options)", add_help=False)
     sub.add_parser("grade", help="grade a class's submissions of an assignment "
                                  "(snakekit grade --help for its options)", add_help=False)
     sub.add_parser("start", help="check this system, then open the lessons in JupyterLab (what `make lab` runs; "
@@ -158,6 +164,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
         from . import emulator
 
         return emulator.cli(argv[1:])
+    if argv[:1] == ["bridge"]:  # standard library and pyserial only: it also runs as one file
+        from .bridge import main as bridge
+
+        return bridge(argv[1:])
     if argv[:1] == ["grade"]:  # the grader lives in its own package, with its own options
         from grader.cli import main as grade
 

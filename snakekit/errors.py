@@ -91,6 +91,17 @@ class CommunicationError(BackendError):
     """The servo bus stopped answering, or answered with corrupt packets, too often."""
 
 
+class PortLostError(BackendError):
+    """The servo bus's serial port went away: the USB adapter was unplugged or lost power, the
+    bridge serving it stopped, or the emulator behind it was closed. The message says what
+    the arm was last told; every later call on the robot raises it again."""
+
+
+class BridgeError(ConfigurationError):
+    """``snakekit bridge`` could not start: the serial port or the address to listen on is not
+    usable (missing, in use, a bad ``--listen``); the message says why and what to do."""
+
+
 class HardwareError(BackendError):
     """A servo reported a hardware alert (overload, overheating, voltage...)."""
 

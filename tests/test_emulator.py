@@ -427,5 +427,5 @@ def test_stop_closes_the_pty(bus):
     bus.stop()
     assert not bus._thread.is_alive()
     with pytest.raises(OSError):
-        os.fstat(bus._master)
+        os.fstat(bus._line.master)
     assert path

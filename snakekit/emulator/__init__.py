@@ -29,7 +29,7 @@ __all__ = ["BusEmulator", "Faults", "Received", "Write", "MujocoMotion", "Profil
 
 def make_emulated_robot(*, motion: str = "mujoco", faults: Faults | None = None, q0=None,
                         timing: bool = False, boot_time: float = 0.05, baudrate: int = 4_000_000,
-                        ids=None, **robot_options):
+                        ids=None, tcp: str | None = None, latency_timer: int = 0, **robot_options):
     """A :class:`~snakekit.hardware.DynamixelSnake` connected to an emulated bus in a thread.
 
     The bus emulator is started first, on its own pseudo-terminal; closing the robot stops
@@ -43,6 +43,9 @@ def make_emulated_robot(*, motion: str = "mujoco", faults: Faults | None = None,
         boot_time: how long a rebooted servo stays silent [s].
         baudrate: bus speed [baud].
         ids: servo ids, base to tip (default: the spec's).
+        tcp: serve the bus on this TCP address (``HOST:PORT``; ``"0"``: a free port on
+            127.0.0.1) instead of a pseudo-terminal; the robot opens ``socket://HOST:PORT``.
+        latency_timer: model the USB adapter's latency timer [ms] (0: answer at once).
         **robot_options: keyword options of :class:`~snakekit.hardware.DynamixelSnake`
             (``on_close``, ``retries``, ``profile_velocity``...).
     """
@@ -51,7 +54,7 @@ def make_emulated_robot(*, motion: str = "mujoco", faults: Faults | None = None,
     from ..hardware import DynamixelSnake
 
     bus = BusEmulator(ids=ids, motion=motion, q0=q0, timing=timing, boot_time=boot_time,
-                      baudrate=baudrate, faults=faults or Faults()).start()
+                      baudrate=baudrate, faults=faults or Faults(), tcp=tcp, latency_timer=latency_timer).start()
     try:
         with warnings.catch_warnings():  # fresh emulated servos: the kit's EEPROM values are always
             warnings.filterwarnings("ignore", "the kit wrote its EEPROM settings")  # written (robot.eeprom_changes)

@@ -21,7 +21,6 @@ import sys
 import threading
 import time
 import traceback
-import tty
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +32,7 @@ from .control_table import FIRMWARE_VERSION_ADDRESS, MODEL_NUMBER_ADDRESS, field
 from .faults import NO_FAULTS, Faults
 from .motion import MOTION_SOURCES, MotionSource
 from .servo import OVERLOAD, EmulatedServo
+from .tcp import FtdiChip, PtyLine, TcpLine
 
 SWITCH_INTERVAL = 0.0005  # s, while an emulator thread runs
 _CLASS_LOCK = threading.Lock()
@@ -78,7 +78,7 @@ class Write:
 
 
 class BusEmulator:
-    """MX-28(2.0) servos on a pseudo-terminal.
+    """MX-28(2.0) servos on a pseudo-terminal, or on a TCP port.
 
     Args:
         ids: servo ids on the bus, base to tip (joint i is driven by ``ids[i]``).
@@ -92,16 +92,27 @@ class BusEmulator:
         faults: faults to inject from the start.
         record_limit: how many received packets to keep.
         spec: the arm.
+        tcp: ``HOST:PORT`` (or ``PORT``, on 127.0.0.1; 0 picks a free port) to serve on TCP,
+            one client at a time, instead of a pseudo-terminal: :attr:`port` is then
+            ``socket://HOST:PORT``, which the driver opens as it would ``snakekit bridge``.
+        latency_timer: model the USB adapter's FTDI latency timer [ms] (1..255; 0: answer
+            at once). The chip holds the replies and sends them to the host when its buffer
+            fills (:data:`~snakekit.emulator.tcp.CHIP_PACKET` bytes) or at the next expiry of its latency timer; the
+            timer restarts at every USB transfer, and an idle chip makes one each period.
     """
 
     def __init__(self, *, ids=None, motion: str | MotionSource = "mujoco", q0=None,
                  baudrate: int = 4_000_000, timing: bool = False, boot_time: float = 0.05,
-                 faults: Faults = NO_FAULTS, record_limit: int = 200_000, spec: SnakeSpec = SPEC):
+                 faults: Faults = NO_FAULTS, record_limit: int = 200_000, spec: SnakeSpec = SPEC,
+                 tcp: str | None = None, latency_timer: int = 0):
         ids = tuple(int(i) for i in (spec.servo_ids if ids is None else ids))
         if len(ids) != spec.n_joints or len(set(ids)) != len(ids) or not all(0 <= i <= p.MAX_ID for i in ids):
             raise ConfigurationError(f"ids must be {spec.n_joints} distinct servo ids in 0..252, got {ids}")
         if baudrate not in BAUD_RATES:
             raise ConfigurationError(f"an MX-28 runs at one of {', '.join(map(str, BAUD_RATES))} baud, got {baudrate}")
+        if isinstance(latency_timer, bool) or not isinstance(latency_timer, int) or not 0 <= latency_timer <= 255:
+            raise ConfigurationError(f"latency_timer is a whole number of milliseconds, 1..255 as on an FTDI chip "
+                                     f"(0: not modelled), got {latency_timer!r}")
         q0 = spec.home if q0 is None else np.asarray(q0, dtype=float)
         if isinstance(motion, str):
             if motion not in MOTION_SOURCES:
@@ -130,11 +141,13 @@ class BusEmulator:
         self.faults = faults
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        os.set_blocking(self._master, False)
+        #: the modelled USB latency timer [ms] (0: replies leave at once)
+        self.latency_timer = latency_timer
+        self._line = TcpLine(tcp) if tcp is not None else PtyLine()
+        self._chip = FtdiChip(self._line, latency_timer) if latency_timer else None
         self._wake_r, self._wake_w = os.pipe()
-        self.port = os.ttyname(self._slave)
+        #: what a client opens: the pseudo-terminal (``/dev/pts/N``) or ``socket://HOST:PORT``
+        self.port = self._line.port
         self.closed = False
 
     # --- clock and faults -------------------------------------------------------------------
@@ -237,15 +250,18 @@ class BusEmulator:
     def serve(self) -> None:
         """Answer packets until :meth:`stop` (or Ctrl-C in the foreground)."""
         advance = getattr(self.motion, "advance", None)
+        line = self._line
         while not self._stop.is_set():
             watching = any(s.watchdog_period for s in self.servos)
-            ready, _, _ = select.select([self._master, self._wake_r], [], [], 0.005 if watching else 0.05)
-            if self._master in ready:
-                try:
-                    data = os.read(self._master, 65536)
-                except (BlockingIOError, InterruptedError):
-                    data = b""
-                except OSError:
+            wait = 0.005 if watching else 0.05
+            if self._chip is not None:
+                wait = self._chip.wait(wait)
+            ready, _, _ = select.select(line.readers() + [self._wake_r], [], [], wait)
+            if self._chip is not None:
+                self._chip.poll()
+            if ready:
+                data = line.receive(ready)
+                if data is None:
                     break
                 if data:
                     for packet in self._parser.feed(data):
@@ -277,7 +293,8 @@ class BusEmulator:
                 BusEmulator._threads_running -= 1
                 if BusEmulator._threads_running == 0 and BusEmulator._saved_switch_interval:
                     sys.setswitchinterval(BusEmulator._saved_switch_interval)
-        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
+        self._line.close()
+        for fd in (self._wake_r, self._wake_w):
             try:
                 os.close(fd)
             except OSError:
@@ -302,7 +319,8 @@ class BusEmulator:
     def describe(self) -> str:
         ids = self.ids
         span = f"{ids[0]}-{ids[-1]}" if ids == tuple(range(ids[0], ids[0] + len(ids))) else ", ".join(map(str, ids))
-        return f"{len(ids)} MX-28 servos (ids {span}) on {self.port} at {self.baudrate} baud"
+        latency = f", USB latency timer {self.latency_timer} ms" if self.latency_timer else ""
+        return f"{len(ids)} MX-28 servos (ids {span}) on {self.port} at {self.baudrate} baud{latency}"
 
     # --- the firmware -----------------------------------------------------------------------
 
@@ -346,10 +364,7 @@ class BusEmulator:
                 s.watchdog_stop(self._heard + period)
 
     def _send(self, data: bytes) -> None:
-        try:
-            os.write(self._master, data)
-        except (BlockingIOError, OSError):
-            pass  # nobody reads the port: the bytes are lost, as on an open bus
+        (self._chip or self._line).write(data)
 
     def _present(self, t: float, servo_id: int) -> EmulatedServo | None:
         s = self._by_id.get(servo_id)

@@ -1,4 +1,4 @@
-"""``snakekit emulator``: serve an emulated MX-28 bus on a pseudo-terminal until Ctrl-C."""
+"""``snakekit emulator``: serve an emulated MX-28 bus on a pseudo-terminal (or a TCP port) until Ctrl-C."""
 
 from __future__ import annotations
 
@@ -21,8 +21,8 @@ def _overload(text: str) -> tuple[int, float]:
 def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="snakekit emulator",
-        description="Emulate five Dynamixel MX-28 (Protocol 2.0) servos on a pseudo-terminal. "
-                    "Open the printed port with the Dynamixel SDK, or with "
+        description="Emulate five Dynamixel MX-28 (Protocol 2.0) servos on a pseudo-terminal (or a TCP "
+                    "port, --tcp). Open the printed port with the Dynamixel SDK, or with "
                     "snakekit.make_robot('hardware', port=...).")
     ap.add_argument("--motion", choices=("mujoco", "profile"), default="mujoco",
                     help="how the servos move: the MuJoCo arm (default) or the firmware profile alone")
@@ -38,6 +38,12 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--overload", type=_overload, default=None, metavar="ID[@S]",
                     help="servo ID reports an overload alert (after S seconds)")
     ap.add_argument("--seed", type=int, default=0, help="random seed of the faults")
+    ap.add_argument("--tcp", metavar="HOST:PORT", default=None,
+                    help="serve on TCP (one client at a time, as snakekit bridge does) instead of a "
+                         "pseudo-terminal; the port to open is then socket://HOST:PORT")
+    ap.add_argument("--latency-timer", type=int, default=0, metavar="MS",
+                    help="model the USB adapter's FTDI latency timer: replies are held up to MS ms "
+                         "(16 is the chip's default, 1 the kit's; default 0: answer at once)")
     return ap
 
 
@@ -60,7 +66,7 @@ def cli(argv: list[str], *, output: TextIO | None = None) -> int:
                         missing=_ids(args.missing), overload=(args.overload[0],) if args.overload else (),
                         overload_after=args.overload[1] if args.overload else 0.0, seed=args.seed)
         bus = BusEmulator(ids=_ids(args.ids), motion=args.motion, baudrate=args.baud, timing=args.timing,
-                          faults=faults)
+                          faults=faults, tcp=args.tcp, latency_timer=args.latency_timer)
     except SystemExit as e:
         return int(e.code or 0)
     except ValueError as e:

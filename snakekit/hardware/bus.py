@@ -7,13 +7,13 @@ retry loop of the hardware backend.
 
 from __future__ import annotations
 
-import select
 import threading
 import time
 from contextlib import contextmanager
 from typing import Callable
 
-from ..errors import BackendError, MissingDependencyError
+from ..bridge import PORT_ERRORS, check_latency_timer, is_url, no_delay
+from ..errors import BackendError, MissingDependencyError, PortLostError
 
 try:
     import dynamixel_sdk as sdk
@@ -30,6 +30,7 @@ COMM_RESULTS = {
     sdk.COMM_RX_WAITING: "status packet incomplete", sdk.COMM_RX_TIMEOUT: "timed out",
     sdk.COMM_RX_CORRUPT: "corrupt status packet", sdk.COMM_NOT_AVAILABLE: "not available",
 }
+SYNC_WRITE = 0x83  # the instruction byte of a SYNC_WRITE packet
 #: the longest lag [s] of a late status packet the bus waits out after a failure
 MAX_LATENESS = 0.4
 SUPPORTED_BAUD_RATES = "57600, 1000000, 2000000, 3000000 or 4000000"
@@ -45,44 +46,117 @@ def describe(result: int) -> str:
 
 
 class Port(sdk.PortHandler):
-    """The SDK's port handler, waiting in ``select`` for the first byte instead of spinning.
+    """The SDK's port handler on any pyserial port, waiting with pyserial's timeout, never spinning.
 
-    The SDK polls the port with a zero timeout until a status packet arrives or its packet
-    timeout passes. Polling a moment, then sleeping in ``select`` until a byte arrives,
-    gives the same timing without burning a CPU core (and without holding Python's lock
-    for long, which an emulator in the same process needs to answer).
+    The port may be a device (``/dev/ttyUSB0``, ``COM3``) or a pyserial URL
+    (``socket://host:7800`` for ``snakekit bridge``, ``rfc2217://host:port``): it is opened
+    with ``serial.serial_for_url``. The SDK polls the port with a zero timeout until a status
+    packet arrives or its packet timeout passes; here each read waits for the bytes the SDK
+    asks for with pyserial's own timeout (at most :attr:`slice` at a time), which works on
+    every pyserial port and system and costs no CPU while waiting.
+
+    A port that goes away (the adapter unplugged, the bridge or the emulator stopped) raises
+    :class:`~snakekit.errors.PortLostError`, saying what the arm was last told
+    (:attr:`last_told`), from then on at every use.
     """
 
-    #: how long to poll before sleeping in select [s]: a fast answer is caught without the
-    #: cost of a wake-up, a slow one costs no CPU
-    spin = 3e-4
+    #: the longest one read waits [s]: a missing reply is noticed within this of its timeout
+    #: (and pyserial on Windows counts its timeout in whole milliseconds)
+    slice = 0.002
+
+    def __init__(self, port_name):
+        super().__init__(port_name)
+        self.ser = None
+        #: called (no arguments) for the words that say what the arm was last told, when the port is lost
+        self.last_told: Callable[[], str] | None = None
+        #: the PortLostError, once the port went away
+        self.lost: PortLostError | None = None
+        #: the last SYNC_WRITE that left the port: ``(time.perf_counter() [s], packet)``, or None
+        self.last_sync_write: tuple[float, bytes] | None = None
 
     def setupPort(self, cflag_baud):
-        """The SDK's port set-up, opening the port exclusively (a second program, or a second
-        robot object, can't share the bus and undo this one's settings)."""
-        if self.is_open:
-            self.closePort()
-        self.ser = serial.Serial(port=self.port_name, baudrate=self.baudrate, bytesize=serial.EIGHTBITS,
-                                 timeout=0, exclusive=True)
+        """Open the port exclusively (a second program, or a second robot object, can't share
+        the bus and undo this one's settings); an open port only changes its baud rate."""
+        if self.is_open and self.ser is not None:
+            with self._guard():
+                self.ser.baudrate = self.baudrate
+            return True
+        self.ser = serial.serial_for_url(self.port_name, baudrate=self.baudrate, bytesize=serial.EIGHTBITS,
+                                         timeout=self.slice, exclusive=True)
+        sock = getattr(self.ser, "_socket", None)  # socket://: send each packet at once (no Nagle)
+        if sock is not None:
+            no_delay(sock)
         self.is_open = True
         self.ser.reset_input_buffer()
         self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
         return True
 
+    @contextmanager
+    def _guard(self):
+        """Turn the port's going away into a PortLostError (once lost, it stays lost)."""
+        if self.lost is not None:
+            raise self._again()
+        try:
+            yield
+        except PORT_ERRORS as e:
+            self.lost = PortLostError(port_lost_message(self.port_name, e, self.last_told))
+            raise self._again() from e
+
+    def _again(self) -> PortLostError:
+        return PortLostError(*self.lost.args)
+
     def readPort(self, length):
-        ser = self.ser
-        data = ser.read(length)  # what the SDK does: a read that never waits
-        if data:
-            return data
-        end = time.perf_counter() + self.spin
-        while time.perf_counter() < end:
-            data = ser.read(length)
-            if data:
-                return data
-        left = (self.packet_timeout - self.getTimeSinceStart()) / 1000.0  # ms -> s
-        if left > 0:
-            select.select([ser.fileno()], [], [], min(left, 0.05))
-        return ser.read(length)
+        """Up to ``length`` bytes: waits until they are all there, the packet timeout passed, or :attr:`slice`."""
+        with self._guard():
+            return self.ser.read(length)
+
+    def read_within(self, size: int) -> bytes:
+        """What arrives within :attr:`slice` [s] (up to ``size`` bytes)."""
+        with self._guard():
+            return self.ser.read(size)
+
+    def writePort(self, packet):
+        with self._guard():
+            written = self.ser.write(packet)
+        if len(packet) > 12 and packet[7] == SYNC_WRITE:
+            self.last_sync_write = (time.perf_counter(), bytes(packet))
+        return written
+
+    def clearPort(self):
+        with self._guard():
+            self.ser.flush()
+
+    def getBytesAvailable(self):
+        with self._guard():
+            return self.ser.in_waiting
+
+    def closePort(self):
+        if self.ser is not None:
+            try:
+                self.ser.close()
+            except PORT_ERRORS:
+                pass  # already gone
+        self.is_open = False
+
+
+def port_lost_message(port: str, error: Exception, last_told: Callable[[], str] | None = None) -> str:
+    """Why the port at ``port`` is gone, what the arm was last told, and what to do."""
+    args = getattr(error, "args", ())
+    error = args[1] if len(args) == 2 and isinstance(args[1], str) else (str(error) or type(error).__name__)
+    if is_url(port):
+        where = (f"the connection to the servo bus at {port} was lost ({error}): the bridge stopped, its "
+                 "adapter was unplugged, or it serves another client (one at a time)")
+        fix = "start the bridge again (snakekit bridge PORT) with the adapter plugged in"
+    else:
+        where = f"the servo bus at {port} is gone ({error}): the USB adapter was unplugged or lost power"
+        fix = "plug the adapter in again"
+    told = ""
+    if last_told is not None:
+        try:
+            told = " " + last_told()
+        except Exception:  # the words must never hide the loss
+            told = ""
+    return f"{where}.{told} Then robot.close() and make the robot again: {fix}."
 
 
 def status_params(rxpacket) -> int:
@@ -202,7 +276,8 @@ class Bus:
     """One open Dynamixel bus: the SDK port and packet handler, a lock, and the retry loop.
 
     Args:
-        port: serial port name (``/dev/ttyUSB0``, or the emulator's pseudo-terminal).
+        port: serial port name (``/dev/ttyUSB0``, the emulator's pseudo-terminal) or a pyserial
+            URL (``socket://host:7800`` for ``snakekit bridge``, ``rfc2217://host:port``).
         baudrate: bus speed [baud].
         retries: how many times a lost or corrupt packet is sent again.
 
@@ -226,6 +301,9 @@ class Bus:
         #: when the bus last carried a packet (time.perf_counter() [s])
         self.last_used = time.perf_counter()
         self._lock = threading.RLock()
+        #: the USB adapter's latency timer (:class:`snakekit.bridge.LatencyTimer`; set to 1 ms when
+        #: the kit may), or None for a port without one (a pseudo-terminal, a socket)
+        self.latency_timer = check_latency_timer(self.name)
         self.port = Port(self.name)
         self.ph = CheckedPacketHandler()
         try:
@@ -235,6 +313,10 @@ class Bus:
                 raise BackendError(f"the servo bus at {self.name} is in use by another program (another "
                                    "notebook kernel or snakekit command?); close the robot there first "
                                    "(robot.close()) or stop that program") from e
+            if is_url(self.name):
+                raise BackendError(f"could not open the servo bus at {self.name}: {e}; check that the "
+                                   "bridge runs on that host (snakekit bridge PORT --listen HOST:PORT) and "
+                                   "the address (socket://HOST:PORT)") from e
             raise BackendError(f"could not open the servo bus at {self.name}: {e}; check the port "
                                "name, that the adapter is plugged in, and that you may use it "
                                "(the 'dialout' group)") from e
@@ -258,33 +340,46 @@ class Bus:
                 self.port.is_using = False
                 self.last_used = time.perf_counter()
 
-    def _byte_within(self, seconds: float) -> bool:
-        """Whether a byte arrives on the line within ``seconds`` [s] (or is waiting already)."""
-        ser = self.port.ser
-        return bool(ser.in_waiting) or bool(select.select([ser.fileno()], [], [], seconds)[0])
+    def _learn(self, since: float | None) -> None:
+        """Late bytes arrived now, for a request sent at ``since`` (perf_counter [s])."""
+        if since is not None:
+            self.lateness = min(max(self.lateness, time.perf_counter() - since), MAX_LATENESS)
+
+    def _bytes_follow(self, seconds: float) -> bool:
+        """Whether bytes wait on the line or arrive within ``seconds`` [s]; they are thrown away
+        and counted."""
+        waiting = self.port.getBytesAvailable()
+        if waiting:
+            self.stray_bytes += len(self.port.read_within(waiting))
+            return True
+        end = time.perf_counter() + seconds
+        while time.perf_counter() < end:
+            data = self.port.read_within(4096)
+            if data:
+                self.stray_bytes += len(data)
+                return True
+        return False
 
     def _discard(self) -> None:
         """Throw away (and count) what is waiting on the line: nothing an earlier request left
         is read as the answer to the next one."""
-        ser = self.port.ser
-        waiting = ser.in_waiting
-        if waiting:
-            self.stray_bytes += len(ser.read(waiting))
+        self._bytes_follow(0.0)
         self.port.clearPort()
 
     def drain(self, quiet: float, longest: float = 0.5, since: float | None = None) -> None:
         """Throw away (and count) bytes until the line has been quiet for ``quiet`` [s] (at most
         ``longest`` [s]): a status packet that arrives after the SDK gave up must not be taken
-        as the next answer. ``since``: when the failed request was sent (perf_counter [s]), to learn
-        how late bytes come (:attr:`lateness`)."""
-        ser = self.port.ser
-        end = time.perf_counter() + longest
-        while time.perf_counter() < end:
-            if not self._byte_within(quiet):
-                return
-            self.stray_bytes += len(ser.read(max(ser.in_waiting, 1)))
-            if since is not None:
-                self.lateness = min(max(self.lateness, time.perf_counter() - since), MAX_LATENESS)
+        as the next answer. ``since``: when the failed request was sent (perf_counter [s]), to
+        learn how late bytes come (:attr:`lateness`)."""
+        now = time.perf_counter()
+        end, quiet_until = now + longest, now + quiet
+        while now < min(end, quiet_until):
+            data = self.port.read_within(4096)
+            if data:
+                self.stray_bytes += len(data)
+                self._learn(since)
+                quiet_until = time.perf_counter() + quiet
+            now = time.perf_counter()
 
     @property
     def quiet_time(self) -> float:
@@ -314,10 +409,10 @@ class Bus:
             if not answered:
                 return result, value
             since = started
-            if result == sdk.COMM_SUCCESS and self._byte_within(self.quiet_time if self._suspect else 0.0):
+            if result == sdk.COMM_SUCCESS and self._bytes_follow(self.quiet_time if self._suspect else 0.0):
                 result = sdk.COMM_RX_CORRUPT  # the "answer" was late bytes of the failed request before
                 self.leftovers += 1
-                since = self._failed_at
+                self._learn(self._failed_at if self._suspect else None)
             if result == sdk.COMM_SUCCESS:
                 self._suspect = False
             else:

@@ -41,15 +41,18 @@ from ..errors import (CommunicationError, ConfigurationError, HardwareError,
 from ..model import SPEC, SnakeSpec
 from ..profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY
 from ..robot import JointState, Robot
+from ..bridge import is_url
 from .bus import Bus, SyncRead, describe, sdk
 from .keepalive import STATUS_BLOCK, KeepAlive, WatchdogMixin
+from .lost import last_told
 from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_ERROR_STATUS, PACKET_ERRORS,
-                        PRESENT_POSITION, PROFILE_ACCELERATION, PROFILE_VELOCITY, STATE_BLOCK, TICKS_PER_RAD,
+                        PRESENT_POSITION, PROFILE_ACCELERATION, PROFILE_VELOCITY, STATE_BLOCK,
                         TORQUE_ENABLE, VELOCITY_UNIT, decode_hardware_error, decode_state, implausible_state,
                         load_to_torque, position_bytes, position_limit_ticks, radians_to_ticks, ticks_to_radians,
                         to_signed, velocity_to_radians_per_second)
-from .options import ON_CLOSE, check_options
+from .options import ON_CLOSE, check_options, port_name
 from .startup import check_eeprom
+from .stopping import StopMixin
 
 KIT_PROFILE_VELOCITY = DEFAULT_PROFILE_VELOCITY  # the simulator's too (profile_planner says why 55)
 _OPEN: "weakref.WeakValueDictionary[str, DynamixelSnake]" = weakref.WeakValueDictionary()
@@ -72,11 +75,13 @@ class ServoInfo:
     firmware: int
 
 
-class DynamixelSnake(WatchdogMixin, Robot):
+class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
     """The arm on a Dynamixel bus (a U2D2 adapter, or the bus emulator's pseudo-terminal).
 
     Args:
-        port: serial port of the bus adapter, e.g. ``"/dev/ttyUSB0"``.
+        port: serial port of the bus adapter, e.g. ``"/dev/ttyUSB0"``, or a pyserial URL such as
+            ``"socket://host.docker.internal:7800"`` (a ``snakekit bridge`` on another computer);
+            default: the ``SNAKEKIT_PORT`` environment variable (the container's ``hardware`` service sets it).
         baudrate: bus speed [baud] (the servos' Baud Rate register must match).
         ids: servo ids from base to tip (default: ``spec.servo_ids``).
         spec: the arm (limits, number of joints, servo ids, the servo model).
@@ -99,7 +104,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
     backend = "hardware"
     realtime = True
 
-    def __init__(self, port: str, baudrate: int = 4_000_000, ids=None, *,
+    def __init__(self, port: str | None = None, baudrate: int = 4_000_000, ids=None, *,
                  spec: SnakeSpec = SPEC, on_close: str = "torque_off",
                  profile_velocity: int = KIT_PROFILE_VELOCITY,
                  profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION,
@@ -111,7 +116,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
         self._release: list = []  # extra clean-ups (e.g. stop an emulator) run by close()
         ids, retries, self.profile_velocity, self.profile_acceleration, self.watchdog = check_options(
             spec, ids, on_close, retries, profile_velocity, profile_acceleration, watchdog)
-        self.port_name = str(port)
+        self.port_name = port_name(port)
         self.baudrate = int(baudrate)
         self.ids = ids
         self.on_close = on_close
@@ -126,7 +131,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
         self._last_positions = None
         self._last_status: dict = {}  # the keep-alive's last status read
 
-        key = os.path.realpath(self.port_name)
+        key = self.port_name if is_url(self.port_name) else os.path.realpath(self.port_name)
         old = _OPEN.get(key)
         if old is not None and not old.closed:
             warnings.warn(f"a robot was already open on {self.port_name}; it was closed first "
@@ -134,6 +139,7 @@ class DynamixelSnake(WatchdogMixin, Robot):
                           UserWarning, stacklevel=2)
             old.close()
         self.bus = Bus(self.port_name, self.baudrate, retries)
+        self.bus.port.last_told = lambda me=weakref.ref(self): last_told(me())  # if the port goes away
         self.closed = False
         _OPEN[key] = self
         self._reader = SyncRead(self.port, self.bus.ph, *STATE_BLOCK, check=lambda _, raw: implausible_state(raw))
@@ -410,95 +416,6 @@ class DynamixelSnake(WatchdogMixin, Robot):
         """Torque off on every servo: the arm goes limp."""
         self._check_open()
         self._torque(False)
-
-    def stop(self) -> str:
-        """Stop the arm now, as ``on_close`` says; never raises (the bus may be failing).
-
-        Returns what was done, in words, saying only what the servos confirmed.
-        """
-        with self.bus.hold():
-            self.port.is_using = False  # an exception may have left the SDK's flag set
-            try:
-                if self.on_close == "hold":
-                    return self._hold_safely()
-                still_on = self._torque_off_safely()
-            except Exception:  # a closed or broken port: nothing more can be sent
-                still_on = list(self.ids)
-        if not still_on:
-            return "The arm was stopped: torque off, read back from every servo."
-        return (f"Torque off was sent, but servo(s) {', '.join(map(str, still_on))} did not confirm it: "
-                "they may still have torque on. Switch the arm's power off before touching it.")
-
-    def _torque_off_safely(self, ids=None) -> list[int]:
-        """Torque off (broadcast, or to each of ``ids``) and read it back; the ids that did not confirm it."""
-        ph, port = self.bus.ph, self.port
-        ids = list(self.ids if ids is None else ids)
-        still_on = ids
-        for attempt in range(self.retries + 1):
-            try:
-                port.clearPort()
-                for target in ([sdk.BROADCAST_ID] if ids == list(self.ids) else ids):
-                    ph.write1ByteTxOnly(port, target, TORQUE_ENABLE, 0)
-                    port.is_using = False
-            except Exception:
-                pass
-            port.is_using = False
-            still_on = []
-            for i in ids:
-                value, result, _ = ph.read1ByteTxRx(port, i, TORQUE_ENABLE)
-                port.is_using = False
-                if result != sdk.COMM_SUCCESS or value != 0:
-                    still_on.append(i)
-            if not still_on:
-                break
-        self.torque_enabled = bool(still_on) or len(ids) < len(self.ids)
-        return still_on
-
-    def _hold_safely(self) -> str:
-        """Hold each servo where it is, by a goal that cannot be far from it; torque off where in doubt.
-
-        A servo's goal becomes its present position only when two READs of it, each the checked
-        answer to its own request, agree within what the joint can move between them, inside
-        the joint's limits; the goal is then written with an answered WRITE. A servo that fails
-        any of this is not sent a goal at all: its torque is turned off (and read back), so no
-        goal is ever made from a reading that was not verified.
-        """
-        held, limp = [], []
-        for i in self.ids:
-            (held if self._hold_servo(i) else limp).append(i)
-        parts = []
-        if held:
-            parts.append(f"servo(s) {', '.join(map(str, held))} hold where they are (goal = present position, "
-                         "read twice and written with an answer)")
-        if limp:
-            still_on = self._torque_off_safely(limp)
-            off = [i for i in limp if i not in still_on]
-            if off:
-                parts.append(f"servo(s) {', '.join(map(str, off))} could not be read reliably, so their torque was "
-                             "turned off instead (read back)")
-            if still_on:
-                parts.append(f"servo(s) {', '.join(map(str, still_on))} could not be read reliably and did not "
-                             "confirm torque off: they may still move to their last goal. Switch the arm's power "
-                             "off before touching it")
-        return "The arm was stopped: " + "; ".join(parts) + "."
-
-    def _hold_servo(self, servo_id: int) -> bool:
-        """Goal = present position of one servo, from two verified READs that agree; False if not done."""
-        lo, hi = self.tick_limits
-        tries = min(self.retries, 1)
-        readings = []
-        for _ in range(2):
-            t = time.perf_counter()
-            result, value, error = self.bus.read(servo_id, PRESENT_POSITION, 4, tries=tries)
-            if result != sdk.COMM_SUCCESS or error & 0x7F:
-                return False
-            readings.append((t, to_signed(value, 4)))
-        (t1, a), (t2, b) = readings
-        reach = (self.spec.velocity_limit * 1.5 * (t2 - t1 + 0.01)) * TICKS_PER_RAD + 2  # ticks it can move
-        if not (lo <= b <= hi) or abs(b - a) > reach:
-            return False
-        result, error = self.bus.write(servo_id, GOAL_POSITION, 4, b, tries=tries)
-        return result == sdk.COMM_SUCCESS and not error & 0x7F
 
     def _reboot(self, servo_id: int, timeout: float = 2.0) -> None:
         result, error = self.bus.reboot(servo_id)

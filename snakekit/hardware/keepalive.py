@@ -15,7 +15,7 @@ import threading
 import time
 import weakref
 
-from ..errors import BackendError
+from ..errors import BackendError, PortLostError
 from .bus import describe, sdk
 from .registers import BUS_WATCHDOG, TORQUE_ENABLE, WATCHDOG_UNIT, to_signed
 
@@ -51,6 +51,9 @@ class KeepAlive:
                 self.sent += 1
                 try:
                     robot._keep_alive()
+                except PortLostError:  # nothing can reach the arm any more: the next call on it says so
+                    self.failed += 1
+                    return
                 except Exception:  # the bus may be failing: the watchdog will stop the arm
                     self.failed += 1
             del robot

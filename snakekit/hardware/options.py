@@ -4,6 +4,7 @@ that says what was wrong and what to use."""
 from __future__ import annotations
 
 import numbers
+import os
 
 from ..errors import ConfigurationError, InputTypeError
 from ..model import SnakeSpec
@@ -11,6 +12,17 @@ from ..profile_planner import VELOCITY_UNIT
 from .registers import velocity_limit_units
 
 ON_CLOSE = ("torque_off", "hold")
+
+
+def port_name(port) -> str:
+    """The arm's serial port: ``port``, or else the ``SNAKEKIT_PORT`` environment variable (the
+    container's ``hardware`` service sets it), or a ConfigurationError that says what to give."""
+    port = os.environ.get("SNAKEKIT_PORT") if port is None else port
+    if not port:
+        raise ConfigurationError("the hardware backend needs the arm's serial port: make_robot('hardware', "
+                                 "port='/dev/ttyUSB0') (macOS: '/dev/cu.usbserial-...', Windows: 'COM3', "
+                                 "through snakekit bridge: 'socket://HOST:7800'), or SNAKEKIT_PORT set")
+    return str(port)
 
 
 def _whole(value, name: str, low: int, high: int | None = None) -> int:
