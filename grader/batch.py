@@ -370,6 +370,10 @@ class Grader:
         for name in a.notebooks:
             raw = read_inside(src, f"{name}.ipynb")
             if raw is None:
+                path = src / f"{name}.ipynb"
+                if path.is_file() and not path.is_symlink() and path.stat().st_size > MAX_FILE:
+                    return self._zero(student, "invalid notebook", f"{name}.ipynb is {path.stat().st_size / 2**20:.0f} MB, "
+                                      f"more than the {MAX_FILE >> 20} MB the grader reads", t0)
                 problems.append(f"{name}.ipynb is missing")
                 continue
             try:

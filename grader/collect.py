@@ -40,10 +40,10 @@ import re
 import shutil
 import sys
 import zipfile
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from .course import CourseError, check_assignment, gradebook
+from .course import CourseError, default_roster, gradebook, require
 
 COURSE = Path("course")
 MANIFEST_COLUMNS = ["student", "lms", "lms_id", "lms_name", "file", "notebook", "submitted_at", "late", "attempts", "note"]
@@ -68,12 +68,6 @@ class Upload:
     data: bytes
     late: bool = False
     order: tuple = ()        # larger is newer: (Canvas file id, resubmission number)
-
-
-@dataclass
-class Placed:
-    student: str
-    uploads: list = field(default_factory=list)
 
 
 def _name_order(filename: str) -> int:
@@ -433,15 +427,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
     args = p.parse_args(argv)
     course = args.course
     try:
-        if not course.is_dir():
-            raise CourseError(f"no course folder {course} (give --course DIR, the folder with nbgrader_config.py)")
-        check_assignment(course, args.assignment)
+        require(course, args.assignment)
         if not args.source.exists():
             raise CourseError(f"--from {args.source} does not exist")
-        roster_path = args.roster or (course / "roster.csv" if (course / "roster.csv").exists() else None)
-        if args.roster and not args.roster.is_file():
-            raise CourseError(f"--roster {args.roster} is not a file")
-        roster = Roster.load(roster_path)
+        roster = Roster.load(default_roster(course, args.roster))
         zone = dateutil.tz.gettz(args.timezone)
         if zone is None:
             raise CourseError(f"--timezone {args.timezone} is not a time zone (e.g. UTC, Europe/Zurich)")

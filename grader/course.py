@@ -6,7 +6,6 @@ and the references still match the source.
 from __future__ import annotations
 
 import contextlib
-import csv
 import datetime as dt
 import hashlib
 import os
@@ -94,6 +93,21 @@ def check_assignment(course: Path, assignment: str) -> None:
     if assignment not in found:
         raise CourseError(f"no assignment '{assignment}' in {course}"
                           + (f"; the course has: {', '.join(found)}" if found else " (no source/ folder, no gradebook)"))
+
+
+def require(course: Path, assignment: str | None = None) -> None:
+    """Raise :class:`CourseError` unless ``course`` is a folder (with ``assignment``)."""
+    if not Path(course).is_dir():
+        raise CourseError(f"no course folder {course} (give --course DIR, the folder with nbgrader_config.py)")
+    if assignment is not None:
+        check_assignment(course, assignment)
+
+
+def default_roster(course: Path, given: Path | None) -> Path | None:
+    """``--roster`` if given (it must be a file), else ``<course>/roster.csv`` if there is one."""
+    if given is not None and not Path(given).is_file():
+        raise CourseError(f"--roster {given} is not a file")
+    return given or (Path(course) / "roster.csv" if (Path(course) / "roster.csv").is_file() else None)
 
 
 # --- paths a command may write ------------------------------------------------------------------
@@ -248,8 +262,3 @@ def source_hash(course: Path, assignment: str) -> str:
         else:
             h.update(path.read_bytes())
     return h.hexdigest()[:16]
-
-
-def read_csv_rows(path: Path) -> list[dict]:
-    with open(path, newline="", encoding="utf-8-sig") as f:
-        return list(csv.DictReader(f))

@@ -34,7 +34,6 @@ written by ``snakekit grade``):
 
 from __future__ import annotations
 
-import argparse
 import csv
 import re
 import shutil
@@ -43,7 +42,7 @@ import zipfile
 from pathlib import Path
 
 from .collect import Roster, _Parser, read_manifest
-from .course import CourseError, check_assignment, check_output, config, course_id, gradebook
+from .course import CourseError, check_output, config, course_id, default_roster, gradebook, require
 
 COURSE = Path("course")
 CANVAS_PREFIX = re.compile(r"^(?P<prefix>.*?_(?:\d+|anon_[A-Za-z0-9]+)_\d+_)")
@@ -117,8 +116,7 @@ def export_main(argv: list[str] | None = None, out=None) -> int:
         if not (course / "gradebook.db").is_file():
             raise CourseError(f"no gradebook in {course} (give --course DIR; grade an assignment first)")
         check_output(path, course, suffix=".csv", what="-o", header=header)
-        roster_path = args.roster or (course / "roster.csv" if (course / "roster.csv").exists() else None)
-        roster = Roster.load(roster_path)
+        roster = Roster.load(default_roster(course, args.roster))
         if args.lms == "canvas" and roster is not None and not any(r.get("canvas_id") for r in roster.rows):
             print("snakekit export: the roster has no canvas_id column: Canvas will match students by name",
                   file=sys.stderr)
@@ -235,9 +233,7 @@ def return_main(argv: list[str] | None = None, out=None) -> int:
     args = p.parse_args(argv)
     course = args.course
     try:
-        if not course.is_dir():
-            raise CourseError(f"no course folder {course} (give --course DIR)")
-        check_assignment(course, args.assignment)
+        require(course, args.assignment)
         if args.out is not None:
             check_output(args.out, course, suffix=".zip", what="-o")
             if args.out.exists():
