@@ -218,8 +218,8 @@ def _gradebook_cells(url: str, cid: str, assignment: str) -> dict:
 
 
 def release_differences(course: Path, assignment: str) -> list[str]:
-    """How ``release/<a>`` and the gradebook differ from what ``nbgrader generate_assignment``
-    gives from ``source/<a>`` now (empty: current)."""
+    """How ``release/<a>`` (if the course has it) and the gradebook differ from what ``nbgrader
+    generate_assignment`` gives from ``source/<a>`` now (empty: current)."""
     course = Path(course)
     with tempfile.TemporaryDirectory(prefix="snakekit-release-") as tmp:
         root = Path(tmp)
@@ -228,7 +228,8 @@ def release_differences(course: Path, assignment: str) -> list[str]:
         generate(course, root, assignment)
         out = []
         fresh = sorted((root / "release" / assignment).glob("*.ipynb"))
-        for nb in fresh:
+        released = (course / "release" / assignment).is_dir()  # a grading-only copy of the course may have none
+        for nb in fresh if released else []:
             have = course / "release" / assignment / nb.name
             if not have.exists():
                 out.append(f"release/{assignment}/{nb.name} is missing")
