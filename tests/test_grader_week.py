@@ -137,6 +137,11 @@ def week(tmp_path_factory):
     steps = {"course": course, "refs": refs, "exchange": exchange, "home": home, "env": env, "ex": ex}
     steps["collect"] = snakekit("collect", ASSIGNMENT, "--course", course, "--from", canvas_zip(course, tmp / "dl.zip"),
                                 "--times", tmp / "times.csv")
+    # frank's notebook (copied in by hand) is 65 MB: more than the grader reads
+    big = nbformat.reads(notebook_bytes(course).decode(), as_version=4)
+    big.cells.append(nbformat.v4.new_markdown_cell("x" * (65 << 20)))
+    (course / "submitted" / "frank" / ASSIGNMENT).mkdir(parents=True)
+    nbformat.write(big, course / "submitted" / "frank" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb")
     grade = ["grade", ASSIGNMENT, "--course", course, "--references", refs, "--timeout", "60", "--jobs", "2"]
     steps["grade"] = snakekit(*grade)
     assert steps["grade"].returncode == 0, steps["grade"].stderr[-3000:] + steps["collect"].stdout
@@ -160,7 +165,7 @@ def test_collect_places_the_newest_attempt_and_reports_the_unknown_id(week):
     assert "not collected: nobody_999_5006_t1_sweep.ipynb: Canvas user 999 (nobody) is not in the roster" in r.stdout
     assert (course / "collected" / f"{ASSIGNMENT}-unmatched" / "nobody_999_5006_t1_sweep.ipynb").exists()
     sub = course / "submitted"
-    assert sorted(p.name for p in sub.iterdir()) == ["alice", "bob", "carol", "dave", "erin"]
+    assert sorted(p.name for p in sub.iterdir()) == ["alice", "bob", "carol", "dave", "erin", "frank"]
     # alice: the resubmission is graded, the first attempt kept beside it
     assert (sub / "alice" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb").read_bytes() == notebook_bytes(course)
     assert [p.name for p in (sub / "alice" / ASSIGNMENT / "attempts").iterdir()] == ["smithalice_101_5001_t1_sweep.ipynb"]
@@ -183,7 +188,8 @@ def test_grades_with_the_late_penalty_and_missing_notebook(week):
     # bob: 7 points, 3 hours late at 1 point per hour (the course's plugin, as nbgrader's autograde applies it)
     assert got == {"alice": ("7", "7", "0", "graded"), "bob": ("4", "7", "3", "graded"),
                    "carol": ("7", "7", "0", "graded"), "dave": ("0", "0", "0", "missing notebook"),
-                   "erin": ("7", "7", "0", "graded")}
+                   "erin": ("7", "7", "0", "graded"), "frank": ("0", "0", "0", "invalid notebook")}
+    assert rows["frank"]["detail"] == "t1_sweep.ipynb is 65 MB, more than the 64 MB the grader reads"
     assert rows["bob"]["submitted_at"] == f"{BOB:%Y-%m-%d %H:%M:%S} UTC"
     assert rows["dave"]["detail"] == "t1_sweep.ipynb is missing (no notebook in the folder)"
     assert "   4 / 7  graded  (late: 7 - 3)" in r.stdout
@@ -194,16 +200,17 @@ def test_regrade_of_one_student_keeps_the_others_and_shows_a_hand_set_score(week
     r = week["regrade"]
     assert r.returncode == 0, r.stderr[-3000:]
     rows = week["csv2"]
-    assert set(rows) == {"alice", "bob", "carol", "dave", "erin"}
+    assert set(rows) == {"alice", "bob", "carol", "dave", "erin", "frank"}
     assert (rows["alice"]["score"], rows["bob"]["score"], rows["carol"]["score"]) == ("7", "4", "6")
     assert "ex3_peak_speed_test set by hand in formgrader" in rows["carol"]["detail"]
     assert rows["dave"]["status"] == "missing notebook"  # from the previous CSV: dave was not regraded
-    assert "graded 1 submission(s)" in r.stdout and "CSV (5 student(s))" in r.stdout
+    assert "graded 1 submission(s)" in r.stdout and "CSV (6 student(s))" in r.stdout
 
 
 def test_return_releases_to_the_exchange_and_zips_for_canvas(week):
     course, r = week["course"], week["return"]
-    assert r.returncode == 0, r.stdout + r.stderr
+    assert r.returncode == 1, r.stdout + r.stderr  # frank's page: neither from the LMS nor from the exchange
+    assert "not returned: frank: neither collected from an LMS" in r.stdout
     with zipfile.ZipFile(course / f"feedback-{ASSIGNMENT}-canvas.zip") as z:
         names = sorted(z.namelist())
         # Canvas's Re-Upload matches <name>_<user id>_<file id>_ to the submission
@@ -237,6 +244,7 @@ def test_export_for_canvas_has_every_number(week):
         ["Carol Lee", "103", "", "cl3", "B", "6", "6"],
         ["Dave Kim", "104", "", "dk4", "B", "0", "0"],
         ["Erin Wu", "", "", "ew5", "B", "7", "7"],
+        ["frank", "", "", "", "", "0", "0"],  # not in the roster: Canvas reports the unknown name on import
     ]
 
 
