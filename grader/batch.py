@@ -38,11 +38,13 @@ from snakekit.errors import SnakekitError
 from snakekit.host import mujoco_gl
 
 from . import feedback, sandbox
+from .course import CourseError, course_id, db_url, generate
 from .references import REFERENCES, Reference
 from .score import ExerciseScore, read_handin, score_exercise
 
 MAX_FILE = 64 << 20  # the largest notebook or hand-in the grader reads back [bytes]
-CSV_COLUMNS = ["student", "assignment", "score", "max_score", "status", "detail"]
+CSV_COLUMNS = ["student", "assignment", "score", "max_score", "status", "raw_score", "late_penalty", "submitted_at",
+               "detail"]
 
 
 class GradingError(SnakekitError):
@@ -114,22 +116,11 @@ def read_inside(root: Path, rel: str, *, limit: int = MAX_FILE) -> bytes | None:
 
 
 def _course_id(course: Path) -> str:
-    cfg = course / "nbgrader_config.py"
-    if cfg.exists():
-        from traitlets.config.loader import PyFileConfigLoader
-
-        try:
-            c = PyFileConfigLoader(cfg.name, path=str(course)).load_config()
-            cid = c.CourseDirectory.get("course_id") if "CourseDirectory" in c else None
-            if isinstance(cid, str) and cid:
-                return cid
-        except Exception:  # noqa: BLE001 - a config we cannot read: nbgrader's default id
-            pass
-    return "default_course"
+    return course_id(course)
 
 
 def _db_url(course: Path) -> str:
-    return f"sqlite:///{course / 'gradebook.db'}"
+    return db_url(course)
 
 
 def ensure_released(course: Path, assignment: str) -> None:
@@ -145,29 +136,12 @@ def ensure_released(course: Path, assignment: str) -> None:
                 pass
     if not (course / "source" / assignment).is_dir():
         raise GradingError(f"no assignment '{assignment}' in {course}/source and none in its gradebook")
-    from nbgrader.apps import NbGraderAPI
-    from nbgrader.coursedir import CourseDirectory
-    from traitlets.config import Config
-
     print(f"snakekit grade: '{assignment}' is not in the gradebook yet; running nbgrader generate_assignment",
           file=sys.stderr)
-    cfg = Config()
-    if (course / "nbgrader_config.py").exists():  # the course's own preprocessors and ids
-        from traitlets.config.loader import PyFileConfigLoader
-
-        cfg = PyFileConfigLoader("nbgrader_config.py", path=str(course)).load_config()
-    cfg.merge(Config({"CourseDirectory": {"root": str(course), "course_id": _course_id(course),
-                                          "db_url": _db_url(course)}}))
-    os.environ["PATH"] = f"{Path(os.path.abspath(sys.executable)).parent}{os.pathsep}{os.environ.get('PATH', '')}"
-    cwd = os.getcwd()
-    os.chdir(course)  # nbgrader resolves some paths from the working folder
     try:
-        api = NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
-        out = api.generate_assignment(assignment, force=True, create=True)
-    finally:
-        os.chdir(cwd)
-    if not out.get("success"):
-        raise GradingError(f"nbgrader generate_assignment {assignment} failed:\n{out.get('error') or out.get('log')}")
+        generate(course, course, assignment)
+    except CourseError as e:
+        raise GradingError(str(e)) from e
 
 
 def load_assignment(course: Path, assignment: str, references: Path | None) -> _Assignment:
@@ -284,6 +258,7 @@ class Grader:
         self.progress = progress
         self.workroot = workroot
         self.use_sandbox = use_sandbox
+        self.late_plugin = None
         self.server = None
         self._lock = threading.Lock()
 
@@ -309,6 +284,12 @@ class Grader:
                 sandbox.check_available()
                 server = self._start_fork_server(base)  # it imports for a second while the batch is set up
             self.a = load_assignment(self.course, self.assignment, self.references)
+            from nbgrader.preprocessors import AssignLatePenalties
+
+            from .course import _on_path, config
+
+            with _on_path(self.course):  # a plugin module beside the course's config (nbgrader's late.py)
+                self.late_plugin = AssignLatePenalties(config=config(self.course))
             _template_gradebook(self.course, self.a, base / "template.db")
             self.server = self._fork_server_ready(server)  # it built matplotlib's font cache in base/mplcache
             if not (base / "mplcache").is_dir():
@@ -390,6 +371,10 @@ class Grader:
         for name in a.notebooks:
             raw = read_inside(src, f"{name}.ipynb")
             if raw is None:
+                path = src / f"{name}.ipynb"
+                if path.is_file() and not path.is_symlink() and path.stat().st_size > MAX_FILE:
+                    return self._zero(student, "invalid notebook", f"{name}.ipynb is {path.stat().st_size / 2**20:.0f} MB, "
+                                      f"more than the {MAX_FILE >> 20} MB the grader reads", t0)
                 problems.append(f"{name}.ipynb is missing")
                 continue
             try:
@@ -400,6 +385,12 @@ class Grader:
                 return self._zero(student, "invalid notebook", f"{name}.ipynb is not a valid notebook: {msg}", t0)
             nbs[name] = nb
             tampered.update(tampered_cells(nb, a, name))
+        if not nbs:  # nothing of the assignment to run: say so, and what the folder does hold
+            others = sorted(p.name for p in src.glob("*.ipynb"))
+            detail = "; ".join(problems) + (f" (the folder has {', '.join(others)}; `snakekit collect {a.name} --from "
+                                            f"<that folder>` finds a renamed notebook by its cells)" if others else
+                                            " (no notebook in the folder)")
+            return self._zero(student, "missing notebook", detail, t0)
         work = self.base / secrets.token_hex(8)
         course = work / "course"
         (course / "submitted" / student).mkdir(parents=True)
@@ -609,8 +600,52 @@ class Grader:
                 for grade in nb.grades:
                     if grade.name in by_id:
                         grade.auto_score = by_id[grade.name].score
-                        grade.needs_manual_grade = False
+                        # as nbgrader's autograde: a score a grader entered by hand stays, flagged for review
+                        grade.needs_manual_grade = grade.manual_score is not None
             gb.db.commit()
+        late_penalties(self.course, a.name, r.student, self.late_plugin)
+        fb = self.course / "feedback" / r.student / a.name
+        for name in ("timestamp.txt", "submission_secret.txt"):  # what nbgrader's release_feedback reads
+            if fb.is_dir() and (src / name).is_file() and not (src / name).is_symlink():
+                shutil.copyfile(src / name, fb / name)
+
+
+def late_penalties(course: Path, assignment: str, student: str, plugin=None) -> None:
+    """Each notebook's late penalty, as nbgrader's ``AssignLatePenalties`` (with the course's
+    ``LateSubmissionPlugin`` or ``AssignLatePenalties.plugin_class``) sets it in autograde."""
+    from nbgrader.preprocessors import AssignLatePenalties
+
+    from .course import _on_path, config
+
+    with _on_path(Path(course)), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pre = plugin or AssignLatePenalties(config=config(course))
+        with _throwaway_log(pre):
+            for nb in _notebook_names(course, assignment):
+                resources = {"nbgrader": {"notebook": nb, "assignment": assignment, "student": student,
+                                          "db_url": _db_url(course)}}
+                pre.preprocess(nbformat.v4.new_notebook(), resources)
+
+
+def _notebook_names(course: Path, assignment: str) -> list[str]:
+    from .course import gradebook
+
+    with gradebook(course) as gb:
+        return [nb.name for nb in gb.find_assignment(assignment).notebooks]
+
+
+class _throwaway_log:
+    """nbgrader's preprocessors log each penalty at warning level; the CSV shows it instead."""
+
+    def __init__(self, pre):
+        self.log = pre.log
+
+    def __enter__(self):
+        self.level = self.log.level
+        self.log.setLevel(50)
+
+    def __exit__(self, *exc):
+        self.log.setLevel(self.level)
 
 
 def _find_cell(nb, gid):
@@ -678,10 +713,52 @@ class Progress:
             print(file=self.stream, flush=True)
 
 
-def write_csv(results: list[SubmissionResult], path: Path) -> Path:
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(CSV_COLUMNS)
-        for r in results:
-            w.writerow([r.student, r.assignment, f"{r.score:g}", f"{r.max_score:g}", r.status, r.detail])
-    return path
+def class_rows(course: Path, assignment: str, results: list[SubmissionResult] = (), previous: dict | None = None) -> list[dict]:
+    """One row per student with a submission of ``assignment`` in the gradebook.
+
+    Scores are the gradebook's (so a score a grader changed in formgrader is there) minus
+    nbgrader's late penalty; the status is this run's, else the previous CSV's.
+    """
+    from .course import gradebook
+
+    now = {r.student: r for r in results}
+    previous = previous or {}
+    rows = []
+    with gradebook(course) as gb:
+        a = gb.find_assignment(assignment)
+        for sub in sorted(a.submissions, key=lambda s: s.student.id):
+            s = sub.student.id
+            raw = float(sub.score or 0.0)
+            penalty = float(sub.late_submission_penalty or 0.0)
+            if s in now:
+                status, detail = now[s].status, now[s].detail
+            else:
+                status, detail = previous.get(s, {}).get("status") or "graded", previous.get(s, {}).get("detail", "")
+            manual = [g.name for nb in sub.notebooks for g in nb.grades if g.manual_score is not None]
+            if manual and "set by hand" not in detail:
+                detail = "; ".join(x for x in (detail, f"score of {', '.join(manual)} set by hand in formgrader") if x)
+            rows.append({"student": s, "assignment": assignment, "score": f"{round(raw - penalty, 4):g}",
+                         "max_score": f"{float(a.max_score):g}", "status": status, "raw_score": f"{round(raw, 4):g}",
+                         "late_penalty": f"{round(penalty, 4):g}",
+                         "submitted_at": sub.timestamp.strftime("%Y-%m-%d %H:%M:%S UTC") if sub.timestamp else "",
+                         "detail": detail})
+    return rows
+
+
+def read_class_csv(path: Path) -> dict[str, dict]:
+    if not Path(path).is_file():
+        return {}
+    with open(path, newline="", encoding="utf-8-sig") as f:
+        return {r["student"]: r for r in csv.DictReader(f) if r.get("student")}
+
+
+def write_csv(rows: list[dict], path: Path) -> Path:
+    """Write the class CSV (to a temporary file first, then in place: never a half-written CSV)."""
+    tmp = Path(path).with_name(f".{Path(path).name}.tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, CSV_COLUMNS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: r.get(k, "") for k in CSV_COLUMNS})
+    os.replace(tmp, path)
+    return Path(path)

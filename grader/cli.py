@@ -1,9 +1,14 @@
 """``snakekit grade ASSIGNMENT``: grade a class's submissions.
 
-    snakekit grade 06_coded_sweep [--course course/] [--jobs N] [--timeout S] [--csv FILE]
+    snakekit grade 06_coded_sweep [--course course/] [--jobs N] [--timeout S] [--csv FILE] [--student S]...
+                                  [--regenerate]
+
+Before anything runs, the release and the reference are compared with the source: when they
+differ, nothing is graded (exit 2) and the command that fixes it is printed (``--regenerate``
+runs it). The gradebook is backed up to ``<course>/backups/`` before the batch writes it.
 
 Exit codes: 0 the batch completed (even if some submissions failed: see the CSV),
-1 the grader itself failed, 2 bad arguments.
+1 the grader itself failed, 2 bad arguments or a stale release/reference.
 """
 
 from __future__ import annotations
@@ -37,8 +42,59 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--memory", type=int, default=4096, help="memory limit per process [MB] (default: 4096)")
     p.add_argument("--csv", type=Path, default=None, help="write the grades here (default: <course>/grades-<assignment>.csv)")
     p.add_argument("--references", type=Path, default=REFERENCES, help="reference runs folder (default: grader/references/)")
-    p.add_argument("--student", action="append", default=None, help="grade only this student (repeatable)")
+    p.add_argument("--student", action="append", default=None,
+                   help="grade only this student (repeatable); the other rows of the CSV are kept")
+    p.add_argument("--regenerate", action="store_true", help="if the release or the reference no longer matches "
+                   "the source, regenerate them (nbgrader generate_assignment --force; grader.references) first")
     return p
+
+
+def _refs_command(args, assignment: str) -> str:
+    extra = ""
+    if args.course.resolve() != (REFERENCES.parent.parent / "course").resolve():
+        extra += f" --course {args.course}"
+    if args.references.resolve() != REFERENCES.resolve():
+        extra += f" --out {args.references}"
+    return f"python -m grader.references {assignment}{extra}"
+
+
+def check_current(args, out) -> list[str]:
+    """Problems (each with the command that fixes it) if the release, the gradebook or the
+    reference no longer match ``source/<a>``; with ``--regenerate`` they are fixed instead."""
+    from .course import backup_gradebook, generate, gradebook, release_differences
+    from .references import Reference, record
+
+    course, a = args.course, args.assignment
+    problems = []
+    if not (course / "source" / a).is_dir():
+        return problems  # graded from the gradebook alone: nothing to compare with
+    known = False
+    if (course / "gradebook.db").exists():
+        with gradebook(course) as gb:
+            known = any(x.name == a and x.notebooks for x in gb.assignments)
+    diffs = release_differences(course, a) if known else []
+    if diffs and args.regenerate:
+        backup_gradebook(course)
+        print(f"snakekit grade: the release of {a} is stale ({diffs[0]}); running nbgrader generate_assignment "
+              f"{a} --force", file=out)
+        generate(course, course, a)
+    elif diffs:
+        problems.append(f"the release of {a} no longer matches {course}/source/{a}: " + "; ".join(diffs)
+                        + f". Regenerate it: `cd {course} && nbgrader generate_assignment {a} --force` "
+                        f"(then release it again on a hub), or run `snakekit grade {a} --regenerate`")
+    ref = Reference.load(args.references / f"{a}.npz")
+    changed = ref.source_changed(course)
+    if changed and args.regenerate:
+        print(f"snakekit grade: {course}/source/{a} changed since its reference was recorded; recording it again",
+              file=out)
+        record(a, course).save(args.references / f"{a}.npz")
+    elif changed:
+        problems.append(f"{course}/source/{a} changed since {args.references}/{a}.npz was recorded from it. "
+                        f"Record it again: `{_refs_command(args, a)}`, or run `snakekit grade {a} --regenerate`")
+    elif changed is None:
+        print(f"snakekit grade: {args.references}/{a}.npz does not say which source it was recorded from; "
+              f"`{_refs_command(args, a)} --check` tells whether it is current", file=sys.stderr)
+    return problems
 
 
 def main(argv: list[str] | None = None, out=None) -> int:
@@ -46,26 +102,39 @@ def main(argv: list[str] | None = None, out=None) -> int:
     args = build_parser().parse_args(argv)
     course = args.course
     problems = []
+    from .course import CourseError, check_assignment, check_output
+
     if not course.is_dir():
         problems.append(f"no course folder {course} (give --course DIR, the folder with nbgrader_config.py)")
-    elif not (course / "source" / args.assignment).is_dir() and not (course / "gradebook.db").exists():
-        found = sorted(p.name for p in (course / "source").iterdir()) if (course / "source").is_dir() else []
-        problems.append(f"no assignment '{args.assignment}' in {course}/source"
-                        + (f"; available: {', '.join(found)}" if found else ""))
+    else:
+        try:
+            check_assignment(course, args.assignment)
+        except CourseError as e:
+            problems.append(str(e))
     if args.jobs is not None and args.jobs < 1:
         problems.append(f"--jobs must be at least 1, got {args.jobs}")
     if not args.timeout > 0:
         problems.append(f"--timeout must be > 0 s, got {args.timeout:g}")
     if args.memory < 256:
         problems.append(f"--memory must be at least 256 MB, got {args.memory}")
+    if not args.references.is_dir():
+        problems.append(f"no references folder {args.references}; give --references DIR, or record them with "
+                        f"`python -m grader.references {args.assignment}`")
+    elif not (args.references / f"{args.assignment}.npz").is_file():
+        problems.append(f"no reference {args.references}/{args.assignment}.npz: every test cell would keep the "
+                        f"kernel's own verdict. Record it: `python -m grader.references {args.assignment}`")
     csv_path = args.csv or course / f"grades-{args.assignment}.csv"
-    if args.csv and not args.csv.resolve().parent.is_dir():
-        problems.append(f"cannot write --csv {args.csv}: folder {args.csv.resolve().parent} does not exist")
+    if course.is_dir():
+        try:
+            check_output(csv_path, course, suffix=".csv", what="--csv", header="student,assignment")
+        except CourseError as e:
+            problems.append(str(e))
     if problems:
         for p in problems:
             print(f"snakekit grade: {p}", file=sys.stderr)
         return 2
-    from .batch import Grader, write_csv
+    from .batch import Grader, class_rows, read_class_csv, write_csv
+    from .course import backup_gradebook
 
     grader = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
                     memory=args.memory << 20)
@@ -79,9 +148,20 @@ def main(argv: list[str] | None = None, out=None) -> int:
         students = args.student
     if not students:
         print(f"snakekit grade: no submissions of {args.assignment} in {course}/submitted/<student>/"
-              f"{args.assignment}/; nothing to grade", file=sys.stderr)
-        write_csv([], csv_path)
-        return 0
+              f"{args.assignment}/; collect them first (`snakekit collect {args.assignment} --from DOWNLOAD` "
+              f"or `nbgrader collect {args.assignment}`)", file=sys.stderr)
+        return 2
+    try:
+        stale = check_current(args, out)
+    except SnakekitError as e:
+        print(f"snakekit grade: {e}", file=sys.stderr)
+        return 1
+    if stale:
+        for p in stale:
+            print(f"snakekit grade: {p}", file=sys.stderr)
+        print("snakekit grade: nothing was graded", file=sys.stderr)
+        return 2
+    backup = backup_gradebook(course)
     try:
         results = grader.run(students)
     except SnakekitError as e:
@@ -90,14 +170,19 @@ def main(argv: list[str] | None = None, out=None) -> int:
     except KeyboardInterrupt:
         print("snakekit grade: interrupted; grades written so far are in the gradebook", file=sys.stderr)
         return 130
-    write_csv(results, csv_path)
+    rows = class_rows(course, args.assignment, results, read_class_csv(csv_path))
+    write_csv(rows, csv_path)
     failed = [r for r in results if r.status != "graded"]
     width = max(len(r.student) for r in results)
+    by_student = {r["student"]: r for r in rows}
     for r in results:
-        print(f"{r.student:<{width}}  {r.score:6g} / {r.max_score:g}  {r.status}"
-              + (f": {r.detail}" if r.detail and r.status != "graded" else ""), file=out)
+        row = by_student.get(r.student, {})
+        late = f"  (late: {row['raw_score']} - {row['late_penalty']})" if float(row.get("late_penalty") or 0) else ""
+        print(f"{r.student:<{width}}  {row.get('score', f'{r.score:g}'):>6} / {r.max_score:g}  {r.status}"
+              + (f": {r.detail}" if r.detail and r.status != "graded" else "") + late, file=out)
     print(f"graded {len(results)} submission(s) of {args.assignment}, {len(failed)} with problems; "
-          f"CSV: {csv_path}; feedback: {course / 'feedback'}/<student>/{args.assignment}/", file=out)
+          f"CSV ({len(rows)} student(s)): {csv_path}; feedback: {course / 'feedback'}/<student>/{args.assignment}/"
+          + (f"; gradebook backed up to {backup}" if backup else ""), file=out)
     return 0
 
 

@@ -155,6 +155,14 @@ class Reference:
             raise ReferenceError(f"{path} has format {meta.get('format')}, this grader reads {FORMAT}; record it again")
         return cls(meta["assignment"], meta, arrays)
 
+    def source_changed(self, course: Path) -> bool | None:
+        """Whether ``course/source/<a>`` changed since the reference was recorded from it (None:
+        the reference predates this record and cannot tell; ``--check`` can)."""
+        from .course import source_hash
+
+        recorded = self.meta.get("source_hash")
+        return None if recorded is None else recorded != source_hash(course, self.assignment)
+
     def check_current(self, spec: SnakeSpec = SPEC) -> None:
         """Refuse a reference recorded for another robot spec."""
         if self.meta["spec_hash"] != spec_hash(spec):
@@ -268,8 +276,11 @@ def record(assignment: str, course: Path = COURSE, *, repeats: int = 3) -> Refer
         if sc.score < 1.0:
             raise ReferenceError(f"{gid}: the instructor solution scores {sc.score:g} of 1 against its own "
                                  f"reference ({sc.message}); fix the hand-in or the tolerance in OVERRIDES")
+    from .course import source_hash
+
     meta = {"format": FORMAT, "assignment": assignment, "kit_version": kit_version(), "spec_hash": spec_hash(),
-            "recorded_from": f"source/{assignment}/{assignment}.ipynb", "exercises": exercises}
+            "recorded_from": f"source/{assignment}/{assignment}.ipynb", "source_hash": source_hash(course, assignment),
+            "exercises": exercises}
     return Reference(assignment, meta, handins)
 
 

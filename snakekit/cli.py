@@ -6,7 +6,10 @@
     snakekit generate [--check]      (the URDF and MJCF from the robot spec)
     snakekit check LESSON.ipynb      (run a lesson's exercise checks: one row per exercise)
     snakekit start [...]             (check this system, then JupyterLab on the lessons: `make lab`)
+    snakekit collect ASSIGNMENT --from DOWNLOAD  (an LMS's download into the course; grader/README.md)
     snakekit grade ASSIGNMENT [...]  (grade a class's submissions; see grader/README.md)
+    snakekit return ASSIGNMENT       (the feedback pages back: hub exchange or an LMS zip)
+    snakekit export [--lms canvas|moodle]  (one row per student, for the LMS's grade import)
 
 Exit codes: 0 success, 1 the robot or a file failed (or a limit was not held), 2 bad
 arguments, 130 interrupted by Ctrl-C, 143 stopped by SIGTERM (both close the robot first).
@@ -143,10 +146,15 @@ def build_parser() -> argparse.ArgumentParser:
                                     "(snakekit emulator --help for its options)", add_help=False)
     sub.add_parser("bridge", help="serve the arm's USB serial port over TCP, for a container or another "
                                   "computer (snakekit bridge --help for its options)", add_help=False)
-    sub.add_parser("grade", help="grade a class's submissions of an assignment "
-                                 "(snakekit grade --help for its options)", add_help=False)
     sub.add_parser("start", help="check this system, then open the lessons in JupyterLab (what `make lab` runs; "
                                  "snakekit start --help for its options)", add_help=False)
+    sub.add_parser("collect", help="put an LMS's download (Canvas, Moodle, a folder) into the course "
+                                   "(snakekit collect --help)", add_help=False)
+    sub.add_parser("grade", help="grade a class's submissions of an assignment "
+                                 "(snakekit grade --help for its options)", add_help=False)
+    sub.add_parser("return", help="return the feedback pages: to the hub's exchange or as an LMS zip "
+                                  "(snakekit return --help)", add_help=False)
+    sub.add_parser("export", help="grades for Canvas's or Moodle's import (snakekit export --help)", add_help=False)
     p = sub.add_parser("generate", help="write the URDF and MJCF from the robot spec")
     p.add_argument("--check", action="store_true", help="only check that the committed files are current")
     p.set_defaults(func=_generate)
@@ -176,6 +184,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
         from .start import main as start
 
         return start(argv[1:], out)
+    if argv[:1] in (["collect"], ["return"], ["export"]):  # the TA's other steps, beside the grader
+        from grader import collect, lms
+
+        return {"collect": collect.main, "return": lms.return_main, "export": lms.export_main}[argv[0]](argv[1:], out)
     args = build_parser().parse_args(argv)
     terminated = []
 

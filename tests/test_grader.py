@@ -247,7 +247,7 @@ def test_exit_code_2_for_bad_arguments(tmp_path):
     r = run("t1_sweep", "--course", str(tmp_path / "nowhere"))
     assert r.returncode == 2 and "no course folder" in r.stderr
     r = run("no_such_lesson", "--course", str(FIXTURE))
-    assert r.returncode == 2 and "available: t1_sweep" in r.stderr
+    assert r.returncode == 2 and "the course has: t1_sweep" in r.stderr
     r = run("t1_sweep", "--course", str(FIXTURE), "--jobs", "0")
     assert r.returncode == 2 and "--jobs must be at least 1" in r.stderr
 

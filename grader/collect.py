@@ -1,0 +1,450 @@
+"""``snakekit collect ASSIGNMENT --from DOWNLOAD``: an LMS's download into nbgrader's ``submitted/``.
+
+    snakekit collect 06_coded_sweep --from submissions.zip [--roster roster.csv] [--times times.csv]
+
+Reads three layouts (a zip, or the folder it was unpacked into):
+
+* Canvas ("Download Submissions"): ``<sortablename>[_LATE]_<userid>_<fileid>_<filename>``;
+  ``LATE`` is Canvas's late mark, ``<fileid>`` grows with every upload, and a file uploaded
+  again under the same name is renamed ``<name>-1.ipynb`` by Canvas. The download carries no
+  submission times (every zip entry is stamped with the time the zip was made).
+* Moodle ("Download all submissions"): a folder ``<Full Name>_<participantid>_assignsubmission_file[_]/``
+  per student (or, without folders, ``<Full Name>_<participantid>_assignsubmission_file_<filename>``).
+  Moodle's times are in its grading worksheet ("Download grading worksheet"), which ``--times`` reads.
+* a plain folder (or zip) of ``<student>.ipynb`` or ``<student>/<anything>.ipynb``.
+
+A roster CSV (``--roster``, default ``<course>/roster.csv``) maps the LMS's ids and names to
+student ids: a column ``student`` and any of ``canvas_id``, ``moodle_id``, ``name`` (the full
+name as the LMS shows it), ``email``, ``sis_id``, ``login_id``, ``section``. A file whose
+student the roster does not name (or names twice) is reported and kept aside in
+``<course>/collected/<assignment>-unmatched/``, never guessed.
+
+Per student the newest notebook of the assignment wins (latest time, then Canvas's file id,
+then the ``-N`` resubmission number); earlier ones are kept in ``submitted/<student>/<a>/attempts/``
+and not graded. A notebook under another name that holds the assignment's cells (its grade
+ids) is found and saved under the assignment's name. The submission time becomes nbgrader's
+``timestamp.txt`` (so the gradebook's due date and the course's late-penalty plugin apply); a
+submission Canvas marks LATE without a time is stamped one second after the due date. What was
+collected is listed in ``<course>/collected/<assignment>.csv`` (``snakekit return`` reads it
+to name the LMS's feedback files). Exit codes: 0 every file placed, 1 some could not be (see
+the report), 2 bad arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime as dt
+import json
+import re
+import shutil
+import sys
+import zipfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from .course import CourseError, default_roster, gradebook, require
+
+COURSE = Path("course")
+MANIFEST_COLUMNS = ["student", "lms", "lms_id", "lms_name", "file", "notebook", "submitted_at", "late", "attempts", "note"]
+ROSTER_IDS = ("canvas_id", "moodle_id", "name", "email", "sis_id", "login_id")
+
+CANVAS = re.compile(r"^(?:(?P<name>.*?)_)??(?:(?P<late>late)_)?(?P<uid>\d+|anon_[A-Za-z0-9]+)_(?P<fid>\d+)_(?P<file>.+)$",
+                    re.I)
+MOODLE_DIR = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_[a-z]+_?$")
+MOODLE_FLAT = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_file_(?P<file>.+)$")
+RESUBMISSION = re.compile(r"^(?P<stem>.*?)-(?P<n>\d+)$")
+
+
+@dataclass(frozen=True)
+class Upload:
+    """One notebook file of the download, and what its name says."""
+
+    lms: str                 # canvas, moodle, folder
+    lms_id: str              # Canvas user id, Moodle participant id, or the file's student name
+    lms_name: str            # the name the LMS wrote (Canvas: doejane; Moodle: Jane Doe)
+    file: str                # the student's own file name
+    entry: str               # where it is in the download
+    data: bytes
+    late: bool = False
+    order: tuple = ()        # larger is newer: (Canvas file id, resubmission number)
+
+
+def _name_order(filename: str) -> int:
+    m = RESUBMISSION.match(Path(filename).stem)
+    return int(m.group("n")) if m else 0
+
+
+def classify(entry: str, data: bytes) -> Upload | None:
+    """What a file of the download is (None: not a notebook)."""
+    parts = [p for p in entry.replace("\\", "/").split("/") if p]
+    if not parts or not parts[-1].lower().endswith(".ipynb") or any(p.startswith((".", "__MACOSX")) for p in parts):
+        return None
+    base = parts[-1]
+    for folder in parts[:-1]:
+        m = MOODLE_DIR.match(folder)
+        if m:
+            return Upload("moodle", m["pid"], m["name"], base, entry, data, order=(0, _name_order(base)))
+    m = MOODLE_FLAT.match(base)
+    if m:
+        return Upload("moodle", m["pid"], m["name"], m["file"], entry, data, order=(0, _name_order(m["file"])))
+    m = CANVAS.match(base)
+    if m:
+        return Upload("canvas", m["uid"], m["name"] or "", m["file"], entry, data, late=bool(m["late"]),
+                      order=(int(m["fid"]), _name_order(m["file"])))
+    who = parts[-2] if len(parts) >= 2 else Path(base).stem
+    return Upload("folder", who, who, base, entry, data, order=(0, _name_order(base)))
+
+
+def read_download(source: Path) -> list[Upload]:
+    """Every notebook in a zip or a folder, classified."""
+    out = []
+    if source.is_dir():
+        for p in sorted(source.rglob("*")):
+            if p.is_file() and not p.is_symlink():
+                u = classify(str(p.relative_to(source)), b"")
+                if u is not None:
+                    out.append(replace(u, data=p.read_bytes()))
+        return out
+    try:
+        with zipfile.ZipFile(source) as z:
+            for info in z.infolist():
+                if not info.is_dir():
+                    u = classify(info.filename, b"")
+                    if u is not None:
+                        out.append(replace(u, data=z.read(info)))
+    except zipfile.BadZipFile as e:
+        raise CourseError(f"{source} is not a zip file ({e}); give the LMS's download or the folder it unpacked into") from e
+    return out
+
+
+# --- the roster -------------------------------------------------------------------------------
+
+
+def _norm(s: str) -> str:
+    return " ".join(str(s).split()).casefold()
+
+
+def _canvas_name(s: str) -> str:  # Canvas writes the sortable name lower-case, letters and digits only
+    return re.sub(r"[\W_]", "", str(s)).casefold()
+
+
+class Roster:
+    """Students by LMS id and name (``<course>/roster.csv``)."""
+
+    def __init__(self, rows: list[dict], path: Path | None = None):
+        self.rows, self.path = rows, path
+        self.students = {r["student"] for r in rows}
+
+    @classmethod
+    def load(cls, path: Path | None) -> "Roster | None":
+        if path is None:
+            return None
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            reader = csv.DictReader(f)
+            cols = [c.strip() for c in reader.fieldnames or []]
+            if "student" not in cols:
+                raise CourseError(f"roster {path} has no 'student' column (its columns: {', '.join(cols) or 'none'}); "
+                                  f"give student and any of {', '.join(ROSTER_IDS)}")
+            rows = [{k.strip(): (v or "").strip() for k, v in r.items() if k} for r in reader]
+        rows = [r for r in rows if r.get("student")]
+        return cls(rows, path)
+
+    def find(self, column: str, value: str, *, norm=_norm) -> list[str]:
+        return sorted({r["student"] for r in self.rows if r.get(column) and norm(r[column]) == norm(value)})
+
+    def row(self, student: str) -> dict:
+        return next((r for r in self.rows if r["student"] == student), {"student": student})
+
+    def who(self, u: Upload) -> tuple[str | None, str]:
+        """The student id of an upload, or None and why not."""
+        if u.lms == "canvas":
+            found = self.find("canvas_id", u.lms_id)
+            if not found and u.lms_name:
+                found = self.find("name", u.lms_name, norm=_canvas_name)
+                if not found:  # Canvas writes "last, first" as lastfirst: the roster's "First Last" reversed
+                    found = sorted({r["student"] for r in self.rows if r.get("name") and
+                                    _canvas_name(" ".join(r["name"].split()[-1:] + r["name"].split()[:-1])) == _canvas_name(u.lms_name)})
+            what = f"Canvas user {u.lms_id} ({u.lms_name or 'anonymous'})"
+        elif u.lms == "moodle":
+            found = self.find("moodle_id", u.lms_id) or self.find("name", u.lms_name)
+            what = f"Moodle participant {u.lms_id} ({u.lms_name})"
+        else:
+            found = [u.lms_id] if u.lms_id in self.students else self.find("login_id", u.lms_id) or self.find("email", u.lms_id)
+            what = f"'{u.lms_id}'"
+        if len(found) == 1:
+            return found[0], ""
+        if not found:
+            return None, f"{what} is not in the roster {self.path}"
+        return None, f"{what} matches {len(found)} students of the roster ({', '.join(found)}); not guessed"
+
+
+def no_roster_who(u: Upload) -> tuple[str | None, str]:
+    if u.lms == "folder" and re.fullmatch(r"[A-Za-z0-9][\w.@-]*", u.lms_id):
+        return u.lms_id, ""
+    what = {"canvas": f"Canvas user {u.lms_id}", "moodle": f"Moodle participant {u.lms_id} ({u.lms_name})"}.get(u.lms, repr(u.lms_id))
+    return None, f"{what}: no roster to map it to a student (give --roster, or write {COURSE}/roster.csv)"
+
+
+# --- submission times ---------------------------------------------------------------------------
+
+TIME_COLUMNS = ("submitted_at", "time", "timestamp", "Last modified (submission)")
+ID_COLUMNS = ("student", "canvas_id", "moodle_id", "Identifier", "email", "Email address", "name", "Full name")
+
+
+def read_times(path: Path, zone: dt.tzinfo) -> list[tuple[str, str, dt.datetime]]:
+    """``(column, value, time)`` rows of a times CSV (Moodle's grading worksheet reads as is)."""
+    import dateutil.parser
+
+    with open(path, newline="", encoding="utf-8-sig") as f:
+        reader = csv.DictReader(f)
+        cols = [c.strip() for c in reader.fieldnames or []]
+        tcol = next((c for c in TIME_COLUMNS if c in cols), None)
+        icol = next((c for c in ID_COLUMNS if c in cols), None)
+        if tcol is None or icol is None:
+            raise CourseError(f"times file {path} needs a time column ({', '.join(TIME_COLUMNS)}) and an id column "
+                              f"({', '.join(ID_COLUMNS)}); it has {', '.join(cols)}")
+        out = []
+        for r in reader:
+            r = {(k or "").strip(): (v or "").strip() for k, v in r.items()}
+            raw = r.get(tcol, "")
+            if not raw or raw in ("-", "No submission"):
+                continue
+            try:
+                t = dateutil.parser.parse(raw)
+            except (ValueError, OverflowError) as e:
+                raise CourseError(f"times file {path}: cannot read the time {raw!r} ({e})") from e
+            if t.tzinfo is None:
+                t = t.replace(tzinfo=zone)
+            value = r.get(icol, "")
+            if icol == "Identifier":  # Moodle: "Participant 12345"
+                value = value.split()[-1] if value else value
+            out.append((icol, value, t.astimezone(dt.timezone.utc)))
+        return out
+
+
+def _time_for(student: str, uploads: list[Upload], roster: Roster | None, times) -> dt.datetime | None:
+    row = roster.row(student) if roster else {"student": student}
+    keys = {("student", student)}
+    for u in uploads:
+        keys |= {("canvas_id", u.lms_id), ("moodle_id", u.lms_id), ("Identifier", u.lms_id),
+                 ("name", _norm(u.lms_name)), ("Full name", _norm(u.lms_name))}
+    for col in ("email", "name", "moodle_id", "canvas_id"):
+        if row.get(col):
+            keys |= {(col, _norm(row[col]) if col == "name" else row[col])}
+    keys |= {("Email address", row.get("email", "")), ("Full name", _norm(row.get("name", "")))}
+    found = [t for col, value, t in times if (col, _norm(value) if "name" in col.lower() else value) in keys and value]
+    return max(found) if found else None
+
+
+# --- matching notebooks to the assignment -----------------------------------------------------
+
+
+def assignment_cells(course: Path, assignment: str) -> dict[str, set[str]]:
+    """Grade ids of the assignment's graded and answer cells, per notebook (from the gradebook)."""
+    from nbgrader.api import MissingEntry
+
+    from .batch import ensure_released
+
+    ensure_released(course, assignment)
+    with gradebook(course) as gb:
+        try:
+            a = gb.find_assignment(assignment)
+        except MissingEntry as e:
+            raise CourseError(f"'{assignment}' is not in the gradebook; run nbgrader generate_assignment {assignment}") from e
+        return {nb.name: {c.name for c in nb.grade_cells} | {c.name for c in nb.solution_cells} for nb in a.notebooks}
+
+
+def grade_ids(data: bytes) -> set[str] | None:
+    try:
+        nb = json.loads(data.decode("utf-8"))
+        return {c.get("metadata", {}).get("nbgrader", {}).get("grade_id") for c in nb.get("cells", [])} - {None}
+    except (ValueError, UnicodeDecodeError, AttributeError):
+        return None
+
+
+def which_notebook(u: Upload, cells: dict[str, set[str]]) -> str | None:
+    """The assignment notebook an upload is (by name, or else by its cells), or None."""
+    stem = Path(u.file).stem
+    m = RESUBMISSION.match(stem)
+    if stem in cells:
+        return stem
+    if m and m["stem"] in cells:
+        return m["stem"]
+    ids = grade_ids(u.data) or set()
+    best = max(cells, key=lambda nb: len(ids & cells[nb]), default=None)
+    return best if best is not None and len(ids & cells[best]) * 2 >= max(len(cells[best]), 1) else None
+
+
+# --- collecting ---------------------------------------------------------------------------------
+
+
+def _stamp(t: dt.datetime) -> str:
+    return t.astimezone(dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S.%f UTC")
+
+
+def collect(course: Path, assignment: str, source: Path, *, roster: Roster | None = None, times=(), out=None):
+    """Place the download's notebooks in ``submitted/``; returns (collected rows, problems)."""
+    out = out or sys.stdout
+    cells = assignment_cells(course, assignment)
+    with gradebook(course) as gb:
+        due = gb.find_assignment(assignment).duedate
+    uploads = read_download(source)
+    if not uploads:
+        raise CourseError(f"{source} holds no notebook (.ipynb)")
+    by_student: dict[str, list[Upload]] = {}
+    problems, unmatched = [], []
+    for u in uploads:
+        student, why = roster.who(u) if roster else no_roster_who(u)
+        if student is None:
+            problems.append(f"{u.entry}: {why}")
+            unmatched.append(u)
+        else:
+            by_student.setdefault(student, []).append(u)
+    rows = []
+    for student, ups in sorted(by_student.items()):
+        rows.append(_place(course, assignment, student, ups, cells, due, _time_for(student, ups, roster, times)))
+    if unmatched:
+        aside = course / "collected" / f"{assignment}-unmatched"
+        aside.mkdir(parents=True, exist_ok=True)
+        for u in unmatched:
+            (aside / Path(u.entry).name).write_bytes(u.data)
+    _write_manifest(course, assignment, rows)
+    width = max([len(r["student"]) for r in rows] + [7])
+    for r in rows:
+        print(f"{r['student']:<{width}}  {r['notebook'] or 'missing notebook':<24} "
+              f"{r['submitted_at'] or '-':<27} {'late' if r['late'] == 'yes' else '':<4} {r['note']}".rstrip(), file=out)
+    for p in problems:
+        print(f"not collected: {p}", file=out)
+    print(f"collected {len(rows)} student(s) of {assignment} into {course}/submitted/ from {source}"
+          + (f"; {len(unmatched)} file(s) not placed, kept in {course}/collected/{assignment}-unmatched/" if unmatched else ""),
+          file=out)
+    return rows, problems
+
+
+def _place(course, assignment, student, ups, cells, due, when) -> dict:
+    folder = course / "submitted" / student / assignment
+    attempts = folder / "attempts"
+    ours = [(u, which_notebook(u, cells)) for u in ups]
+    ours.sort(key=lambda x: x[0].order)
+    newest = {}
+    for u, nb in ours:
+        if nb is not None:
+            newest[nb] = u
+    notes = []
+    folder.mkdir(parents=True, exist_ok=True)
+    for nb, u in newest.items():
+        dest = folder / f"{nb}.ipynb"
+        if dest.exists() and dest.read_bytes() != u.data:  # collected before: the earlier one is kept, not graded
+            _keep(dest, attempts, "previously-collected")
+            if (folder / "timestamp.txt").exists():
+                _keep(folder / "timestamp.txt", attempts, "previously-collected")
+        dest.write_bytes(u.data)
+        if Path(u.file).name != dest.name:
+            notes.append(f"{u.file} saved as {dest.name}")
+    older = [u for u, nb in ours if nb is None or newest.get(nb) is not u]
+    for u in older:
+        attempts.mkdir(exist_ok=True)
+        (attempts / Path(u.entry).name).write_bytes(u.data)
+    if older:
+        notes.append(f"{len(older)} earlier or other file(s) kept in attempts/, not graded")
+    late = any(u.late for u in newest.values())
+    stamp = None
+    if when is not None:
+        stamp = when
+    elif late and due is not None:
+        stamp = due.replace(tzinfo=dt.timezone.utc) + dt.timedelta(seconds=1)
+        notes.append("marked late by the LMS, which gives no time: stamped 1 s after the due date")
+    elif late:
+        notes.append("marked late by the LMS, but the assignment has no due date in nbgrader_config.py")
+    if stamp is not None:
+        (folder / "timestamp.txt").write_text(_stamp(stamp))
+    elif (folder / "timestamp.txt").exists() and newest:
+        _keep(folder / "timestamp.txt", attempts, "previously-collected")
+    u0 = next(iter(newest.values()), ups[-1])
+    is_late = late or (stamp is not None and due is not None and stamp > due.replace(tzinfo=dt.timezone.utc))
+    return {"student": student, "lms": u0.lms, "lms_id": u0.lms_id, "lms_name": u0.lms_name, "file": Path(u0.entry).name,
+            "notebook": ", ".join(f"{nb}.ipynb" for nb in newest), "submitted_at": _stamp(stamp) if stamp else "",
+            "late": "yes" if is_late else "", "attempts": str(len(older)),
+            "note": "; ".join(notes) if newest else "missing notebook: no notebook of the assignment (kept in attempts/)"}
+
+
+def _keep(path: Path, attempts: Path, tag: str) -> None:
+    attempts.mkdir(exist_ok=True)
+    n = 1
+    while (attempts / f"{tag}-{n}-{path.name}").exists():
+        n += 1
+    shutil.move(str(path), attempts / f"{tag}-{n}-{path.name}")
+
+
+def _write_manifest(course: Path, assignment: str, rows: list[dict]) -> Path:
+    path = course / "collected" / f"{assignment}.csv"
+    path.parent.mkdir(exist_ok=True)
+    old = {}
+    if path.exists():  # a later download of a few students keeps the others' rows
+        with open(path, newline="") as f:
+            old = {r["student"]: r for r in csv.DictReader(f)}
+    old.update({r["student"]: r for r in rows})
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, MANIFEST_COLUMNS)
+        w.writeheader()
+        for s in sorted(old):
+            w.writerow({k: old[s].get(k, "") for k in MANIFEST_COLUMNS})
+    return path
+
+
+def read_manifest(course: Path, assignment: str) -> dict[str, dict]:
+    path = Path(course) / "collected" / f"{assignment}.csv"
+    if not path.exists():
+        return {}
+    with open(path, newline="") as f:
+        return {r["student"]: r for r in csv.DictReader(f)}
+
+
+# --- the command ----------------------------------------------------------------------------------
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        print(f"{self.prog}: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def main(argv: list[str] | None = None, out=None) -> int:
+    import dateutil.tz
+
+    p = _Parser(prog="snakekit collect", description="Put an LMS's download (Canvas, Moodle, or a folder of "
+                "<student>.ipynb) into the course's submitted/ folder, the newest attempt of each student.")
+    p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
+    p.add_argument("--from", dest="source", type=Path, required=True, help="the download: a zip or a folder")
+    p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
+    p.add_argument("--roster", type=Path, default=None, help="CSV: student and canvas_id / moodle_id / name ... "
+                   "(default: <course>/roster.csv if it exists)")
+    p.add_argument("--times", type=Path, default=None, help="CSV of submission times (Moodle's grading worksheet, "
+                   "or columns student/canvas_id/moodle_id and submitted_at)")
+    p.add_argument("--timezone", default="UTC", help="zone of times without one in --times (default: UTC)")
+    args = p.parse_args(argv)
+    course = args.course
+    try:
+        require(course, args.assignment)
+        if not args.source.exists():
+            raise CourseError(f"--from {args.source} does not exist")
+        roster = Roster.load(default_roster(course, args.roster))
+        zone = dateutil.tz.gettz(args.timezone)
+        if zone is None:
+            raise CourseError(f"--timezone {args.timezone} is not a time zone (e.g. UTC, Europe/Zurich)")
+        times = read_times(args.times, zone) if args.times else []
+    except (CourseError, OSError) as e:
+        print(f"snakekit collect: {e}", file=sys.stderr)
+        return 2
+    try:
+        _, problems = collect(course.resolve(), args.assignment, args.source, roster=roster, times=times, out=out)
+    except CourseError as e:
+        print(f"snakekit collect: {e}", file=sys.stderr)
+        return 2
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

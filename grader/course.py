@@ -1,0 +1,265 @@
+"""The course folder as the TA's commands share it: its configuration, its gradebook (backed
+up before a batch writes it), the paths no command may write over, and whether the release
+and the references still match the source.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import hashlib
+import os
+import shutil
+import sqlite3
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+
+from snakekit.errors import SnakekitError
+
+#: Backups of the gradebook kept in ``<course>/backups/`` (the oldest are removed).
+BACKUPS_KEPT = 20
+
+#: Folders of the course that hold what no command may write over (the output of a command
+#: never goes there): the instructor's sources, the release, the students' submissions.
+PROTECTED = ("source", "release", "submitted", "autograded", "feedback", "exchange", "backups")
+
+
+class CourseError(SnakekitError, ValueError):
+    """A command's arguments name something the course does not have, or a path it must not write."""
+
+
+def config(course: Path):
+    """The course's ``nbgrader_config.py`` as a traitlets Config (empty if there is none)."""
+    from traitlets.config import Config
+    from traitlets.config.loader import PyFileConfigLoader
+
+    course = Path(course)
+    if not (course / "nbgrader_config.py").exists():
+        return Config()
+    with _on_path(course):  # a late-penalty plugin may live beside the config (nbgrader's docs: late.py)
+        return PyFileConfigLoader("nbgrader_config.py", path=str(course)).load_config()
+
+
+@contextlib.contextmanager
+def _on_path(folder: Path):
+    sys.path.insert(0, str(folder))
+    try:
+        yield
+    finally:
+        with contextlib.suppress(ValueError):
+            sys.path.remove(str(folder))
+
+
+def course_id(course: Path) -> str:
+    try:
+        cfg = config(course)
+        cid = cfg.CourseDirectory.get("course_id") if "CourseDirectory" in cfg else None
+        return cid if isinstance(cid, str) and cid else "default_course"
+    except Exception:  # noqa: BLE001 - a config we cannot read: nbgrader's default id
+        return "default_course"
+
+
+def db_url(course: Path) -> str:
+    return f"sqlite:///{Path(course) / 'gradebook.db'}"
+
+
+@contextlib.contextmanager
+def gradebook(course: Path):
+    """nbgrader's Gradebook of the course (its SQLAlchemy session warnings silenced)."""
+    from nbgrader.api import Gradebook
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with Gradebook(db_url(course), course_id(course)) as gb:
+            yield gb
+
+
+def assignments(course: Path) -> list[str]:
+    """Assignments the course has: in ``source/`` or in the gradebook."""
+    course = Path(course)
+    names = {p.name for p in (course / "source").iterdir() if p.is_dir() and not p.name.startswith(".")} \
+        if (course / "source").is_dir() else set()
+    if (course / "gradebook.db").exists():
+        with contextlib.suppress(Exception), gradebook(course) as gb:
+            names |= {a.name for a in gb.assignments if a.notebooks}
+    return sorted(names)
+
+
+def check_assignment(course: Path, assignment: str) -> None:
+    """Raise :class:`CourseError` naming the assignments that exist if ``assignment`` is not one."""
+    found = assignments(course)
+    if assignment not in found:
+        raise CourseError(f"no assignment '{assignment}' in {course}"
+                          + (f"; the course has: {', '.join(found)}" if found else " (no source/ folder, no gradebook)"))
+
+
+def require(course: Path, assignment: str | None = None) -> None:
+    """Raise :class:`CourseError` unless ``course`` is a folder (with ``assignment``)."""
+    if not Path(course).is_dir():
+        raise CourseError(f"no course folder {course} (give --course DIR, the folder with nbgrader_config.py)")
+    if assignment is not None:
+        check_assignment(course, assignment)
+
+
+def default_roster(course: Path, given: Path | None) -> Path | None:
+    """``--roster`` if given (it must be a file), else ``<course>/roster.csv`` if there is one."""
+    if given is not None and not Path(given).is_file():
+        raise CourseError(f"--roster {given} is not a file")
+    return given or (Path(course) / "roster.csv" if (Path(course) / "roster.csv").is_file() else None)
+
+
+# --- paths a command may write ------------------------------------------------------------------
+
+
+def check_output(path: Path, course: Path, *, suffix: str, what: str, header: str | None = None) -> Path:
+    """Refuse an output path that would write over something of the course's.
+
+    ``path`` must end in ``suffix``, lie in an existing folder, not be a folder, not be the
+    gradebook or inside a folder of :data:`PROTECTED`, and if it exists it must be a file this
+    command wrote before (its first line starts with ``header``).
+    """
+    path = Path(path)
+    resolved = path.resolve()
+    root = Path(course).resolve()
+    if resolved.is_dir():
+        raise CourseError(f"{what} {path} is a folder; give a file name ending in {suffix}")
+    if resolved == root / "gradebook.db" or resolved.name.endswith((".db", ".sqlite", ".ipynb")):
+        raise CourseError(f"{what} {path} would write over a {'gradebook' if resolved.suffix != '.ipynb' else 'notebook'}; "
+                          f"give a file name ending in {suffix}")
+    if resolved.suffix.lower() != suffix:
+        raise CourseError(f"{what} {path} must end in {suffix}")
+    for name in PROTECTED:
+        if resolved.is_relative_to(root / name):
+            raise CourseError(f"{what} {path} is inside {course}/{name}/, which no command writes; "
+                              "write it elsewhere (the course folder itself is fine)")
+    if not resolved.parent.is_dir():
+        raise CourseError(f"cannot write {what} {path}: folder {resolved.parent} does not exist")
+    if resolved.exists() and header is not None:
+        with open(resolved, "rb") as f:
+            first = f.readline(4096).decode("utf-8", "replace").lstrip("\ufeff")
+        if not first.startswith(header):
+            raise CourseError(f"{what} {path} exists and is not one this command wrote (its first line is "
+                              f"{first.strip()[:80]!r}); give another file name")
+    return path
+
+
+# --- the gradebook's backups ------------------------------------------------------------------
+
+
+def backup_gradebook(course: Path, keep: int = BACKUPS_KEPT) -> Path | None:
+    """Copy ``gradebook.db`` to ``<course>/backups/gradebook-<UTC time>.db`` (SQLite's online
+    backup: a consistent copy even while formgrader has it open); keep the newest ``keep``."""
+    src = Path(course) / "gradebook.db"
+    if not src.exists():
+        return None
+    folder = Path(course) / "backups"
+    folder.mkdir(exist_ok=True)
+    stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%d-%H%M%S-%f")
+    dest = folder / f"gradebook-{stamp}.db"
+    with contextlib.closing(sqlite3.connect(src)) as s, contextlib.closing(sqlite3.connect(dest)) as d:
+        s.backup(d)
+    for old in sorted(folder.glob("gradebook-*.db"))[:-keep]:
+        old.unlink()
+    return dest
+
+
+# --- is the release (and the gradebook) what the source gives now? ---------------------------
+
+
+def generate(config_dir: Path, root: Path, assignment: str, *, db: str | None = None) -> None:
+    """``nbgrader generate_assignment`` of ``root/source/<assignment>`` with the course's own
+    configuration (read from ``config_dir``), its gradebook ``db`` (default: ``root``'s)."""
+    from nbgrader.apps import NbGraderAPI
+    from nbgrader.coursedir import CourseDirectory
+    from traitlets.config import Config
+
+    cfg = config(config_dir)
+    cfg.merge(Config({"CourseDirectory": {"root": str(root), "course_id": course_id(config_dir),
+                                          "db_url": db or db_url(root)}}))
+    os.environ["PATH"] = f"{Path(os.path.abspath(sys.executable)).parent}{os.pathsep}{os.environ.get('PATH', '')}"
+    cwd = os.getcwd()
+    os.chdir(root)  # nbgrader resolves some paths from the working folder
+    try:
+        with _on_path(Path(config_dir).resolve()):
+            api = NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
+            out = api.generate_assignment(assignment, force=True, create=True)
+    finally:
+        os.chdir(cwd)
+    if not out.get("success"):
+        raise CourseError(f"nbgrader generate_assignment {assignment} failed:\n{out.get('error') or out.get('log')}")
+
+
+def _cells(nb_path: Path) -> list:
+    import nbformat
+
+    nb = nbformat.read(nb_path, as_version=4)
+    return [(c.cell_type, c.source, dict(c.metadata.get("nbgrader", {}))) for c in nb.cells]
+
+
+def _gradebook_cells(url: str, cid: str, assignment: str) -> dict:
+    from nbgrader.api import Gradebook, MissingEntry
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with Gradebook(url, cid) as gb:
+            try:
+                a = gb.find_assignment(assignment)
+            except MissingEntry:
+                return {}
+            out = {}
+            for nb in a.notebooks:
+                for c in nb.source_cells:
+                    out[(nb.name, c.name)] = (c.cell_type, c.source, bool(c.locked))
+                for g in nb.grade_cells:
+                    out[(nb.name, g.name, "points")] = float(g.max_score)
+            return out
+
+
+def release_differences(course: Path, assignment: str) -> list[str]:
+    """How ``release/<a>`` (if the course has it) and the gradebook differ from what ``nbgrader
+    generate_assignment`` gives from ``source/<a>`` now (empty: current)."""
+    course = Path(course)
+    with tempfile.TemporaryDirectory(prefix="snakekit-release-") as tmp:
+        root = Path(tmp)
+        shutil.copytree(course / "source" / assignment, root / "source" / assignment,
+                        ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
+        generate(course, root, assignment)
+        out = []
+        fresh = sorted((root / "release" / assignment).glob("*.ipynb"))
+        released = (course / "release" / assignment).is_dir()  # a grading-only copy of the course may have none
+        for nb in fresh if released else []:
+            have = course / "release" / assignment / nb.name
+            if not have.exists():
+                out.append(f"release/{assignment}/{nb.name} is missing")
+            elif _cells(have) != _cells(nb):
+                out.append(f"release/{assignment}/{nb.name} differs from what the source gives now")
+        old = _gradebook_cells(db_url(course), course_id(course), assignment)
+        new = _gradebook_cells(db_url(root), course_id(course), assignment)
+        changed = sorted({k[1] for k in set(old) | set(new) if old.get(k) != new.get(k)})
+        if changed:
+            out.append(f"the gradebook's cells differ from the source's ({', '.join(changed[:6])}"
+                       + (", ..." if len(changed) > 6 else "") + "): grading would run the old tests")
+    return out
+
+
+# --- the source a reference was recorded from -----------------------------------------------
+
+
+def source_hash(course: Path, assignment: str) -> str:
+    """A hash of what a reference depends on in ``source/<a>``: every code cell of its
+    notebooks and every other file (markdown and outputs do not change a hand-in)."""
+    import nbformat
+
+    folder = Path(course) / "source" / assignment
+    h = hashlib.sha256()
+    for path in sorted(p for p in folder.rglob("*") if p.is_file() and ".ipynb_checkpoints" not in p.parts):
+        h.update(str(path.relative_to(folder)).encode() + b"\0")
+        if path.suffix == ".ipynb":
+            for c in nbformat.read(path, as_version=4).cells:
+                if c.cell_type == "code":
+                    h.update(c.source.encode() + b"\0")
+        else:
+            h.update(path.read_bytes())
+    return h.hexdigest()[:16]
