@@ -22,8 +22,9 @@ from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf  # noqa: E402
 from .progress import LONG_RUN, TextProgress  # noqa: E402
 from .robot import JointState, Robot, Run  # noqa: E402
 from .trajectory import Trajectory  # noqa: E402
-from .validate import as_configuration, check_limits, number  # noqa: E402
-from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner  # noqa: E402
+from .validate import MAX_DURATION, as_configuration, check_limits, number  # noqa: E402
+from .profile_planner import (DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner,  # noqa: E402
+                              check_profile)
 
 
 # qpos, qvel and act first, in that order (rows of rollout's state: time, qpos, qvel, act, ...)
@@ -44,9 +45,10 @@ class SimRobot(Robot):
         realtime: pace the simulation to the wall clock (for the viewer and demos);
             otherwise run as fast as possible (tests and grading).
         q0: initial joint angles [rad] (default: home).
-        profile_velocity: Profile Velocity register value (0.229 rev/min units; 0 = step).
-        profile_acceleration: Profile Acceleration register value (214.577 rev/min^2 units;
-            0 = rectangular).
+        profile_velocity: Profile Velocity register value (0.229 rev/min units), 1..62: the
+            driver's range (:func:`snakekit.profile_planner.check_profile`).
+        profile_acceleration: Profile Acceleration register value (214.577 rev/min^2 units),
+            1..32767.
 
     Each physics step (1 ms) the actuator's control is the profile's mean velocity over the
     step, and MuJoCo integrates it into the reference position (the actuator's state). In
@@ -61,6 +63,7 @@ class SimRobot(Robot):
                  profile_velocity: int = DEFAULT_PROFILE_VELOCITY,
                  profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION):
         super().__init__(spec)
+        profile_velocity, profile_acceleration = check_profile(profile_velocity, profile_acceleration, spec)
         self.realtime = bool(realtime)
         self.model = load_model(spec)
         self.data = mujoco.MjData(self.model)
@@ -213,7 +216,7 @@ class SimRobot(Robot):
 
     def step(self, duration: float) -> None:
         """Let the simulation run for ``duration`` [s] holding the present goals."""
-        duration = number(duration, "duration", "s", at_least=0,
+        duration = number(duration, "duration", "s", at_least=0, at_most=MAX_DURATION,
                           hint="It is how long the simulation runs holding the present goals")
         self._check_open()
         if self.realtime:

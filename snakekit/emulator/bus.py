@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import ConfigurationError, InputTypeError
 from ..model import SPEC, SnakeSpec
+from ..validate import as_configuration
 from . import protocol as p
 from .control_table import FIRMWARE_VERSION_ADDRESS, MODEL_NUMBER_ADDRESS, field_at, to_signed
 from .faults import NO_FAULTS, Faults
@@ -102,7 +103,7 @@ class BusEmulator:
             raise ConfigurationError(f"ids must be {spec.n_joints} distinct servo ids in 0..252, got {ids}")
         if baudrate not in BAUD_RATES:
             raise ConfigurationError(f"an MX-28 runs at one of {', '.join(map(str, BAUD_RATES))} baud, got {baudrate}")
-        q0 = spec.home if q0 is None else np.asarray(q0, dtype=float)
+        q0 = spec.home if q0 is None else as_configuration(q0, spec, "q0")
         if isinstance(motion, str):
             if motion not in MOTION_SOURCES:
                 raise ConfigurationError(f"unknown motion source '{motion}'; choose one of {', '.join(MOTION_SOURCES)}")
