@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -104,16 +105,22 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
                                      on_cell_start=lambda cell, cell_index: running.append(cell_index),
                                      resources={"metadata": {"path": str(path.resolve().parent)}})
     stopped = ""
-    try:
-        client.execute()
-    except CellTimeoutError:
-        stopped = (f"cell {running[-1] + 1} ran longer than {timeout:g} s and was stopped (an endless loop, or a "
-                   "long run: run it in JupyterLab to see, or give more time with --timeout)")
-    except DeadKernelError:
-        stopped = (f"the Python kernel died while running cell {running[-1] + 1} (the process ended: os._exit, "
-                   "a crash in a compiled library, or out of memory); restart the kernel in JupyterLab and run "
-                   "that cell to see")
-    last = running[-1] if stopped else len(nb.cells)
+    # The kernel's own log (its start-up notes, or a traceback when it is shut down in the middle of
+    # a cell) is not the student's output: it goes to a file, and its last line is shown if it dies.
+    with tempfile.TemporaryFile("w+") as log:
+        try:
+            client.execute(stderr=log)
+        except CellTimeoutError:
+            stopped = (f"cell {running[-1] + 1} ran longer than {timeout:g} s and was stopped (an endless loop, "
+                       "or a long run: run it in JupyterLab to see, or give more time with --timeout)")
+        except DeadKernelError:
+            log.seek(0)
+            said = [line.strip() for line in log if line.strip() and "WARNING" not in line]
+            where = f"while running cell {running[-1] + 1}" if running else "before the first cell"
+            stopped = (f"the Python kernel died {where} (the process ended: os._exit, a crash in a compiled "
+                       "library, or out of memory)" + (f"; its last words: {said[-1][:200]}" if said else "")
+                       + "; restart the kernel in JupyterLab and run that cell to see")
+    last = (running[-1] if running else 0) if stopped else len(nb.cells)
     rows, got, total, failed = [], 0, 0, 0
     others = []
     for index, cell in enumerate(nb.cells):

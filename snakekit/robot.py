@@ -26,8 +26,8 @@ from .errors import BackendError, FileFormatError, InputTypeError, LimitError, S
 from .model import SPEC, SnakeSpec
 from .progress import LONG_RUN, TextProgress
 from .trajectory import Trajectory, joint_trajectory
-from .validate import (MAX_DURATION, check_limits, frozen, number, options_of, readable_file, sample_count, too_long,
-                       write_failed, writable_file)
+from .validate import (MAX_DURATION, check_limits, check_rate, frozen, number, options_of, readable_file, sample_count,
+                       too_long, write_failed, writable_file)
 
 
 @dataclass(frozen=True, eq=False)
@@ -316,8 +316,8 @@ class Robot(ABC):
     @staticmethod
     def _record_times(trajectory: Trajectory, record_rate: float, settle: float) -> np.ndarray:
         """When the state is recorded during a run, from the run's start [s]."""
-        record_rate = number(record_rate, "record_rate", "Hz", above=0, at_most=1e4,
-                             hint="It is how often the state is recorded during the run (default: 100)")
+        record_rate = check_rate(record_rate, "record_rate",
+                                 "It is how often the state is recorded during the run (default: 100)")
         settle = number(settle, "settle", "s", at_least=0, at_most=3600,
                         hint="It is how long recording goes on after the last goal (default: 0.5)")
         end = trajectory.duration + settle
