@@ -52,12 +52,20 @@ def max_profile_velocity(spec: SnakeSpec = SPEC) -> int:
     return math.floor(spec.velocity_limit / VELOCITY_UNIT + 1e-9)
 
 
-def check_profile(profile_velocity, profile_acceleration, spec: SnakeSpec = SPEC) -> tuple[int, int]:
+#: The most a servo's Velocity Limit register (and so its Profile Velocity) can hold.
+FIRMWARE_MAX_PROFILE_VELOCITY = 1023
+
+
+def check_profile(profile_velocity, profile_acceleration, spec: SnakeSpec = SPEC, *,
+                  firmware_range: bool = False) -> tuple[int, int]:
     """The Profile Velocity and Acceleration register values the kit lets a servo use.
 
     Velocity 1..:func:`max_profile_velocity` (0 would mean no profile: the servo steps to each
-    goal at full speed, 5.6 rad/s on the simulated arm), acceleration 1..32767. The simulator
-    and the driver both check with this, so neither runs what the other would refuse.
+    goal at full speed, and a 1 rad step peaks at 5.5 rad/s on the simulated arm), acceleration
+    1..32767. The simulator and the driver both check with this, so neither runs what the
+    other would refuse. With
+    ``firmware_range`` (the simulator's ``any_profile``, to show what such values do), every
+    value the firmware takes: velocity 0..1023, acceleration 0..32767.
 
     Raises:
         ConfigurationError: a value outside those ranges; InputTypeError: not a whole number.
@@ -67,17 +75,17 @@ def check_profile(profile_velocity, profile_acceleration, spec: SnakeSpec = SPEC
     ...
     snakekit.errors.ConfigurationError: profile_velocity 0 would let the servos move at full speed (0 = no profile), over the 1.5 rad/s joint speed limit; use 1..62 (0.229 rev/min units)
     """
-    top = max_profile_velocity(spec)
-    if isinstance(profile_velocity, numbers.Integral) and not isinstance(profile_velocity, bool) and (
-            profile_velocity == 0 or profile_velocity > top):
+    low, top = (0, FIRMWARE_MAX_PROFILE_VELOCITY) if firmware_range else (1, max_profile_velocity(spec))
+    if not firmware_range and isinstance(profile_velocity, numbers.Integral) and not isinstance(
+            profile_velocity, bool) and (profile_velocity == 0 or profile_velocity > top):
         fast = ("full speed (0 = no profile)" if profile_velocity == 0
                 else f"{profile_velocity * VELOCITY_UNIT:.2f} rad/s")
         raise ConfigurationError(f"profile_velocity {profile_velocity} would let the servos move at {fast}, over the "
                                  f"{spec.velocity_limit} rad/s joint speed limit; use 1..{top} (0.229 rev/min units)")
-    profile_velocity = number(profile_velocity, "profile_velocity", at_least=1, at_most=top, integer=True,
+    profile_velocity = number(profile_velocity, "profile_velocity", at_least=low, at_most=top, integer=True,
                               hint="It is the servos' Profile Velocity register, in 0.229 rev/min units, "
                               f"e.g. {DEFAULT_PROFILE_VELOCITY} (the kit's default)")
-    profile_acceleration = number(profile_acceleration, "profile_acceleration", at_least=1, at_most=32767,
+    profile_acceleration = number(profile_acceleration, "profile_acceleration", at_least=low, at_most=32767,
                                   integer=True, hint="It is the servos' Profile Acceleration register, in 214.577 "
                                   f"rev/min^2 units, e.g. {DEFAULT_PROFILE_ACCELERATION} (the kit's default)")
     return profile_velocity, profile_acceleration

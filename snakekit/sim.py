@@ -18,6 +18,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from mujoco import rollout  # noqa: E402
 
+from .errors import ConfigurationError  # noqa: E402
 from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf  # noqa: E402
 from .progress import LONG_RUN, TextProgress  # noqa: E402
 from .robot import JointState, Robot, Run  # noqa: E402
@@ -49,6 +50,9 @@ class SimRobot(Robot):
             driver's range (:func:`snakekit.profile_planner.check_profile`).
         profile_acceleration: Profile Acceleration register value (214.577 rev/min^2 units),
             1..32767.
+        any_profile: take every value the servos' firmware does instead (velocity 0..1023,
+            where 0 means no profile, and acceleration 0..32767), to see what they do: the
+            simulator only; the real arm's driver refuses them, as they break the speed limit.
 
     Each physics step (1 ms) the actuator's control is the profile's mean velocity over the
     step, and MuJoCo integrates it into the reference position (the actuator's state). In
@@ -61,9 +65,14 @@ class SimRobot(Robot):
 
     def __init__(self, *, realtime: bool = False, q0=None, spec: SnakeSpec = SPEC,
                  profile_velocity: int = DEFAULT_PROFILE_VELOCITY,
-                 profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION):
+                 profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION, any_profile: bool = False):
         super().__init__(spec)
-        profile_velocity, profile_acceleration = check_profile(profile_velocity, profile_acceleration, spec)
+        try:
+            profile_velocity, profile_acceleration = check_profile(profile_velocity, profile_acceleration, spec,
+                                                                   firmware_range=bool(any_profile))
+        except ConfigurationError as e:
+            raise ConfigurationError(f"{e}. To see what such a profile does, the simulator runs it with "
+                                     "any_profile=True (the real arm never does)") from None
         self.realtime = bool(realtime)
         self.model = load_model(spec)
         self.data = mujoco.MjData(self.model)

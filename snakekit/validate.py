@@ -14,6 +14,7 @@ snakekit.errors.LimitError: q is outside the joint limits [-1.57, 1.57] rad: joi
 from __future__ import annotations
 
 import operator
+from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -45,14 +46,17 @@ def _first_not_real(a: np.ndarray):
 
 def _first_bool(items):
     """The first boolean in the (nested) lists, tuples or arrays ``items``, or None."""
-    for x in items:
-        kind = type(x)
-        if kind is bool or kind is np.bool_:
-            return x
-        if kind is list or kind is tuple or (kind is np.ndarray and x.dtype.kind in "bO" and x.ndim):
-            found = _first_bool(x)
-            if found is not None:
-                return found
+    kinds = set(map(type, items))  # the types are gathered in C: a 500 x 5 list costs ~0.1 ms
+    if kinds and kinds <= {list, tuple}:  # rows of values: look at the values
+        return _first_bool(list(chain.from_iterable(items)))
+    if bool in kinds or np.bool_ in kinds:
+        return next(x for x in items if type(x) is bool or type(x) is np.bool_)
+    if kinds & {list, tuple, np.ndarray}:  # a mix of rows and arrays
+        for x in items:
+            if type(x) in (list, tuple) or (type(x) is np.ndarray and x.dtype.kind in "bO" and x.ndim):
+                found = _first_bool(x)
+                if found is not None:
+                    return found
     return None
 
 
@@ -61,7 +65,7 @@ def _no_bools(a, arr: np.ndarray, name: str, hint: str) -> None:
     if arr.dtype.kind == "b":
         b = arr.flat[0].item() if arr.size else None
     else:
-        b = _first_bool(a) if isinstance(a, (list, tuple, np.ndarray)) and np.ndim(a) else None
+        b = _first_bool(a) if isinstance(a, (list, tuple)) or (isinstance(a, np.ndarray) and a.ndim) else None
     if b is not None:
         raise InputTypeError(f"{name} holds {bool(b)!r}, a boolean, where a number is needed (numpy would read it as "
                              f"{int(b)}); every value must be a real number" + (f". {hint}" if hint else ""))

@@ -434,6 +434,25 @@ def test_the_simulator_refuses_the_profile_velocities_the_driver_refuses(pv, wor
         snakekit.make_robot("sim", profile_acceleration=0)
 
 
+def test_the_simulator_runs_a_profile_beyond_the_arm_only_when_asked():
+    with raises(snakekit.ConfigurationError, "use 1..62 (0.229 rev/min units). To see what such a profile does, the "
+                "simulator runs it with any_profile=True (the real arm never does)"):
+        snakekit.make_robot("sim", profile_velocity=0)
+    # asked: lesson 5 shows what no profile does (a step that breaks the 1.5 rad/s limit)
+    with snakekit.make_robot("sim", profile_velocity=0, any_profile=True) as robot:
+        robot.command([1.0, 0, 0, 0, 0])
+        peak = 0.0
+        for _ in range(300):
+            robot.step(0.002)
+            peak = max(peak, abs(robot.read().velocities[0]))
+    assert peak > 3 * SPEC.velocity_limit  # what the refusal keeps off the arm (5.5 rad/s measured)
+    # still only what the firmware takes, and never on the arm
+    with raises(snakekit.ConfigurationError, "profile_velocity must be a whole number from 0 to 1023, got -5"):
+        snakekit.make_robot("sim", profile_velocity=-5, any_profile=True)
+    with raises(snakekit.InputTypeError, "the 'hardware' backend has no option 'any_profile'"):
+        snakekit.make_robot("hardware", port="/dev/no-such-port", profile_velocity=0, any_profile=True)
+
+
 def test_make_robot_names_what_is_wrong_with_its_arguments():
     with raises(snakekit.InputTypeError, "the backend is named by a string, one of 'sim', 'emulator', 'hardware'; got "
                 "['sim'] (list)"):
