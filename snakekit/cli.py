@@ -121,14 +121,30 @@ def _generate(args, out) -> int:
 
 
 def _check(args, out) -> int:
-    from .checks import check_notebook
+    from .errors import FileFormatError
+    from .notebook_check import check_notebook
 
     path = Path(args.notebook)
     if path.suffix != ".ipynb" or not path.is_file():
         print(f"snakekit check: {path} is not a notebook file (give a lesson, e.g. "
               "notebooks/03_inverse_kinematics.ipynb)", file=sys.stderr)
         return 2
-    return check_notebook(path, out=out, timeout=args.timeout)
+    try:
+        return check_notebook(path, out=out, timeout=args.timeout)
+    except FileFormatError as e:
+        print(f"snakekit check: {e}", file=sys.stderr)
+        return 2
+
+
+def _seconds(text: str) -> float:
+    """``--timeout``'s value: seconds > 0, at most a day (nbclient takes 0 as "no limit")."""
+    from .validate import number
+
+    try:
+        return number(float(text), "--timeout", "s", above=0, at_most=86400,
+                      hint="It is how long one cell may run (default: 300)")
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e) if "--timeout" in str(e) else f"not a number of seconds: {text!r}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -160,7 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_generate)
     p = sub.add_parser("check", help="run a lesson's exercise checks: one row per exercise, exit 1 on a failure")
     p.add_argument("notebook", help="the lesson notebook, e.g. notebooks/03_inverse_kinematics.ipynb")
-    p.add_argument("--timeout", type=float, default=300.0, help="seconds a cell may run (default: 300)")
+    p.add_argument("--timeout", type=_seconds, default=300.0, help="seconds a cell may run (default: 300)")
     p.set_defaults(func=_check)
     return parser
 

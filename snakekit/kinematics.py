@@ -14,7 +14,7 @@ import pinocchio as pin
 
 from .errors import NotFiniteError, ShapeError, UnreachableTargetError
 from .model import SPEC, SnakeSpec, urdf
-from .validate import as_configuration, check_limits, number, real_array  # noqa: F401  (the lessons use them here)
+from .validate import as_configuration, check_count, check_limits, number, real_array  # noqa: F401  (lessons use them)
 
 
 @dataclass(frozen=True)
@@ -269,8 +269,8 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
     Raises:
         UnreachableTargetError: no solution within ``tol``; the error carries the closest
             tool point found and its joint angles.
-        ConfigurationError: ``tol`` below 1e-12 m or not finite, ``max_iter`` < 1,
-            ``restarts`` < 0.
+        ConfigurationError: ``tol`` below 1e-12 m or not finite, ``max_iter`` not from 1 to
+            10,000, ``restarts`` not from 0 to 1000.
         InputTypeError: a target or heading that is not a real number.
 
     >>> import numpy as np, snakekit
@@ -282,10 +282,9 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
     target_xy, heading = _target(target_xy, heading)
     tol = number(tol, "tol", "m", at_least=1e-12, hint="It is how close the tool must come to the target; "
                  "floating point resolves about 1e-12 m at the arm's scale (default: 1e-6)")
-    max_iter = number(max_iter, "max_iter", at_least=1, integer=True,
-                      hint="It is how many solver steps each start may take (default: 100)")
-    restarts = number(restarts, "restarts", at_least=0, integer=True,
-                      hint="It is how many random starts follow q0 (default: 20)")
+    max_iter = check_count(max_iter, "max_iter", 1, 10_000,
+                           hint="It is how many solver steps each start may take (default: 100)")
+    restarts = check_count(restarts, "restarts", 0, 1000, hint="It is how many random starts follow q0 (default: 20)")
     use_heading = heading is not None
     target = np.array([*_solver_xy(target_xy, spec), heading if use_heading else 0.0])
     if q0 is None:
@@ -320,7 +319,12 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
 
 
 def workspace_points(n: int = 5000, *, seed: int = 0, spec: SnakeSpec = SPEC) -> np.ndarray:
-    """Tool points (n, 2) [m] of uniformly random configurations inside the limits."""
+    """Tool points (n, 2) [m] of uniformly random configurations inside the limits.
+
+    Raises:
+        ConfigurationError: ``n`` is not a whole number from 1 to 1,000,000.
+    """
+    n = check_count(n, "n", 1, 1_000_000, hint="It is how many random poses are drawn (default: 5000)")
     k = _kin(spec)
     rng = np.random.default_rng(seed)
     out = np.empty((n, 2))

@@ -23,9 +23,14 @@ Register units: velocity 0.229 rev/min, acceleration 214.577 rev/min^2.
 from __future__ import annotations
 
 import math
+import numbers
 from typing import NamedTuple
 
 import numpy as np
+
+from .errors import ConfigurationError
+from .model import SPEC, SnakeSpec
+from .validate import number
 
 VELOCITY_UNIT = 0.229 * 2 * math.pi / 60  # rad/s per Profile Velocity unit
 ACCELERATION_UNIT = 214.577 * 2 * math.pi / 3600  # rad/s^2 per Profile Acceleration unit
@@ -36,6 +41,54 @@ ACCELERATION_UNIT = 214.577 * 2 * math.pi / 3600  # rad/s^2 per Profile Accelera
 # 1.56 rad/s with 62), and 100 units = 37.45 rad/s^2, so t1 = 64 * 55 / 100 = 35.2 ms.
 DEFAULT_PROFILE_VELOCITY = 55
 DEFAULT_PROFILE_ACCELERATION = 100
+
+
+def max_profile_velocity(spec: SnakeSpec = SPEC) -> int:
+    """The largest Profile Velocity inside the joint speed limit [0.229 rev/min units].
+
+    >>> max_profile_velocity()                 # 1.5 rad/s
+    62
+    """
+    return math.floor(spec.velocity_limit / VELOCITY_UNIT + 1e-9)
+
+
+#: The most a servo's Velocity Limit register (and so its Profile Velocity) can hold.
+FIRMWARE_MAX_PROFILE_VELOCITY = 1023
+
+
+def check_profile(profile_velocity, profile_acceleration, spec: SnakeSpec = SPEC, *,
+                  firmware_range: bool = False) -> tuple[int, int]:
+    """The Profile Velocity and Acceleration register values the kit lets a servo use.
+
+    Velocity 1..:func:`max_profile_velocity` (0 would mean no profile: the servo steps to each
+    goal at full speed, and a 1 rad step peaks at 5.5 rad/s on the simulated arm), acceleration
+    1..32767. The simulator and the driver both check with this, so neither runs what the
+    other would refuse. With
+    ``firmware_range`` (the simulator's ``any_profile``, to show what such values do), every
+    value the firmware takes: velocity 0..1023, acceleration 0..32767.
+
+    Raises:
+        ConfigurationError: a value outside those ranges; InputTypeError: not a whole number.
+
+    >>> check_profile(0, 100)
+    Traceback (most recent call last):
+    ...
+    snakekit.errors.ConfigurationError: profile_velocity 0 would let the servos move at full speed (0 = no profile), over the 1.5 rad/s joint speed limit; use 1..62 (0.229 rev/min units)
+    """
+    low, top = (0, FIRMWARE_MAX_PROFILE_VELOCITY) if firmware_range else (1, max_profile_velocity(spec))
+    if not firmware_range and isinstance(profile_velocity, numbers.Integral) and not isinstance(
+            profile_velocity, bool) and (profile_velocity == 0 or profile_velocity > top):
+        fast = ("full speed (0 = no profile)" if profile_velocity == 0
+                else f"{profile_velocity * VELOCITY_UNIT:.2f} rad/s")
+        raise ConfigurationError(f"profile_velocity {profile_velocity} would let the servos move at {fast}, over the "
+                                 f"{spec.velocity_limit} rad/s joint speed limit; use 1..{top} (0.229 rev/min units)")
+    profile_velocity = number(profile_velocity, "profile_velocity", at_least=low, at_most=top, integer=True,
+                              hint="It is the servos' Profile Velocity register, in 0.229 rev/min units, "
+                              f"e.g. {DEFAULT_PROFILE_VELOCITY} (the kit's default)")
+    profile_acceleration = number(profile_acceleration, "profile_acceleration", at_least=low, at_most=32767,
+                                  integer=True, hint="It is the servos' Profile Acceleration register, in 214.577 "
+                                  f"rev/min^2 units, e.g. {DEFAULT_PROFILE_ACCELERATION} (the kit's default)")
+    return profile_velocity, profile_acceleration
 
 
 def acceleration_time_ms(profile_velocity: int, profile_acceleration: int) -> float:

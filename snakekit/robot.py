@@ -26,7 +26,8 @@ from .errors import BackendError, FileFormatError, InputTypeError, LimitError, S
 from .model import SPEC, SnakeSpec
 from .progress import LONG_RUN, TextProgress
 from .trajectory import Trajectory, joint_trajectory
-from .validate import check_limits, frozen, number, readable_file, write_failed, writable_file
+from .validate import (MAX_DURATION, check_limits, check_rate, frozen, number, options_of, readable_file, sample_count,
+                       too_long, write_failed, writable_file)
 
 
 @dataclass(frozen=True, eq=False)
@@ -190,6 +191,9 @@ class Robot(ABC):
     #: and the run ends later (:attr:`late_shifts` counts these).
     late_goal = 0.03
     late_shifts = 0
+    #: The longest trajectory :meth:`run` accepts [s]; longer is refused as probably given in
+    #: milliseconds. Raise it on a robot to run a longer one on purpose.
+    max_duration = MAX_DURATION
 
     def __init__(self, spec: SnakeSpec = SPEC):
         self.spec = spec
@@ -307,6 +311,10 @@ class Robot(ABC):
             raise ShapeError("trajectory positions", f"(N, {self.spec.n_joints})",
                              (len(trajectory), trajectory.n_joints),
                              f"the arm has {self.spec.n_joints} joints: give one column per joint")
+        if trajectory.duration > self.max_duration:
+            raise too_long(trajectory.duration, "the trajectory's duration", self.max_duration,
+                           f"nothing was sent. To run one this long on purpose, set robot.max_duration = "
+                           f"{np.ceil(trajectory.duration):.0f} first")
         trajectory.check_limits(self.spec)
         present = self.read().positions
         gap = np.abs(trajectory.positions[0] - present)
@@ -320,12 +328,12 @@ class Robot(ABC):
     @staticmethod
     def _record_times(trajectory: Trajectory, record_rate: float, settle: float) -> np.ndarray:
         """When the state is recorded during a run, from the run's start [s]."""
-        record_rate = number(record_rate, "record_rate", "Hz", above=0, at_most=1e4,
-                             hint="It is how often the state is recorded during the run (default: 100)")
+        record_rate = check_rate(record_rate, "record_rate",
+                                 "It is how often the state is recorded during the run (default: 100)")
         settle = number(settle, "settle", "s", at_least=0, at_most=3600,
                         hint="It is how long recording goes on after the last goal (default: 0.5)")
         end = trajectory.duration + settle
-        return np.arange(int(np.floor(end * record_rate + 1e-9)) + 1) / record_rate
+        return np.arange(sample_count(end, record_rate, "the run's recording")) / record_rate
 
     def move_to(self, q, duration: float | None = None, **run_options) -> Run:
         """Move smoothly (quintic, within the velocity limit) from the present position to ``q``."""
@@ -371,6 +379,9 @@ def make_robot(backend: str = "sim", **options) -> Robot:
     Options go to the backend, e.g. ``make_robot("sim", realtime=True)`` or
     ``make_robot("hardware", port="/dev/ttyUSB0")``.
     """
+    if not isinstance(backend, str):
+        raise InputTypeError(f"the backend is named by a string, one of {', '.join(map(repr, BACKENDS))}; got "
+                             f"{backend!r} ({type(backend).__name__})")
     if backend not in BACKENDS:
         raise BackendError(f"unknown backend '{backend}'; choose one of {', '.join(BACKENDS)}")
     module, name = BACKENDS[backend]
@@ -378,4 +389,6 @@ def make_robot(backend: str = "sim", **options) -> Robot:
         factory = getattr(importlib.import_module(module), name)
     except (ImportError, AttributeError) as e:
         raise BackendError(f"the '{backend}' backend is not available: {e}") from e
+    options_of(factory, options, f"the '{backend}' backend",
+               needs={"port": "the arm's serial port, e.g. port='/dev/ttyUSB0'; docs/hardware.md says how to find it"})
     return factory(**options)

@@ -16,12 +16,13 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
+from .errors import ConfigurationError
 from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf
 from .progress import LONG_RUN, TextProgress
 from .robot import JointState, Robot, Run
 from .trajectory import Trajectory
-from .validate import as_configuration, check_limits, number
-from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner
+from .validate import MAX_DURATION, as_configuration, check_limits, number
+from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner, check_profile
 
 
 # qpos, qvel and act first, in that order (rows of rollout's state: time, qpos, qvel, act, ...)
@@ -42,9 +43,13 @@ class SimRobot(Robot):
         realtime: pace the simulation to the wall clock (for the viewer and demos);
             otherwise run as fast as possible (tests and grading).
         q0: initial joint angles [rad] (default: home).
-        profile_velocity: Profile Velocity register value (0.229 rev/min units; 0 = step).
-        profile_acceleration: Profile Acceleration register value (214.577 rev/min^2 units;
-            0 = rectangular).
+        profile_velocity: Profile Velocity register value (0.229 rev/min units), 1..62: the
+            driver's range (:func:`snakekit.profile_planner.check_profile`).
+        profile_acceleration: Profile Acceleration register value (214.577 rev/min^2 units),
+            1..32767.
+        any_profile: take every value the servos' firmware does instead (velocity 0..1023,
+            where 0 means no profile, and acceleration 0..32767), to see what they do: the
+            simulator only; the real arm's driver refuses them, as they break the speed limit.
 
     Each physics step (1 ms) the actuator's control is the profile's mean velocity over the
     step, and MuJoCo integrates it into the reference position (the actuator's state). In
@@ -57,8 +62,14 @@ class SimRobot(Robot):
 
     def __init__(self, *, realtime: bool = False, q0=None, spec: SnakeSpec = SPEC,
                  profile_velocity: int = DEFAULT_PROFILE_VELOCITY,
-                 profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION):
+                 profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION, any_profile: bool = False):
         super().__init__(spec)
+        try:
+            profile_velocity, profile_acceleration = check_profile(profile_velocity, profile_acceleration, spec,
+                                                                   firmware_range=bool(any_profile))
+        except ConfigurationError as e:
+            raise ConfigurationError(f"{e}. To see what such a profile does, the simulator runs it with "
+                                     "any_profile=True (the real arm never does)") from None
         self.realtime = bool(realtime)
         self.model = load_model(spec)
         self.data = mujoco.MjData(self.model)
@@ -211,7 +222,7 @@ class SimRobot(Robot):
 
     def step(self, duration: float) -> None:
         """Let the simulation run for ``duration`` [s] holding the present goals."""
-        duration = number(duration, "duration", "s", at_least=0,
+        duration = number(duration, "duration", "s", at_least=0, at_most=MAX_DURATION,
                           hint="It is how long the simulation runs holding the present goals")
         self._check_open()
         if self.realtime:

@@ -14,9 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FileFormatError, InputTypeError, LimitError, NotFiniteError, ShapeError, TrajectoryError
+from .errors import (ConfigurationError, FileFormatError, InputTypeError, LimitError, NotFiniteError, ShapeError,
+                     TrajectoryError)
 from .model import SPEC, SnakeSpec
-from .validate import check_limits, frozen, number, readable_file, real_array, write_failed, writable_file
+from .validate import (MAX_DURATION, check_count, check_duration, check_limits, check_rate, frozen, number,
+                       readable_file, real_array, sample_count, write_failed, writable_file)
 
 
 @dataclass(frozen=True)
@@ -147,8 +149,8 @@ class Trajectory:
         if times is None:
             if rate is None:
                 raise TrajectoryError("resample needs a rate > 0 [Hz] or times, got neither")
-            rate = number(rate, "rate", "Hz", above=0, hint="resample needs a rate > 0 [Hz] or times")
-            count = int(np.floor(self.duration * rate + 1e-9)) + 1
+            rate = check_rate(rate, hint="It is how many samples per second the new grid has")
+            count = sample_count(self.duration, rate, "the resampled trajectory")
             times = self.times[0] + np.arange(count) / rate
         times = real_array(times, "times", "(M,)", "Give the new sample times [s]")
         vel = None
@@ -359,13 +361,18 @@ def _read_csv(path: Path, n: int) -> dict:
 # --- time scaling (Modern Robotics, ch. 9) ----------------------------------------------
 
 
+def _move_time(T) -> float:
+    """A time scaling's ``T``, checked: a duration > 0 [s] (0 would divide by zero, < 0 run backwards)."""
+    return number(T, "T", "s", above=0, hint="T is how long the move takes")
+
+
 def cubic_time_scaling(T: float, t):
     """s(t) in [0, 1] with zero start and end velocity: 3(t/T)^2 - 2(t/T)^3.
 
     >>> round(float(cubic_time_scaling(2.0, 1.0)), 6)
     0.5
     """
-    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)
+    r = np.clip(np.asarray(t, dtype=float) / _move_time(T), 0, 1)
     return 3 * r**2 - 2 * r**3
 
 
@@ -375,7 +382,7 @@ def quintic_time_scaling(T: float, t):
     >>> round(float(quintic_time_scaling(2.0, 1.0)), 6)
     0.5
     """
-    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)
+    r = np.clip(np.asarray(t, dtype=float) / _move_time(T), 0, 1)
     return 10 * r**3 - 15 * r**4 + 6 * r**5
 
 
@@ -385,6 +392,7 @@ def trapezoidal_time_scaling(T: float, t, *, accel_fraction: float = 0.25):
     >>> round(float(trapezoidal_time_scaling(2.0, 1.0)), 6)
     0.5
     """
+    T = _move_time(T)
     if not 0 < accel_fraction <= 0.5:
         raise TrajectoryError(f"accel_fraction must be in (0, 0.5], got {accel_fraction}")
     ta = accel_fraction * T
@@ -421,17 +429,20 @@ def joint_trajectory(q_start, q_end, duration: float | None = None, *, method: s
     scaling, peak = _SCALINGS[method]
     a = check_limits(q_start, spec, "q_start")
     b = check_limits(q_end, spec, "q_end")
-    rate = number(rate, "rate", "Hz", above=0, hint="It is how many points per second the move is "
-                  "sampled at (default: 100)")
+    rate = check_rate(rate, hint="It is how many points per second the move is sampled at (default: 100)")
     if duration is None:
         speed_fraction = number(speed_fraction, "speed_fraction", above=0, at_most=1,
                                 hint="It is the share of the velocity limit the fastest joint may reach "
                                 "(default: 0.8); or give the duration [s]")
         duration = max(peak * float(np.abs(b - a).max()) / (speed_fraction * spec.velocity_limit), 1.0 / rate)
+        if duration > MAX_DURATION:
+            raise ConfigurationError(f"at speed_fraction={speed_fraction:g} the move takes {duration:.4g} s, "
+                                     f"longer than the {MAX_DURATION:g} s the kit accepts; raise speed_fraction "
+                                     "(default: 0.8)")
     else:
-        duration = number(duration, "duration", "s", above=0,
-                          hint="Give how long the move takes, or leave it out for the fastest move "
-                          "inside the velocity limit")
+        duration = check_duration(duration, hint="Give how long the move takes, or leave it out for the fastest "
+                                  "move inside the velocity limit")
+    sample_count(duration, rate, "the move")
     n = max(int(np.ceil(duration * rate - 1e-9)), 1)
     t = np.linspace(0.0, duration, n + 1)
     s = scaling(duration, t)
@@ -450,11 +461,10 @@ def side_sweep(*, points: int = 500, rate: float = 10.0, sweeps: int = 50,
     >>> len(tr), round(tr.duration, 1), bool(abs(tr.positions[[0, -1]]).max() < 1e-12)
     (500, 49.9, True)
     """
-    points = number(points, "points", at_least=2, integer=True, hint="It is how many goals the sweep sends "
-                    "(the task: 500)")
-    rate = number(rate, "rate", "Hz", above=0, hint="It is how many goals per second are sent (the task: 10)")
-    sweeps = number(sweeps, "sweeps", at_least=1, integer=True,
-                    hint="It is how many side-to-side sweeps fill the run (the task: 50)")
+    points = check_count(points, "points", 2, 100_000, hint="It is how many goals the sweep sends (the task: 500)")
+    rate = check_rate(rate, hint="It is how many goals per second are sent (the task: 10)")
+    sweeps = check_count(sweeps, "sweeps", 1, points, hint="It is how many side-to-side sweeps fill the run "
+                         "(the task: 50)")
     amplitude = number(amplitude, "amplitude", "rad", hint="It is how far each joint swings (default: 0.2)")
     t = np.arange(points) / rate
     period = t[-1] / sweeps

@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -41,9 +42,9 @@ def raises(kind, text):
 
 def test_ik_with_max_iter_zero_is_refused_not_solved():
     # before: the start pose came back as a "solution" (it puts the tool at (0.3315, 0), not on the target)
-    with raises(snakekit.ConfigurationError, "max_iter must be a whole number >= 1, got 0. It is how many solver"):
+    with raises(snakekit.ConfigurationError, "max_iter must be a whole number from 1 to 10000, got 0. It is how many solver"):
         snakekit.inverse_kinematics([0.25, 0.10], max_iter=0)
-    with raises(snakekit.ConfigurationError, "restarts must be a whole number >= 0, got -1"):
+    with raises(snakekit.ConfigurationError, "restarts must be a whole number from 0 to 1000, got -1"):
         snakekit.inverse_kinematics([0.25, 0.10], restarts=-1)
 
 
@@ -124,21 +125,21 @@ def test_joint_trajectory_speed_fraction_and_duration():
     with raises(snakekit.ConfigurationError, "duration must be a finite number > 0 [s], got inf. Give how long "
                 "the move takes"):
         joint_trajectory(a, b, duration=float("inf"))  # before: OverflowError
-    with raises(snakekit.ConfigurationError, "rate must be a finite number > 0 [Hz], got -10"):
+    with raises(snakekit.ConfigurationError, "rate must be a finite number > 0 and <= 10000 [Hz], got -10"):
         joint_trajectory(a, b, 1.0, rate=-10)  # before: accepted, one point at each end
 
 
 @pytest.mark.parametrize("rate", [0, -10, float("nan"), float("inf")])
 def test_side_sweep_rate_must_be_positive(rate):
-    with raises(snakekit.ConfigurationError, f"rate must be a finite number > 0 [Hz], got {rate!r}. It is how "
+    with raises(snakekit.ConfigurationError, f"rate must be a finite number > 0 and <= 10000 [Hz], got {rate!r}. It is how "
                 "many goals per second are sent (the task: 10)"):
         side_sweep(rate=rate)
 
 
 def test_side_sweep_counts_are_whole_numbers():
-    with raises(snakekit.ConfigurationError, "points must be a whole number >= 2, got 1"):
+    with raises(snakekit.ConfigurationError, "points must be a whole number from 2 to 100000, got 1"):
         side_sweep(points=1)
-    with raises(snakekit.InputTypeError, "sweeps must be a whole number >= 1, got 2.5 (float)"):
+    with raises(snakekit.InputTypeError, "sweeps must be a whole number from 1 to 500, got 2.5 (float)"):
         side_sweep(sweeps=2.5)
 
 
@@ -149,17 +150,17 @@ def test_sim_step_and_run_options():
     from snakekit.sim import SimRobot
 
     with SimRobot() as robot:
-        with raises(snakekit.ConfigurationError, "duration must be a finite number >= 0 [s], got nan"):
+        with raises(snakekit.ConfigurationError, "duration must be a finite number from 0 to 600 [s], got nan"):
             robot.step(float("nan"))
-        with raises(snakekit.ConfigurationError, "duration must be a finite number >= 0 [s], got inf"):
+        with raises(snakekit.ConfigurationError, "duration must be a finite number from 0 to 600 [s], got inf"):
             robot.step(float("inf"))  # before: OverflowError
-        with raises(snakekit.InputTypeError, "duration must be a finite number >= 0 [s], got '1' (str)"):
+        with raises(snakekit.InputTypeError, "duration must be a finite number from 0 to 600 [s], got '1' (str)"):
             robot.step("1")
         move = joint_trajectory(np.zeros(5), [0.2, 0, 0, 0, 0], 0.5)
         with raises(snakekit.ConfigurationError, "record_rate must be a finite number > 0 and <= 10000 [Hz], got 0. "
                     "It is how often the state is recorded"):
             robot.run(move, record_rate=0)
-        with raises(snakekit.ConfigurationError, "settle must be a finite number >= 0 and <= 3600 [s], got nan"):
+        with raises(snakekit.ConfigurationError, "settle must be a finite number from 0 to 3600 [s], got nan"):
             robot.run(move, settle=float("nan"))  # before: ValueError "cannot convert float NaN to integer"
         assert robot.read().time == 0  # nothing ran
 
@@ -169,7 +170,7 @@ def test_render_beyond_the_offscreen_buffer():
 
     with SimRobot() as robot:
         buffer = robot.model.vis.global_
-        with raises(snakekit.ConfigurationError, f"width must be a whole number >= 1 and <= {buffer.offwidth} "
+        with raises(snakekit.ConfigurationError, f"width must be a whole number from 1 to {buffer.offwidth} "
                     f"[pixels], got 1920. The offscreen buffer is {buffer.offwidth} x {buffer.offheight} pixels"):
             robot.render(width=1920, height=1080)  # before: MuJoCo's own ValueError
         image = robot.render(width=buffer.offwidth, height=buffer.offheight)
@@ -299,3 +300,294 @@ def test_sweep_never_loses_a_finished_run(tmp_path, monkeypatch, capsys):
     run = Run.load(kept[0])
     np.testing.assert_array_equal(run.commanded.positions, side_sweep().positions)
     assert len(run.measured) > 500
+
+
+# --- booleans are not numbers ------------------------------------------------------------------
+
+
+BOOL_WORDS = "holds True, a boolean, where a number is needed (numpy would read it as 1); every value must be a real number"
+
+
+def test_booleans_are_not_angles(tmp_path):
+    # before: True was taken as 1 rad everywhere (FK of [True, 0, 0, 0, 0] put the tool at x = 0.179 m)
+    with raises(snakekit.InputTypeError, "q " + BOOL_WORDS + ". Give one angle [rad] per joint"):
+        snakekit.forward_kinematics([True, 0, 0, 0, 0])
+    with raises(snakekit.InputTypeError, "q holds True, a boolean"):
+        snakekit.forward_kinematics(np.array([1, 0, 0, 0, 0], dtype=bool))
+    with raises(snakekit.InputTypeError, "q holds False, a boolean"):
+        snakekit.forward_kinematics([0.1, 0.2, np.False_, 0, 0])     # mixed with floats, numpy makes it 0.0
+    with raises(snakekit.InputTypeError, "positions " + BOOL_WORDS):
+        Trajectory([0, 1], [[0.0] * 5, [True, 0.1, 0, 0, 0]])
+    with raises(snakekit.InputTypeError, "times holds False, a boolean, where a number is needed (numpy would read "
+                "it as 0)"):
+        Trajectory([False, True], np.zeros((2, 5)))
+    np.savez(tmp_path / "b.npz", times=[0.0, 1.0], positions=np.ones((2, 5), dtype=bool))
+    with raises(snakekit.FileFormatError, "b.npz does not hold a valid trajectory: positions " + BOOL_WORDS):
+        Trajectory.load(tmp_path / "b.npz")
+    with snakekit.make_robot("sim") as robot:
+        with raises(snakekit.InputTypeError, "commanded q " + BOOL_WORDS):
+            robot.command([True, 0, 0, 0, 0])
+        robot.step(0.2)
+        np.testing.assert_array_equal(robot.read().positions, np.zeros(5))     # nothing was sent
+    # numbers of every real kind still pass
+    assert snakekit.forward_kinematics(np.zeros(5, dtype=np.int32))[0, 3] == pytest.approx(SPEC.reach)
+
+
+def test_a_fifo_named_like_a_trajectory_is_refused_without_waiting(tmp_path):
+    import threading
+
+    os.mkfifo(tmp_path / "pipe.csv")   # before: open() waited forever for a writer
+    caught = []
+    reader = threading.Thread(target=lambda: caught.append(_error_of(Trajectory.load, tmp_path / "pipe.csv")),
+                              daemon=True)
+    reader.start()
+    reader.join(timeout=30)
+    assert caught, "Trajectory.load waited on the pipe"
+    assert isinstance(caught[0], snakekit.FileFormatError)
+    assert "pipe.csv is not a regular file (a pipe, socket or device); give the path of a file saved on disk" \
+        in str(caught[0])
+
+
+def _error_of(fn, *args, **kwargs):
+    try:
+        fn(*args, **kwargs)
+    except Exception as e:
+        return e
+    return None
+
+
+# --- counts, rates and durations have stated bounds --------------------------------------------
+
+
+@pytest.mark.parametrize("n, kind", [(-1, snakekit.ConfigurationError), (10**12, snakekit.ConfigurationError),
+                                     (2.5, snakekit.InputTypeError), ("100", snakekit.InputTypeError),
+                                     (None, snakekit.InputTypeError), (float("nan"), snakekit.InputTypeError)])
+def test_workspace_points_count_is_a_bounded_whole_number(n, kind):
+    # before: numpy's "negative dimensions", "'float' object cannot be interpreted as an integer"...
+    with raises(kind, f"n must be a whole number from 1 to 1000000, got {n!r}"):
+        snakekit.workspace_points(n)
+    assert snakekit.workspace_points(3).shape == (3, 2)
+
+
+def test_ik_restarts_and_steps_are_bounded():
+    # before: restarts=10**6 ran for hours on a target the joint limits keep the tool from
+    with raises(snakekit.ConfigurationError, "restarts must be a whole number from 0 to 1000, got 1000000"):
+        snakekit.inverse_kinematics([0.25, 0.10], restarts=10**6)
+    with raises(snakekit.ConfigurationError, "max_iter must be a whole number from 1 to 10000, got 1000000000"):
+        snakekit.inverse_kinematics([0.25, 0.10], max_iter=10**9)
+
+
+def test_huge_rates_and_durations_are_refused_before_any_memory_is_taken():
+    a, b = np.zeros(5), [0.3, 0, 0, 0, 0]
+    with raises(snakekit.ConfigurationError,
+                "rate must be a finite number > 0 and <= 10000 [Hz], got 1000000000000.0"):
+        small().resample(rate=1e12)  # before: MemoryError (7.28 TiB)
+    with raises(snakekit.ConfigurationError, "duration is 1e+12 s (1.67e+10 min), longer than the 600 s (10 min) the "
+                "kit accepts. Times are in seconds: if these are milliseconds, divide them by 1000"):
+        joint_trajectory(a, b, duration=1e12)  # before: MemoryError (728 TiB)
+    with raises(snakekit.ConfigurationError, "rate must be a finite number > 0 and <= 10000 [Hz], got 1000000000.0"):
+        joint_trajectory(a, b, 1.0, rate=1e9)
+    with raises(snakekit.ConfigurationError, "the move would hold 6000001 points (600 s at 10000 Hz), more than the "
+                "1000000 the kit makes; lower the rate or shorten the time"):
+        joint_trajectory(a, b, 600, rate=1e4)  # each bound is fine alone: together 6 million points
+    with raises(snakekit.ConfigurationError, "at speed_fraction=1e-09 the move takes 3.75e+08 s, longer than the "
+                "600 s the kit accepts; raise speed_fraction"):
+        joint_trajectory(a, b, speed_fraction=1e-9)
+    with raises(snakekit.ConfigurationError, "points must be a whole number from 2 to 100000, got 1000000000. It is "
+                "how many goals the sweep sends"):
+        side_sweep(points=10**9)
+    # what the lessons do stays as it was
+    assert len(joint_trajectory(a, b, 600, rate=100)) == 60001
+    assert len(side_sweep(points=30, sweeps=3)) == 30
+
+
+@pytest.mark.parametrize("name", ["cubic", "quintic", "trapezoidal"])
+@pytest.mark.parametrize("T", [0, -2.0])
+def test_time_scalings_need_a_positive_duration(name, T):
+    from snakekit import trajectory
+
+    scaling = getattr(trajectory, f"{name}_time_scaling")
+    # before: T=0 gave NaN (or ZeroDivisionError), T<0 a number
+    with raises(snakekit.ConfigurationError, f"T must be a finite number > 0 [s], got {T!r}. T is how long the "
+                "move takes"):
+        scaling(T, 0.5)
+    assert scaling(2.0, 1.0) == pytest.approx(0.5)
+
+
+# --- the robot -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("pv, words", [
+    (0, "profile_velocity 0 would let the servos move at full speed (0 = no profile), over the 1.5 rad/s joint "
+        "speed limit; use 1..62 (0.229 rev/min units)"),
+    (1000, "profile_velocity 1000 would let the servos move at 23.98 rad/s, over the 1.5 rad/s joint speed limit; "
+           "use 1..62"),
+    (-5, "profile_velocity must be a whole number from 1 to 62, got -5. It is the servos' Profile Velocity register"),
+])
+def test_the_simulator_refuses_the_profile_velocities_the_driver_refuses(pv, words):
+    # before: the simulator took them, and with 0 a step to 1 rad peaked at 5.6 rad/s (limit 1.5)
+    with raises(snakekit.ConfigurationError, words):
+        snakekit.make_robot("sim", profile_velocity=pv)
+    with raises(snakekit.ConfigurationError, words):  # the driver: the same check, before the port opens
+        snakekit.make_robot("hardware", port="/dev/no-such-port", profile_velocity=pv)
+    with raises(snakekit.ConfigurationError, "profile_acceleration must be a whole number from 1 to 32767, got 0"):
+        snakekit.make_robot("sim", profile_acceleration=0)
+
+
+def test_the_simulator_runs_a_profile_beyond_the_arm_only_when_asked():
+    with raises(snakekit.ConfigurationError, "use 1..62 (0.229 rev/min units). To see what such a profile does, the "
+                "simulator runs it with any_profile=True (the real arm never does)"):
+        snakekit.make_robot("sim", profile_velocity=0)
+    # asked: lesson 5 shows what no profile does (a step that breaks the 1.5 rad/s limit)
+    with snakekit.make_robot("sim", profile_velocity=0, any_profile=True) as robot:
+        robot.command([1.0, 0, 0, 0, 0])
+        peak = 0.0
+        for _ in range(300):
+            robot.step(0.002)
+            peak = max(peak, abs(robot.read().velocities[0]))
+    assert peak > 3 * SPEC.velocity_limit  # what the refusal keeps off the arm (5.5 rad/s measured)
+    # still only what the firmware takes, and never on the arm
+    with raises(snakekit.ConfigurationError, "profile_velocity must be a whole number from 0 to 1023, got -5"):
+        snakekit.make_robot("sim", profile_velocity=-5, any_profile=True)
+    with raises(snakekit.InputTypeError, "the 'hardware' backend has no option 'any_profile'"):
+        snakekit.make_robot("hardware", port="/dev/no-such-port", profile_velocity=0, any_profile=True)
+
+
+def test_make_robot_names_what_is_wrong_with_its_arguments():
+    with raises(snakekit.InputTypeError, "the backend is named by a string, one of 'sim', 'emulator', 'hardware'; got "
+                "['sim'] (list)"):
+        snakekit.make_robot(["sim"])  # before: TypeError "unhashable type: 'list'"
+    with raises(snakekit.InputTypeError, "the 'sim' backend has no option 'speed'; its options are realtime, q0, spec, "
+                "profile_velocity, profile_acceleration"):
+        snakekit.make_robot("sim", speed=2)  # before: TypeError from SimRobot.__init__
+    with raises(snakekit.InputTypeError, "the 'emulator' backend has no option 'speed'; its options are motion, faults, "
+                "q0, timing"):
+        snakekit.make_robot("emulator", speed=2)
+    with raises(snakekit.InputTypeError, "the 'hardware' backend needs port=... (the arm's serial port, e.g. "
+                "port='/dev/ttyUSB0'"):
+        snakekit.make_robot("hardware")  # before: "missing 1 required positional argument: 'port'"
+    with raises(snakekit.InputTypeError, "baudrate must be a whole number >= 1 [baud], got 'fast' (str). Use 57600, "
+                "1000000, 2000000, 3000000 or 4000000"):
+        snakekit.make_robot("hardware", port="/dev/no-such-port", baudrate="fast")  # before: int()'s ValueError
+    for backend in ("sim", "emulator"):
+        with raises(snakekit.InputTypeError, "q0 holds 'a', which is not a number (str)"):
+            snakekit.make_robot(backend, q0=["a", 0, 0, 0, 0])
+
+
+def test_a_trajectory_in_milliseconds_is_refused_on_the_robot():
+    # a 2 s move written in milliseconds: 33 minutes on the arm, before
+    ms = Trajectory(np.linspace(0, 2000, 21), np.zeros((21, 5)))
+    words = ("the trajectory's duration is 2000 s (33.3 min), longer than the 600 s (10 min) the kit accepts. "
+             "Times are in seconds: if these are milliseconds, divide them by 1000; nothing was sent. To run one "
+             "this long on purpose, set robot.max_duration = 2000 first")
+    with snakekit.make_robot("sim") as robot:
+        with raises(snakekit.ConfigurationError, words):
+            robot.run(ms)
+        with raises(snakekit.ConfigurationError, "the trajectory's duration is 1e+07 s"):
+            robot.run(Trajectory([0, 1e7], np.zeros((2, 5))))  # before: MemoryError
+        assert robot.read().time == 0  # nothing ran
+        robot.max_duration = 700  # on purpose: it runs
+        run = robot.run(Trajectory([0, 650], np.zeros((2, 5))), record_rate=1, settle=0)
+        assert run.robot_time == 650
+    with snakekit.make_robot("emulator", motion="profile") as robot:
+        with raises(snakekit.ConfigurationError, words):
+            robot.run(ms)
+        assert robot.goals_sent == 0
+
+
+def test_the_emulator_refuses_a_delay_that_is_not_a_finite_time():
+    from snakekit.emulator import Faults
+
+    for bad in (float("nan"), float("inf"), -0.1):
+        with raises(snakekit.ConfigurationError, f"Faults.delay_time must be a finite number from 0 to 10 [s], "
+                    f"got {bad!r}. It is how late a delayed reply arrives"):
+            Faults(delay=0.3, delay_time=bad)
+    for value in ("nan", "inf"):  # before: accepted, then a traceback for every delayed packet
+        r = subprocess.run([sys.executable, "-m", "snakekit.cli", "emulator", "--delay", "0.3", "--delay-time", value],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2, r.stdout + r.stderr
+        assert f"snakekit emulator: Faults.delay_time must be a finite number from 0 to 10 [s], got {value}" in r.stderr
+        assert "Traceback" not in r.stderr and "emulator:" not in r.stdout
+
+
+# --- `snakekit check` on a file that is not a working lesson -------------------------------------
+
+
+def _graded(source, **meta):
+    from nbformat.v4 import new_code_cell
+
+    cell = new_code_cell(source)
+    cell.metadata["nbgrader"] = {"grade": True, "solution": False, "locked": True, **meta}
+    return cell
+
+
+def _broken_lessons():
+    """(name, bytes of the file, words of the one-line message) for each kind of broken lesson."""
+    import nbformat
+    from nbformat.v4 import new_notebook
+
+    def nb(*cells):
+        return nbformat.writes(new_notebook(cells=list(cells))).encode()
+
+    fresh = "take a fresh copy of the lesson from the kit's notebooks/ folder and copy your answers into it"
+    return [
+        ("empty", b"", f"empty.ipynb is empty, not a notebook; {fresh}"),
+        ("text", b"print('hello')\n", "text.ipynb is not a Jupyter notebook: it is not JSON (it starts with "
+                                     "\"print('hello')\"), perhaps another file renamed to .ipynb"),
+        ("other_json", b'{"name": "snake", "joints": 5}', "other_json.ipynb is JSON but not a Jupyter notebook (a "
+                                                          "notebook is a JSON object with a list of cells; this has no "
+                                                          "'cells' list)"),
+        ("no_metadata", b'{"cells": [], "nbformat": 4, "nbformat_minor": 5}',
+         "no_metadata.ipynb is JSON but not a Jupyter notebook (The notebook is invalid and is missing an expected "
+         "key: metadata)"),
+        ("utf16", nb(_graded("assert True", grade_id="a", points=1)).decode().encode("utf-16"),
+         "utf16.ipynb is not UTF-8 text (it looks like UTF-16): byte 0 is 0xff. Jupyter saves notebooks as UTF-8; "
+         "open it in JupyterLab and save it again there"),
+        ("no_grade_id", nb(_graded("assert True", points=1)),
+         f"no_grade_id.ipynb: cell 1 is a graded cell without a grade id (its nbgrader metadata was changed); {fresh}"),
+        ("string_points", nb(_graded("assert True", grade_id="ex_test", points="2")),
+         "string_points.ipynb: graded cell ex_test (cell 1) has points '2', not a number >= 0"),
+    ]
+
+
+@pytest.mark.parametrize("name, data, words", _broken_lessons(), ids=[c[0] for c in _broken_lessons()])
+def test_check_on_a_file_that_is_not_a_lesson_says_so_in_one_line(tmp_path, name, data, words):
+    (tmp_path / f"{name}.ipynb").write_bytes(data)
+    exe = Path(sys.executable).parent / "snakekit"
+    r = subprocess.run([str(exe), "check", f"{name}.ipynb"], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert r.stderr.startswith("snakekit check: ") and words in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr + r.stdout
+
+
+@pytest.mark.parametrize("body, stopped", [
+    ("while True:\n    pass", "stopped: cell 2 ran longer than 3 s and was stopped (an endless loop, or a long run"),
+    ("import os\nos._exit(1)", "stopped: the Python kernel died while running cell 2 (the process ended"),
+])
+def test_check_reports_a_cell_that_never_ends_or_kills_the_kernel(tmp_path, body, stopped):
+    import nbformat
+    from nbformat.v4 import new_notebook
+
+    cells = [_graded("assert 1 + 1 == 2", grade_id="first_test", points=1),
+             _graded(body, grade_id="stuck_test", points=2), _graded("assert True", grade_id="after_test", points=3)]
+    nbformat.write(new_notebook(cells=cells), tmp_path / "lesson.ipynb")
+    exe = Path(sys.executable).parent / "snakekit"
+    r = subprocess.run([str(exe), "check", "--timeout", "3", "lesson.ipynb"], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 1, r.stdout + r.stderr
+    rows = [line.split() for line in r.stdout.splitlines()]
+    assert ["first_test", "1", "pt", "passed"] in rows
+    assert ["stuck_test", "2", "pt", "FAILED", "stopped", "here", "(see", "below)"] in rows
+    assert ["after_test", "3", "pt", "FAILED", "not", "run", "(cell", "2", "stopped", "the", "run)"] in rows
+    assert "1 of 3 exercises passed, 1 of 6 points" in r.stdout
+    assert stopped in r.stdout and "Traceback" not in r.stdout + r.stderr
+
+
+@pytest.mark.parametrize("value", ["nan", "0", "-5", "inf"])
+def test_check_timeout_must_be_a_time(tmp_path, value):
+    exe = Path(sys.executable).parent / "snakekit"
+    r = subprocess.run([str(exe), "check", "--timeout", value, "lesson.ipynb"], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2
+    assert "argument --timeout: --timeout must be a finite number > 0 and <= 86400 [s]" in r.stderr

@@ -103,7 +103,7 @@ def test_emulator_command_prints_a_port_the_sdk_can_use():
 
 def test_emulator_command_rejects_a_bad_option():
     r = subprocess.run(SNAKEKIT + ["emulator", "--drop", "2"], capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and "drop is a probability in [0, 1], got 2.0" in r.stderr
+    assert r.returncode == 2 and "Faults.drop must be a finite number from 0 to 1, got 2.0. It is a probability" in r.stderr
 
 
 # --- `snakekit check`: a lesson's checks from a terminal ------------------------------------

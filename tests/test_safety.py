@@ -464,7 +464,7 @@ def test_a_killed_host_leaves_the_arm_stopped_not_running_to_its_goal():
     ({"retries": "x"}, "retries must be a whole number"), ({"retries": -1}, "retries must be in 0..100"),
     ({"retries": 1.5}, "retries must be a whole number"),
     ({"profile_velocity": "x"}, "profile_velocity must be a whole number"),
-    ({"profile_acceleration": 0}, "profile_acceleration must be in 1..32767"),
+    ({"profile_acceleration": 0}, "profile_acceleration must be a whole number from 1 to 32767"),
     ({"watchdog": 5}, "watchdog must be 0 (off) or 0.02..2.54 s"),
 ])
 def test_bad_driver_options_are_snakekit_errors_before_the_port_opens(options, words):

@@ -52,7 +52,7 @@ def test_reference_follows_the_firmware_profile_timing():
 
 
 def test_a_large_step_saturates_the_torque():
-    with SimRobot(profile_velocity=0) as robot:  # velocity 0: no profile, a step
+    with SimRobot(profile_velocity=0, any_profile=True) as robot:  # velocity 0: no profile, a step
         robot.command([1.0, 0, 0, 0, 0])
         efforts = []
         for _ in range(100):
@@ -239,7 +239,7 @@ def test_real_time_and_fast_modes_give_the_same_motion():
 
 def test_goals_without_a_profile_jump_within_one_step():
     tr = Trajectory([0.0, 0.2], [[0] * 5, [0.05, 0, 0, 0, -0.05]])  # 0.25 rad/s: inside limits
-    with SimRobot(profile_velocity=0) as robot:
+    with SimRobot(profile_velocity=0, any_profile=True) as robot:
         run = robot.run(tr, settle=1.0)
         assert robot.data.act[0] == pytest.approx(0.05, abs=1e-12)  # the servo's reference
     np.testing.assert_allclose(run.measured.positions[-1], [0.05, 0, 0, 0, -0.05], atol=5e-3)

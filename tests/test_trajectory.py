@@ -127,7 +127,7 @@ def test_resample_interpolates_linearly():
     assert len(r) == 11
     np.testing.assert_allclose(r.times, np.arange(11) / 10)
     np.testing.assert_allclose(r.positions[:, 0], 0.4 * np.arange(11) / 10, atol=1e-15)
-    with pytest.raises(snakekit.ConfigurationError, match=r"rate must be a finite number > 0 \[Hz\], got 0"):
+    with pytest.raises(snakekit.ConfigurationError, match=r"rate must be a finite number > 0 and <= 10000 \[Hz\], got 0"):
         small().resample(0)
     with pytest.raises(snakekit.TrajectoryError, match="resample needs a rate > 0 \\[Hz\\] or times, got neither"):
         small().resample()

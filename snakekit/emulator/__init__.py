@@ -52,7 +52,10 @@ def make_emulated_robot(*, motion: str = "mujoco", faults: Faults | None = None,
     import warnings
 
     from ..hardware import DynamixelSnake
+    from ..validate import options_of
 
+    options_of(DynamixelSnake, robot_options, "the 'emulator' backend", given=("port", "baudrate", "ids"),
+               also=("motion", "faults", "q0", "timing", "boot_time", "baudrate", "ids"))
     bus = BusEmulator(ids=ids, motion=motion, q0=q0, timing=timing, boot_time=boot_time,
                       baudrate=baudrate, faults=faults or Faults(), tcp=tcp, latency_timer=latency_timer).start()
     try:

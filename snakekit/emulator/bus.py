@@ -23,10 +23,10 @@ import time
 import traceback
 from dataclasses import dataclass
 
-import numpy as np
 
 from ..errors import ConfigurationError, InputTypeError
 from ..model import SPEC, SnakeSpec
+from ..validate import as_configuration
 from . import protocol as p
 from .control_table import FIRMWARE_VERSION_ADDRESS, MODEL_NUMBER_ADDRESS, field_at, to_signed
 from .faults import NO_FAULTS, Faults
@@ -113,7 +113,7 @@ class BusEmulator:
         if isinstance(latency_timer, bool) or not isinstance(latency_timer, int) or not 0 <= latency_timer <= 255:
             raise ConfigurationError(f"latency_timer is a whole number of milliseconds, 1..255 as on an FTDI chip "
                                      f"(0: not modelled), got {latency_timer!r}")
-        q0 = spec.home if q0 is None else np.asarray(q0, dtype=float)
+        q0 = spec.home if q0 is None else as_configuration(q0, spec, "q0")
         if isinstance(motion, str):
             if motion not in MOTION_SOURCES:
                 raise ConfigurationError(f"unknown motion source '{motion}'; choose one of {', '.join(MOTION_SOURCES)}")

@@ -8,7 +8,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import ConfigurationError
+from ..validate import MAX_DURATION, number
+
+#: The latest a delayed reply may come [s]: far past the SDK's timeout, and the driver's.
+MAX_DELAY_TIME = 10.0
 
 
 @dataclass(frozen=True)
@@ -40,11 +43,15 @@ class Faults:
 
     def __post_init__(self):
         for name in ("drop", "corrupt", "delay"):
-            v = getattr(self, name)
-            if not 0.0 <= v <= 1.0:
-                raise ConfigurationError(f"Faults.{name} is a probability in [0, 1], got {v}")
-        if self.delay_time < 0 or self.overload_after < 0:
-            raise ConfigurationError("Faults.delay_time and Faults.overload_after are durations >= 0 s")
+            number(getattr(self, name), f"Faults.{name}", at_least=0, at_most=1,
+                   hint="It is a probability (0.1 = 10 % of packets)")
+        number(self.delay_time, "Faults.delay_time", "s", at_least=0, at_most=MAX_DELAY_TIME,
+               hint="It is how late a delayed reply arrives (the SDK gives up after ~34 ms)")
+        number(self.overload_after, "Faults.overload_after", "s", at_least=0, at_most=MAX_DURATION,
+               hint="It is how long after the faults are set the overload alert comes")
+        if self.count is not None:
+            number(self.count, "Faults.count", at_least=0, integer=True, hint="It is how many packet faults are "
+                   "injected before they stop (None: never stop)")
         object.__setattr__(self, "missing", tuple(int(i) for i in self.missing))
         object.__setattr__(self, "overload", tuple(int(i) for i in self.overload))
 

@@ -137,8 +137,9 @@ class MujocoMotion(MotionSource):
                  profile_acceleration: int = 0):
         from ..sim import SimRobot  # MuJoCo only when this source is used
 
+        # the registers as the servos hold them: 0 (no profile) is the firmware's power-on value
         self.sim = SimRobot(q0=q0, spec=spec, profile_velocity=profile_velocity,
-                            profile_acceleration=profile_acceleration)
+                            profile_acceleration=profile_acceleration, any_profile=True)
         m = self.sim.model
         self._gain = m.actuator_gainprm[:, 0].copy()
         self._bias = m.actuator_biasprm[:, :3].copy()

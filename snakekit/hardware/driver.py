@@ -50,7 +50,7 @@ from .registers import (BUS_WATCHDOG, FIRMWARE_VERSION, GOAL_POSITION, HARDWARE_
                         TORQUE_ENABLE, VELOCITY_UNIT, decode_hardware_error, decode_state, implausible_state,
                         load_to_torque, position_bytes, position_limit_ticks, radians_to_ticks, ticks_to_radians,
                         to_signed, velocity_to_radians_per_second)
-from .options import ON_CLOSE, check_options, port_name
+from .options import ON_CLOSE, check_baudrate, check_options, port_name
 from .startup import check_eeprom
 from .stopping import StopMixin
 
@@ -110,6 +110,7 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
                  profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION,
                  retries: int = 3, torque: bool = True, reboot_faulted: bool = False,
                  fix_eeprom: bool = True, watchdog: float = 0.5):
+        baudrate = check_baudrate(baudrate)
         super().__init__(spec)
         self.closed = True  # until the port is open: close() has nothing to release
         self._keepalive = None

@@ -8,8 +8,9 @@ import os
 
 from ..errors import ConfigurationError, InputTypeError
 from ..model import SnakeSpec
-from ..profile_planner import VELOCITY_UNIT
-from .registers import velocity_limit_units
+from ..profile_planner import check_profile
+from ..validate import number
+from .bus import SUPPORTED_BAUD_RATES
 
 ON_CLOSE = ("torque_off", "hold")
 
@@ -39,7 +40,8 @@ def _whole(value, name: str, low: int, high: int | None = None) -> int:
 def check_options(spec: SnakeSpec, ids, on_close, retries, profile_velocity, profile_acceleration, watchdog):
     """``(ids, retries, profile_velocity, profile_acceleration, watchdog)``, checked and normalised.
 
-    The profile velocity may not exceed the joint speed limit (nor be 0: no profile, full speed).
+    The profile velocity may not exceed the joint speed limit (nor be 0: no profile, full speed):
+    :func:`snakekit.profile_planner.check_profile`, which the simulator uses too.
     """
     if ids is None:
         ids = spec.servo_ids
@@ -51,15 +53,14 @@ def check_options(spec: SnakeSpec, ids, on_close, retries, profile_velocity, pro
     if on_close not in ON_CLOSE:
         raise ConfigurationError(f"on_close must be one of {', '.join(map(repr, ON_CLOSE))}, got {on_close!r}")
     retries = _whole(retries, "retries", 0, 100)
-    top = velocity_limit_units(spec)
-    if isinstance(profile_velocity, numbers.Integral) and not isinstance(profile_velocity, bool) and (
-            profile_velocity == 0 or profile_velocity > top):
-        raise ConfigurationError(
-            f"profile_velocity {profile_velocity} would let the servos move at "
-            f"{'full speed (0 = no profile)' if profile_velocity == 0 else f'{profile_velocity * VELOCITY_UNIT:.2f} rad/s'}, "
-            f"over the {spec.velocity_limit} rad/s joint speed limit; use 1..{top} (0.229 rev/min units)")
-    profile_velocity = _whole(profile_velocity, "profile_velocity", 1, top)
-    profile_acceleration = _whole(profile_acceleration, "profile_acceleration", 1, 32767)
+    profile_velocity, profile_acceleration = check_profile(profile_velocity, profile_acceleration, spec)
     if not isinstance(watchdog, numbers.Real) or not (watchdog == 0 or 0.02 <= watchdog <= 2.54):
         raise ConfigurationError(f"watchdog must be 0 (off) or 0.02..2.54 s, got {watchdog!r}")
     return ids, retries, profile_velocity, profile_acceleration, float(watchdog)
+
+
+def check_baudrate(baudrate) -> int:
+    """``baudrate`` [baud] as an int, or an error naming the rates to use."""
+    return number(baudrate, "baudrate", "baud", at_least=1, integer=True,
+                  hint=f"Use {SUPPORTED_BAUD_RATES}, the rate set in the servos' Baud Rate register (the kit's "
+                  "arm: 4000000)")

@@ -1,0 +1,161 @@
+"""A lesson's checks from a terminal (``snakekit check LESSON.ipynb``).
+
+The notebook runs top to bottom in a fresh kernel, in its own folder as in JupyterLab, and
+each graded cell becomes one row: grade id, points, passed or failed, and the first line of
+the message the student would see under the cell. The file itself is not changed.
+
+What can go wrong before or while it runs is said in one line, never as a traceback: a file
+that is not a notebook (empty, plain text, JSON of another kind, not UTF-8), a graded cell
+whose nbgrader metadata was edited, a cell that runs past the time limit, a kernel that dies.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+
+from .errors import FileFormatError
+
+#: What to do with a lesson file that can't be used as it is.
+FRESH_COPY = "take a fresh copy of the lesson from the kit's notebooks/ folder and copy your answers into it"
+
+
+def read_lesson(path):
+    """The notebook at ``path`` (nbformat v4), with its graded cells' metadata checked.
+
+    Raises:
+        FileFormatError: the file is empty, not UTF-8, not JSON, not a Jupyter notebook, or a
+            graded cell lacks its grade id or has points that are not a number.
+    """
+    import nbformat
+
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise FileFormatError(f"{path} could not be read ({e.strerror or e})") from None
+    if not data.strip():
+        raise FileFormatError(f"{path} is empty, not a notebook; {FRESH_COPY}")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        kind = " (it looks like UTF-16)" if data[:2] in (b"\xff\xfe", b"\xfe\xff") or b"\x00" in data[:8] else ""
+        raise FileFormatError(f"{path} is not UTF-8 text{kind}: byte {e.start} is 0x{data[e.start]:02x}. Jupyter "
+                              "saves notebooks as UTF-8; open it in JupyterLab and save it again there, or "
+                              f"{FRESH_COPY}") from None
+    try:
+        raw = json.loads(text)
+    except ValueError:
+        start = text.strip().splitlines()[0][:40]
+        raise FileFormatError(f"{path} is not a Jupyter notebook: it is not JSON (it starts with {start!r}), "
+                              f"perhaps another file renamed to .ipynb; {FRESH_COPY}") from None
+    if not isinstance(raw, dict) or not isinstance(raw.get("cells"), list):
+        raise FileFormatError(f"{path} is JSON but not a Jupyter notebook (a notebook is a JSON object with a list "
+                              f"of cells; this has no 'cells' list); {FRESH_COPY}")
+    try:
+        with warnings.catch_warnings():  # nbformat's own warnings (a cell without an id...): not the student's
+            warnings.simplefilter("ignore")
+            nb = nbformat.reads(text, as_version=4)
+            nbformat.validate(nb)
+    except Exception as e:  # nbformat's ValidationError, or its own errors on JSON of another shape
+        why = str(e).strip().splitlines()[0][:160] if str(e).strip() else type(e).__name__
+        raise FileFormatError(f"{path} is JSON but not a Jupyter notebook ({why}); {FRESH_COPY}") from None
+    for index, cell in enumerate(nb.cells):
+        meta = cell.metadata.get("nbgrader")
+        if cell.cell_type != "code" or not isinstance(meta, dict) or not meta.get("grade"):
+            continue
+        gid, points = meta.get("grade_id"), meta.get("points", 0)
+        if not isinstance(gid, str) or not gid:
+            raise FileFormatError(f"{path}: cell {index + 1} is a graded cell without a grade id (its nbgrader "
+                                  f"metadata was changed); {FRESH_COPY}")
+        if isinstance(points, bool) or not isinstance(points, (int, float)) or not math.isfinite(points) \
+                or points < 0:
+            raise FileFormatError(f"{path}: graded cell {gid} (cell {index + 1}) has points {points!r}, not a "
+                                  f"number >= 0 (its nbgrader metadata was changed); {FRESH_COPY}")
+    return nb
+
+
+def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
+    """Run a lesson notebook top to bottom and report each exercise's check.
+
+    Prints one row per graded cell (grade id, points, passed or failed, the first line of
+    the message) and a total; returns 0 when every check passed, 1 otherwise. A cell that
+    runs longer than ``timeout`` [s], or a kernel that dies, stops the run: the rows say
+    which cell, and the graded cells after it count as not run.
+
+    Raises:
+        FileFormatError: the file is not a lesson notebook (:func:`read_lesson`).
+    """
+    import nbclient
+    from nbclient.exceptions import CellTimeoutError, DeadKernelError
+
+    out = out or sys.stdout
+    path = Path(path)
+    nb = read_lesson(path)
+    graded = [c for c in nb.cells if c.cell_type == "code" and c.metadata.get("nbgrader", {}).get("grade")]
+    if not graded:
+        print(f"{path}: no graded exercise in this notebook (a lesson from notebooks/ has them)", file=out)
+        return 1
+    running = []
+    client = nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3", allow_errors=True,
+                                     on_cell_start=lambda cell, cell_index: running.append(cell_index),
+                                     resources={"metadata": {"path": str(path.resolve().parent)}})
+    stopped = ""
+    # The kernel's own log (its start-up notes, or a traceback when it is shut down in the middle of
+    # a cell) is not the student's output: it goes to a file, and its last line is shown if it dies.
+    with tempfile.TemporaryFile("w+") as log:
+        try:
+            client.execute(stderr=log)
+        except CellTimeoutError:
+            stopped = (f"cell {running[-1] + 1} ran longer than {timeout:g} s and was stopped (an endless loop, "
+                       "or a long run: run it in JupyterLab to see, or give more time with --timeout)")
+        except DeadKernelError:
+            log.seek(0)
+            said = [line.strip() for line in log if line.strip() and "WARNING" not in line]
+            where = f"while running cell {running[-1] + 1}" if running else "before the first cell"
+            stopped = (f"the Python kernel died {where} (the process ended: os._exit, a crash in a compiled "
+                       "library, or out of memory)" + (f"; its last words: {said[-1][:200]}" if said else "")
+                       + "; restart the kernel in JupyterLab and run that cell to see")
+    last = (running[-1] if running else 0) if stopped else len(nb.cells)
+    rows, got, total, failed = [], 0, 0, 0
+    others = []
+    for index, cell in enumerate(nb.cells):
+        if cell.cell_type != "code":
+            continue
+        errors = [o for o in cell.get("outputs", []) if o.output_type == "error"]
+        meta = cell.metadata.get("nbgrader", {})
+        if meta.get("grade"):
+            points = meta.get("points", 0)
+            total += points
+            if index >= last:
+                failed += 1
+                rows.append((meta["grade_id"], points, "FAILED", "stopped here (see below)" if index == last
+                             else f"not run (cell {last + 1} stopped the run)"))
+            elif errors:
+                failed += 1
+                e = errors[0]
+                text = str(e.get("evalue", "")).strip().splitlines()
+                first = text[0] if text else ""
+                message = first if e.ename in ("CheckFailed", "ShortcutError") else f"{e.ename}: {first}"
+                rows.append((meta["grade_id"], points, "FAILED", message))
+            else:
+                got += points
+                rows.append((meta["grade_id"], points, "passed", ""))
+        elif errors and not meta.get("solution"):
+            others.append(f"cell {index + 1}: {errors[0].ename}: {str(errors[0].evalue).strip()[:120]}")
+        elif errors:
+            others.append(f"answer cell {meta.get('grade_id')}: {errors[0].ename}: {str(errors[0].evalue).strip()[:120]}")
+    width = max(len(r[0]) for r in rows)
+    print(f"{path.name}", file=out)
+    for grade_id, points, status, message in rows:
+        print(f"  {grade_id:<{width}}  {points:>2} pt  {status:<6}  {message}".rstrip(), file=out)
+    print(f"  {len(rows) - failed} of {len(rows)} exercises passed, {got:g} of {total:g} points", file=out)
+    for line in others:
+        print(f"  also failed: {line}", file=out)
+    if stopped:
+        print(f"  stopped: {stopped}", file=out)
+    return 0 if failed == 0 else 1
