@@ -13,7 +13,7 @@ import os as _os
 _os.environ.setdefault("MUJOCO_GL", "egl")
 
 from .errors import (  # noqa: E402
-    BackendError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
+    BackendError, CheckFailed, CollisionError, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
     InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError,
     ServoMismatchError, ShapeError, ShortcutError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
@@ -26,6 +26,7 @@ _LAZY = {
     **dict.fromkeys(("forward_kinematics", "inverse_kinematics", "jacobian", "joint_frames",
                      "planar_jacobian", "tool_pose_2d", "workspace_points", "workspace_boundary",
                      "closest_reachable_point"), "kinematics"),
+    **dict.fromkeys(("clearance", "collides"), "collision"),
     **dict.fromkeys(("Trajectory", "joint_trajectory", "side_sweep"), "trajectory"),
     **dict.fromkeys(("JointState", "Run", "make_robot"), "robot"),
     **dict.fromkeys(("as_configuration", "check_limits"), "validate"),
@@ -34,7 +35,7 @@ _LAZY = {
 __all__ = [
     "SPEC", "SnakeSpec", *_LAZY,
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
-    "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError", "BackendError",
+    "LimitError", "CollisionError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError", "BackendError",
     "CommunicationError", "HardwareError", "ServoMismatchError", "InstructionError", "ViewerError",
     "MissingDependencyError", "PacketError", "CheckFailed", "ShortcutError",
 ]

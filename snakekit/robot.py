@@ -8,8 +8,9 @@
 >>> run.limits_held(), bool(abs(state.positions - [0.5, -0.3, 0.2, 0, 0]).max() < 0.01)
 (True, True)
 
-Every backend refuses a command or trajectory outside the joint limits *before* anything
-moves, and turns torque off (or holds) when closed, even after an exception.
+Every backend refuses a command or trajectory outside the joint limits, or whose path folds
+the arm onto itself (:mod:`snakekit.collision`), *before* anything moves, and turns torque
+off (or holds) when closed, even after an exception.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import BackendError, FileFormatError, InputTypeError, LimitError, ShapeError
+from .errors import BackendError, CollisionError, FileFormatError, InputTypeError, LimitError, ShapeError
 from .model import SPEC, SnakeSpec
 from .progress import LONG_RUN, TextProgress
 from .trajectory import Trajectory, joint_trajectory
@@ -188,6 +189,8 @@ class Robot(ABC):
     def __init__(self, spec: SnakeSpec = SPEC):
         self.spec = spec
         self.closed = False
+        #: the last goal sent [rad] (None before the first): a command's path starts there
+        self.last_goal: np.ndarray | None = None
 
     # --- what a backend provides -------------------------------------------------------
 
@@ -222,9 +225,48 @@ class Robot(ABC):
                                f"snakekit.make_robot('{self.backend}')")
 
     def command(self, q) -> None:
-        """Send a position goal ``q`` [rad]. Raises :class:`LimitError` outside the limits."""
+        """Send a position goal ``q`` [rad].
+
+        Raises:
+            LimitError: ``q`` is outside the joint limits.
+            CollisionError: the straight path from the last goal sent (or, before the first,
+                from the present position) to ``q`` brings two links that are not
+                neighbours closer than ``spec.collision_margin``. Nothing is sent.
+        """
         self._check_open()
-        self._send(check_limits(q, self.spec, "commanded q"))
+        q = check_limits(q, self.spec, "commanded q")
+        start = self.read().positions if self.last_goal is None else self.last_goal
+        self._check_path(np.array([0.0, 1.0]), np.array([start, q]), "command")
+        self._send(q)
+        self.last_goal = q
+
+    def _check_path(self, times: np.ndarray, positions: np.ndarray, what: str) -> None:
+        """Refuse a path that folds the arm onto itself (:func:`snakekit.collision.first_collision`)."""
+        from .collision import first_collision, worst_between  # Pinocchio only when a goal is checked
+
+        hit = first_collision(times, positions, spec=self.spec)
+        if hit is not None and what == "command" and hit.time == 0.0:
+            # Already folded (a backend started there): only the goal is judged, so the arm can leave.
+            hit = first_collision(times[1:], positions[1:], spec=self.spec)
+        if hit is None:
+            return
+        margin = self.spec.collision_margin
+        k = min(int(np.searchsorted(times, hit.time, side="right")), len(times) - 1)  # the goal after the hit
+        worst = worst_between(positions[max(k - 1, 0)], positions[k], times[max(k - 1, 0)], times[k], spec=self.spec)
+        if what == "command":
+            where = ("at the goal" if hit.time == 1.0 else
+                     f"{100 * hit.time:.0f} % of the way from the last goal, on the straight path")
+            deepest = "at the goal" if worst.time == 1.0 else f"{100 * worst.time:.0f} % of the way"
+            when = None
+        else:
+            where, when = f"at t = {hit.time:.3f} s", hit.time
+            deepest = f"at t = {worst.time:.3f} s"
+        raise CollisionError(
+            f"the {what} would fold the arm onto itself: {where}, {hit.links[0]} and {hit.links[1]} come "
+            f"closer than the {1000 * margin:.0f} mm margin, and {deepest} "
+            f"{worst.describe()} (q = {np.round(worst.q, 3).tolist()} rad). Nothing was sent. Choose goals "
+            "that keep the links apart (snakekit.clearance(q) says how far apart they are), or go "
+            "around through a more open pose.", when, hit.links, hit.distance, hit.q, margin)
 
     def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5,
             progress: bool | None = None) -> Run:
@@ -267,6 +309,7 @@ class Robot(ABC):
                 self._advance(t0 + min(t_goal, t_rec))
                 if k < n_goals and t_goal <= t_rec:
                     self._send(goals[k])
+                    self.last_goal = goals[k]
                     sent_t[k] = self._now() - t0
                     k += 1
                     if bar is not None:
@@ -296,6 +339,7 @@ class Robot(ABC):
                              (len(trajectory), trajectory.n_joints),
                              f"the arm has {self.spec.n_joints} joints: give one column per joint")
         trajectory.check_limits(self.spec)
+        self._check_path(trajectory.times, trajectory.positions, "trajectory")
         present = self.read().positions
         gap = np.abs(trajectory.positions[0] - present)
         if gap.max() > self.start_tolerance:
