@@ -215,3 +215,38 @@ def _split(c: _Checker, q0, q1, d0, d1, t0, t1, margin) -> Clearance | None:
     if dm.min() < margin:
         return _at(c, dm, qm, tm)
     return _split(c, qm, q1, dm, d1, tm, t1, margin)
+
+
+def check_path(times, positions, *, what: str = "trajectory", spec: SnakeSpec = SPEC) -> None:
+    """Raise :class:`~snakekit.errors.CollisionError` if the straight path through
+    ``positions`` (N, n_joints) [rad] at ``times`` (N,) [s] brings two non-neighbouring links
+    closer than ``spec.collision_margin`` (:func:`first_collision`).
+
+    The message names when (the time, or for ``what="command"``, with times ``[0, 1]``, how
+    far along the move from the last goal), the two links, and the closest they come on that
+    stretch. For a command whose start is already too close (a robot started folded), only
+    the goal is judged, so the arm can move out.
+    """
+    times, positions = np.asarray(times, dtype=float), np.asarray(positions, dtype=float)
+    hit = first_collision(times, positions, spec=spec)
+    if hit is not None and what == "command" and hit.time == 0.0:
+        hit = first_collision(times[1:], positions[1:], spec=spec)
+    if hit is None:
+        return
+    margin = spec.collision_margin
+    k = min(int(np.searchsorted(times, hit.time, side="right")), len(times) - 1)  # the goal after the hit
+    worst = worst_between(positions[max(k - 1, 0)], positions[k], times[max(k - 1, 0)], times[k], spec=spec)
+    if what == "command":
+        where = ("at the goal" if hit.time == 1.0 else
+                 f"{100 * hit.time:.0f} % of the way from the last goal, on the straight path")
+        deepest = "at the goal" if worst.time == 1.0 else f"{100 * worst.time:.0f} % of the way"
+        when = None
+    else:
+        where, when = f"at t = {hit.time:.3f} s", hit.time
+        deepest = f"at t = {worst.time:.3f} s"
+    raise CollisionError(
+        f"the {what} would fold the arm onto itself: {where}, {hit.links[0]} and {hit.links[1]} come "
+        f"closer than the {1000 * margin:.0f} mm margin, and {deepest} {worst.describe()} "
+        f"(q = {np.round(worst.q, 3).tolist()} rad). Nothing was sent. Choose goals that keep the links "
+        "apart (snakekit.clearance(q) says how far apart they are), or go around through a more open pose.",
+        when, hit.links, hit.distance, hit.q, margin)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import BackendError, CollisionError, FileFormatError, InputTypeError, LimitError, ShapeError
+from .errors import BackendError, FileFormatError, InputTypeError, LimitError, ShapeError
 from .model import SPEC, SnakeSpec
 from .progress import LONG_RUN, TextProgress
 from .trajectory import Trajectory, joint_trajectory
@@ -241,32 +241,10 @@ class Robot(ABC):
         self.last_goal = q
 
     def _check_path(self, times: np.ndarray, positions: np.ndarray, what: str) -> None:
-        """Refuse a path that folds the arm onto itself (:func:`snakekit.collision.first_collision`)."""
-        from .collision import first_collision, worst_between  # Pinocchio only when a goal is checked
+        """Refuse a path that folds the arm onto itself (:func:`snakekit.collision.check_path`)."""
+        from .collision import check_path  # Pinocchio only when a goal is checked: runs load without it
 
-        hit = first_collision(times, positions, spec=self.spec)
-        if hit is not None and what == "command" and hit.time == 0.0:
-            # Already folded (a backend started there): only the goal is judged, so the arm can leave.
-            hit = first_collision(times[1:], positions[1:], spec=self.spec)
-        if hit is None:
-            return
-        margin = self.spec.collision_margin
-        k = min(int(np.searchsorted(times, hit.time, side="right")), len(times) - 1)  # the goal after the hit
-        worst = worst_between(positions[max(k - 1, 0)], positions[k], times[max(k - 1, 0)], times[k], spec=self.spec)
-        if what == "command":
-            where = ("at the goal" if hit.time == 1.0 else
-                     f"{100 * hit.time:.0f} % of the way from the last goal, on the straight path")
-            deepest = "at the goal" if worst.time == 1.0 else f"{100 * worst.time:.0f} % of the way"
-            when = None
-        else:
-            where, when = f"at t = {hit.time:.3f} s", hit.time
-            deepest = f"at t = {worst.time:.3f} s"
-        raise CollisionError(
-            f"the {what} would fold the arm onto itself: {where}, {hit.links[0]} and {hit.links[1]} come "
-            f"closer than the {1000 * margin:.0f} mm margin, and {deepest} "
-            f"{worst.describe()} (q = {np.round(worst.q, 3).tolist()} rad). Nothing was sent. Choose goals "
-            "that keep the links apart (snakekit.clearance(q) says how far apart they are), or go "
-            "around through a more open pose.", when, hit.links, hit.distance, hit.q, margin)
+        check_path(times, positions, what=what, spec=self.spec)
 
     def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5,
             progress: bool | None = None) -> Run:
