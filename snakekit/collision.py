@@ -110,10 +110,15 @@ class _Checker:
             for j in range(a, b):
                 self.radii[k, j] = (b - (j + 1)) * spec.link_length + reach[b]
 
-    def distances(self, q: np.ndarray) -> np.ndarray:
+    def distances(self, q: np.ndarray) -> list[float]:
         """Signed distance [m] of every pair at ``q`` (checked joint angles)."""
         pin.computeDistances(self.model, self.data, self.geometry, self.gdata, q)
-        return np.array([r.min_distance for r in self._results])
+        return [r.min_distance for r in self._results]
+
+    def closest(self, q: np.ndarray) -> tuple[int, float]:
+        """The closest pair at ``q`` (checked joint angles): its index and signed distance [m]."""
+        k = pin.computeDistances(self.model, self.data, self.geometry, self.gdata, q)
+        return k, self._results[k].min_distance
 
 
 @lru_cache(maxsize=4)
@@ -124,24 +129,22 @@ def _checker(spec: SnakeSpec) -> _Checker:
 def pair_distances(q, *, spec: SnakeSpec = SPEC) -> dict[tuple[str, str], float]:
     """Signed distance [m] between every pair of non-neighbouring bodies at ``q`` [rad]."""
     c = _checker(spec)
-    return dict(zip(c.pair_names, c.distances(as_configuration(q, spec)).tolist()))
+    return dict(zip(c.pair_names, c.distances(as_configuration(q, spec))))
 
 
 def clearance(q, *, spec: SnakeSpec = SPEC) -> Clearance:
     """The closest pair of non-neighbouring links at joint angles ``q`` [rad], and their distance."""
     c = _checker(spec)
     q = as_configuration(q, spec)
-    d = c.distances(q)
-    k = int(d.argmin())
-    return Clearance(float(d[k]), c.pair_names[k], q)
+    k, d = c.closest(q)
+    return Clearance(d, c.pair_names[k], q)
 
 
 def collides(q, *, spec: SnakeSpec = SPEC, margin: float | None = None) -> bool:
     """Whether two non-neighbouring links at ``q`` [rad] are closer than ``margin`` [m]
     (default: ``spec.collision_margin``)."""
     margin = spec.collision_margin if margin is None else margin
-    c = _checker(spec)
-    return bool(c.distances(as_configuration(q, spec)).min() < margin)
+    return _checker(spec).closest(as_configuration(q, spec))[1] < margin
 
 
 def collision_free(qs, *, spec: SnakeSpec = SPEC) -> np.ndarray:
@@ -149,7 +152,7 @@ def collision_free(qs, *, spec: SnakeSpec = SPEC) -> np.ndarray:
     non-neighbouring links at least ``spec.collision_margin`` apart."""
     c = _checker(spec)
     qs = np.asarray(qs, dtype=float)
-    return np.array([c.distances(q).min() >= spec.collision_margin for q in qs], dtype=bool)
+    return np.array([c.closest(q)[1] >= spec.collision_margin for q in qs], dtype=bool)
 
 
 def first_collision(times, positions, *, spec: SnakeSpec = SPEC) -> Clearance | None:
@@ -166,14 +169,14 @@ def first_collision(times, positions, *, spec: SnakeSpec = SPEC) -> Clearance | 
     times = np.asarray(times, dtype=float)
     D = np.array([c.distances(q) for q in positions])
     L = np.abs(np.diff(positions, axis=0)) @ c.radii.T
-    safe = ((D[:-1] + D[1:] - L) >= 2 * margin).all(axis=1)
-    for k in range(len(positions)):
-        if D[k].min() < margin:
+    bad = D.min(axis=1) < margin
+    unproven = np.append(((D[:-1] + D[1:] - L) < 2 * margin).any(axis=1), False)  # segment k: goals k, k+1
+    for k in np.flatnonzero(bad | unproven).tolist():  # in time order
+        if bad[k]:
             return _at(c, D[k], positions[k], times[k])
-        if k + 1 < len(positions) and not safe[k]:
-            hit = _split(c, positions[k], positions[k + 1], D[k], D[k + 1], times[k], times[k + 1], margin)
-            if hit is not None:
-                return hit
+        hit = _split(c, positions[k], positions[k + 1], D[k], D[k + 1], times[k], times[k + 1], margin)
+        if hit is not None:
+            return hit
     return None
 
 
@@ -186,9 +189,9 @@ def worst_between(q0, q1, t0: float = 0.0, t1: float = 1.0, *, samples: int = 20
     best = None
     for s in np.linspace(0.0, 1.0, samples):
         q = q0 + s * (q1 - q0)
-        d = c.distances(q)
-        if best is None or d.min() < best.distance:
-            best = _at(c, d, q, t0 + s * (t1 - t0))
+        k, d = c.closest(q)
+        if best is None or d < best.distance:
+            best = Clearance(d, c.pair_names[k], q, t0 + s * (t1 - t0))
     return best
 
 
@@ -208,7 +211,7 @@ def _split(c: _Checker, q0, q1, d0, d1, t0, t1, margin) -> Clearance | None:
         k = int(bound.argmin())
         return Clearance(float(bound[k]), c.pair_names[k], (q0 + q1) / 2, (t0 + t1) / 2)
     qm, tm = (q0 + q1) / 2, (t0 + t1) / 2
-    dm = c.distances(qm)
+    dm = np.array(c.distances(qm))
     hit = _split(c, q0, qm, d0, dm, t0, tm, margin)
     if hit is not None:
         return hit
