@@ -287,7 +287,6 @@ class Robot(ABC):
                 self._advance(t0 + min(t_goal, t_rec))
                 if k < n_goals and t_goal <= t_rec:
                     self._send(goals[k])
-                    self.last_goal = goals[k]
                     sent_t[k] = self._now() - t0
                     k += 1
                     if bar is not None:
@@ -298,6 +297,8 @@ class Robot(ABC):
                     r += 1
             complete = True
         finally:
+            if k:  # the next command's path starts at the last goal that was sent
+                self.last_goal = goals[k - 1]
             if bar is not None:
                 bar.close(complete=complete)
         wall = time.perf_counter() - wall0

@@ -137,8 +137,9 @@ def test_sim_refuses_a_trajectory_whose_path_folds_and_names_time_links_distance
 
 def test_sim_runs_task2_and_goes_home():
     with SimRobot() as robot:
-        run = robot.run(snakekit.side_sweep())
-        assert run.limits_held()
+        sweep = snakekit.side_sweep()
+        run = robot.run(sweep)
+        assert run.limits_held() and robot.last_goal == pytest.approx(sweep.positions[-1])
         robot.move_to([0.4, 0.3, -0.2, 0.1, 0])
         robot.home()
         robot.command([0.2, 0.2, 0.2, 0.2, 0.2])
@@ -155,11 +156,16 @@ def test_emulator_refuses_a_fold_with_nothing_on_the_bus():
             robot.run(snakekit.Trajectory([0.0, 2.0], [SAFE_A, SAFE_B]))
         assert len(bus.writes(GOAL_POSITION, 4)) == before
         assert robot.goals_sent == 0
+        robot.move_to([0.0, 0.5, 1.5, 1.5, -0.9], duration=0.5)  # the driver's run: its last goal is remembered
+        assert robot.last_goal == pytest.approx([0.0, 0.5, 1.5, 1.5, -0.9])
+        with pytest.raises(CollisionError, match="from the last goal"):
+            robot.command(SAFE_B)  # safe itself, but the straight path from the last goal swings over the base
+        before = len(bus.writes(GOAL_POSITION, 4))
         robot.command(SAFE_A)  # a safe goal still goes through (the bus thread records it soon after)
         deadline = time.monotonic() + 2.0
         while len(bus.writes(GOAL_POSITION, 4)) == before and time.monotonic() < deadline:
             time.sleep(0.01)
-        assert len(bus.writes(GOAL_POSITION, 4)) == before + 5 and robot.goals_sent == 1
+        assert len(bus.writes(GOAL_POSITION, 4)) == before + 5
 
 
 def test_sweep_command_checks_its_trajectory_before_making_a_robot(monkeypatch, capsys):
