@@ -61,6 +61,7 @@ def steps(submissions: int) -> list[Step]:
         Step("bridge", "control cycle through snakekit bridge vs the direct port; the USB latency timer",
              ["bridge.py"], 40),
         Step("sim", "Task 2: fast vs bare MuJoCo, and in real time", ["sim.py"], 85),
+        Step("collision", "self-collision check: a pose, Task 2's path, Task 2 with contacts", ["collision.py"], 15),
         Step("interactive", "Task 1 through the control panel and viewer", ["interactive.py", "--repeats", "3"], 60),
         Step("setups", "time to a lesson kernel and to JupyterLab; install size", ["setups.py", "--repeats", "3"], 40),
         Step("optimisations", "this round's changes, before and after", ["before_after.py"], 130),
@@ -404,6 +405,17 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
                 f"{c['ratio']:.2f}x | {c['target']} |")
         add(f"| `snakekit.inverse_kinematics`, {k['ik_targets']} random reachable targets | median {k['ik_median_us']:.0f} us, "
             f"95th percentile {k['ik_p95_us']:.0f} us, {100 * k['ik_success']:.1f} % solved | - | - | < 1000 us, >= 99 % |")
+    c = results.get("collision")
+    if c:
+        add(f"| self-collision: `snakekit.clearance(q)`, one pose (closest pair of non-neighbouring links) | "
+            f"{c['pose_us']:.1f} us | {c['pose_bare_us']:.1f} us (bare `pinocchio.computeDistances`) | "
+            f"{c['pose_us'] / c['pose_bare_us']:.2f}x | <= 20 us |")
+        add(f"| ... Task 2's 500 goals, path between goals included ({c['sweep_poses']} poses computed) | "
+            f"{c['sweep_ms']:.2f} ms | - | - | <= 10 ms |")
+        add(f"| ... Task 2 fast (`SimRobot.run`, check and contacts) vs a bare `mj_step` loop, same model | "
+            f"{c['task2_ours_s'] * 1000:.0f} ms | {c['task2_bare_s'] * 1000:.0f} ms | {c['task2_overhead']:.3f}x | <= 1.05x |")
+        add(f"| ... the bare loop with the links' contacts vs without | {c['task2_bare_s'] * 1000:.0f} ms | "
+            f"{c['task2_bare_no_contacts_s'] * 1000:.0f} ms | {c['contacts_cost']:.3f}x | - |")
     add("")
 
     # --- optimisations

@@ -15,8 +15,9 @@ from .host import choose_mujoco_gl as _choose_mujoco_gl
 _choose_mujoco_gl()
 
 from .errors import (  # noqa: E402
-    BackendError, BridgeError, CheckFailed, CommunicationError, ConfigurationError, FileFormatError, FileWriteError, HardwareError,
-    InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError, PacketError, PortLostError,
+    BackendError, BridgeError, CheckFailed, CollisionError, CommunicationError, ConfigurationError, FileFormatError,
+    FileWriteError, HardwareError, InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError,
+    PacketError, PortLostError,
     ServoMismatchError, ShapeError, ShortcutError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
 from .model import SPEC, SnakeSpec  # noqa: E402
@@ -28,6 +29,7 @@ _LAZY = {
     **dict.fromkeys(("forward_kinematics", "inverse_kinematics", "jacobian", "joint_frames",
                      "planar_jacobian", "tool_pose_2d", "workspace_points", "workspace_boundary",
                      "closest_reachable_point"), "kinematics"),
+    **dict.fromkeys(("clearance", "collides"), "collision"),
     **dict.fromkeys(("Trajectory", "joint_trajectory", "side_sweep"), "trajectory"),
     **dict.fromkeys(("JointState", "Run", "make_robot"), "robot"),
     **dict.fromkeys(("as_configuration", "check_limits"), "validate"),
@@ -36,8 +38,8 @@ _LAZY = {
 __all__ = [
     "SPEC", "SnakeSpec", *_LAZY,
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
-    "LimitError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError", "BackendError",
-    "BridgeError",
+    "LimitError", "CollisionError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError",
+    "BackendError", "BridgeError",
     "CommunicationError", "HardwareError", "PortLostError", "ServoMismatchError", "InstructionError", "ViewerError",
     "MissingDependencyError", "PacketError", "CheckFailed", "ShortcutError",
 ]

@@ -154,3 +154,20 @@ class CheckFailed(SnakekitError, AssertionError):
 
 class ShortcutError(CheckFailed):
     """A library function was called inside an exercise that asks the student to write it."""
+
+
+class CollisionError(LimitError):
+    """A goal or a path would bring two links that are not neighbours in the chain closer
+    than the spec's collision margin (the arm folding onto itself); nothing was sent.
+
+    Attributes:
+        time: when on the path [s] (None for a single goal).
+        links: the two bodies (``"base_link"``, ``"link1"``...).
+        distance: their distance there [m] (negative: they would overlap by that much).
+        q: the joint angles there [rad].
+        margin: the least distance allowed [m].
+    """
+
+    def __init__(self, message: str, time, links, distance: float, q, margin: float):
+        self.time, self.links, self.distance, self.q, self.margin = time, tuple(links), distance, q, margin
+        super().__init__(message)

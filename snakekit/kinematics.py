@@ -1,7 +1,9 @@
 """Forward kinematics, Jacobians and inverse kinematics, on Pinocchio.
 
 Pinocchio reads the URDF generated from :data:`snakekit.model.SPEC`. Poses are 4x4
-homogeneous transforms ``T_world_<frame>`` in metres; angles in radians.
+homogeneous transforms ``T_world_<frame>`` in metres; angles in radians. IK, the closest
+reachable point and the workspace leave out poses that fold the arm onto itself
+(:mod:`snakekit.collision`).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from functools import lru_cache
 import numpy as np
 import pinocchio as pin
 
+from .collision import clearance, collides, collision_free
 from .errors import NotFiniteError, ShapeError, UnreachableTargetError
 from .model import SPEC, SnakeSpec, urdf
 from .validate import as_configuration, check_count, check_limits, number, real_array  # noqa: F401  (lessons use them)
@@ -147,13 +150,14 @@ def _closest(k: _Kin, target: np.ndarray, use_heading: bool, starts, *, max_iter
 
     Projected Levenberg-Marquardt from each start: a step is kept only if it brings the tool
     closer, so every run descends to a local minimum of the distance, even with joints
-    pressed against their limits. The best of all runs is returned.
+    pressed against their limits. The best of the runs that end with the links apart is
+    returned (a folded one only if every run ends folded).
     """
     lo, hi = k.spec.lower, k.spec.upper
     rows = _PLANAR_ROWS if use_heading else _PLANAR_ROWS[:2]
     scale = np.array([1.0, 1.0, k.spec.link_length])[: len(rows)]
     eye = np.eye(len(rows))
-    best_q, best_f = None, np.inf
+    best_q, best_f, folded = None, np.inf, None
     for q in starts:
         q = np.clip(np.asarray(q, dtype=float), lo, hi)
         e = _residual(k, target, use_heading, q)
@@ -175,9 +179,11 @@ def _closest(k: _Kin, target: np.ndarray, use_heading: bool, starts, *, max_iter
             q, e, f = qn, en, fn
             if done:
                 break
-        if f < best_f:
+        if not collides(q, spec=k.spec) and f < best_f:
             best_q, best_f = q, f
-    return best_q
+        elif best_q is None:
+            folded = q
+    return folded if best_q is None else best_q
 
 
 def _closest_configuration(k: _Kin, target: np.ndarray, use_heading: bool, starts, rng) -> np.ndarray:
@@ -298,17 +304,30 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
     dist = float(np.hypot(*target_xy))
     if dist > spec.reach + tol:
         starts = starts[:3]  # certainly out of reach: a few tries find the closest point
+    folded = None  # a solution that folds the arm onto itself: searched past, never returned
     for start in starts:
         q, err = _dls(k, target, use_heading, start.copy(), tol=tol, max_iter=max_iter, damping=1e-3)
         n = float(np.abs(err).max())
+        if n < tol:
+            c = clearance(q, spec=spec)
+            if c.distance >= spec.collision_margin:
+                return q
+            folded = c
+            continue
         if n < best_err:
             best_q, best_err = q, n
-        if n < tol:
-            return q
-    best_q = _closest_configuration(k, target, use_heading, [best_q], rng)
-    closest = tool_pose_2d(best_q, spec=spec)
     what = f"({_fmt(target_xy[0])}, {_fmt(target_xy[1])}) m" + (
         f" with heading {heading:.4f} rad" if use_heading else "")
+    if folded is not None:
+        raise UnreachableTargetError(
+            f"target {what} is reached only with the arm folded onto itself: in the solutions found "
+            f"from {len(starts)} starts, {folded.describe()} (they must stay "
+            f"{1000 * spec.collision_margin:.0f} mm apart). Pick a target the arm reaches more openly, "
+            "or try another q0 or more restarts.",
+            target=(*target_xy.tolist(), *([heading] if use_heading else [])),
+            closest=tuple(target_xy.tolist()), q_closest=folded.q)
+    best_q = _closest_configuration(k, target, use_heading, [best_q], rng)
+    closest = tool_pose_2d(best_q, spec=spec)
     why = (f"it is {_fmt(dist)} m from joint 1 and the arm reaches {spec.reach:.4f} m"
            if dist > spec.reach else "the joint limits keep the tool from it")
     raise UnreachableTargetError(
@@ -319,7 +338,8 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
 
 
 def workspace_points(n: int = 5000, *, seed: int = 0, spec: SnakeSpec = SPEC) -> np.ndarray:
-    """Tool points (n, 2) [m] of uniformly random configurations inside the limits.
+    """Tool points (n, 2) [m] of uniformly random configurations inside the limits that keep
+    the links apart (:func:`snakekit.collision.collides`: folded poses are left out).
 
     Raises:
         ConfigurationError: ``n`` is not a whole number from 1 to 1,000,000.
@@ -328,9 +348,14 @@ def workspace_points(n: int = 5000, *, seed: int = 0, spec: SnakeSpec = SPEC) ->
     k = _kin(spec)
     rng = np.random.default_rng(seed)
     out = np.empty((n, 2))
-    for i, q in enumerate(rng.uniform(spec.lower, spec.upper, (n, spec.n_joints))):
-        pin.framesForwardKinematics(k.model, k.data, q)
-        out[i] = k.data.oMf[k.tool].translation[:2]
+    i = 0
+    while i < n:
+        for q in rng.uniform(spec.lower, spec.upper, (n - i, spec.n_joints)):
+            if collides(q, spec=spec):
+                continue
+            pin.framesForwardKinematics(k.model, k.data, q)
+            out[i] = k.data.oMf[k.tool].translation[:2]
+            i += 1
     return out
 
 
@@ -353,7 +378,7 @@ def boundary_configurations(*, bins: int = 120, samples: int = 20000, refine: in
 
     For each of ``bins`` directions around joint 1 it keeps the farthest tool point found
     among ``samples`` random configurations and the evenly curled ones (joints 2..n bent
-    alike), then pushes each direction's best configuration outwards with ``refine`` small
+    alike), leaving out those that fold the arm onto itself, then pushes each direction's best configuration outwards with ``refine`` small
     random steps (a step that lands in another direction improves that one). Every vertex
     is a reachable tool point.
 
@@ -369,6 +394,7 @@ def boundary_configurations(*, bins: int = 120, samples: int = 20000, refine: in
     qs[samples:, 0] = np.repeat(grid, grid.size)  # curled: joint 1 at a, joints 2..n all at b
     qs[samples:, 1:] = np.tile(grid, grid.size)[:, None]
     # filled in place: a list of ~24,000 poses would hold as many small arrays at once
+    qs = qs[collision_free(qs, spec=spec)]  # folded poses are not part of the workspace
     pts = np.empty((len(qs), 2))
     k = _kin(spec)
     for i, q in enumerate(qs):
@@ -390,7 +416,7 @@ def boundary_configurations(*, bins: int = 120, samples: int = 20000, refine: in
             q = np.clip(best_q[b] + rng.normal(0, step, n), spec.lower, spec.upper)
             p = forward_kinematics(q, spec=spec)[:2, 3]
             r, k = float(np.hypot(*p)), int(bin_of(p))
-            if r > best_r[k]:  # a farther point for whichever direction it lands in
+            if r > best_r[k] and not collides(q, spec=spec):  # farther, for whichever direction it lands in
                 best_r[k], best_q[k], best_p[k] = r, q, p
     keep = best_r > 0
     points, configurations = best_p[keep], best_q[keep]

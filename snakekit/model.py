@@ -69,6 +69,9 @@ class SnakeSpec:
         servo_ids: Dynamixel IDs from base to tip.
         link_mass: mass of one printed link bracket [kg].
         tool_mass: mass of the tool tip [kg].
+        collision_margin: the least distance two links that are not neighbours in the chain
+            may come to each other [m]: a goal or path that brings them closer is refused
+            (:mod:`snakekit.collision`).
         servo: the servo model.
     """
 
@@ -81,6 +84,7 @@ class SnakeSpec:
     servo_ids: tuple[int, ...] = (1, 2, 3, 4, 5)
     link_mass: float = 0.012
     tool_mass: float = 0.005
+    collision_margin: float = 0.005
     servo: ServoSpec = ServoSpec()
 
     @property
@@ -177,6 +181,25 @@ def _base_geometry(spec: SnakeSpec) -> list[_Box]:
     ]
 
 
+def body_names(spec: SnakeSpec = SPEC) -> tuple[str, ...]:
+    """The arm's rigid bodies from base to tip, as the URDF and MJCF name them."""
+    return ("base_link", *(f"link{i + 1}" for i in range(spec.n_joints)))
+
+
+def collision_points(spec: SnakeSpec = SPEC) -> list[np.ndarray]:
+    """The corners (N, 3) [m] of each body's parts, in the body's frame, base to tip.
+
+    A body's collision shape is the convex hull of these points: the servo it carries, its
+    printed bracket plates and the space between them (where the servo it is driven by sits),
+    so it holds every part of the body and is at most a few millimetres larger. The URDF's
+    visual boxes, the MJCF's collision meshes and the collision check
+    (:mod:`snakekit.collision`) all come from the same parts.
+    """
+    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    bodies = [_base_geometry(spec)] + [_link_geometry(spec, i)[0] for i in range(spec.n_joints)]
+    return [np.vstack([np.array(b.centre) + signs * np.array(b.size) / 2 for b in boxes]) for boxes in bodies]
+
+
 def link_mass_properties(spec: SnakeSpec = SPEC) -> list[tuple[float, np.ndarray, np.ndarray]]:
     """``(mass [kg], centre of mass [m], inertia about the CoM [kg m^2])`` of each link."""
     return [_combine(_link_geometry(spec, i)[1]) for i in range(spec.n_joints)]
@@ -269,12 +292,12 @@ def mjcf(spec: SnakeSpec = SPEC) -> str:
         f"<!-- {HEADER} -->",
         '<mujoco model="snake">',
         '  <compiler angle="radian" autolimits="true"/>',
-        # Joint axes are vertical and the links never touch anything: no contacts to compute.
-        # The only constraints are the joints' dry friction; PGS solves those fastest here
-        # (Task 2 differs from the Newton solver's by < 1e-7 rad).
-        '  <option timestep="0.001" integrator="implicitfast" solver="PGS">',
-        '    <flag contact="disable"/>',
-        "  </option>",
+        # Joint axes are vertical: the links touch only each other, when the arm folds onto
+        # itself. Contacts are computed between each body's collision hull (group 3, unseen)
+        # and those of the bodies that are not its neighbours (<contact> below). The other constraints are the
+        # joints' dry friction; PGS solves them fastest here (Task 2 differs from the Newton
+        # solver's by < 1e-7 rad).
+        '  <option timestep="0.001" integrator="implicitfast" solver="PGS"/>',
         "  <visual>",
         '    <global offwidth="1280" offheight="960"/>',
         '    <headlight ambient="0.35 0.35 0.35" diffuse="0.35 0.35 0.35" specular="0.1 0.1 0.1"/>',
@@ -283,6 +306,8 @@ def mjcf(spec: SnakeSpec = SPEC) -> str:
         '    <texture name="grid" type="2d" builtin="checker" width="256" height="256" '
         'rgb1="0.82 0.84 0.86" rgb2="0.74 0.76 0.78"/>',
         '    <material name="grid" texture="grid" texrepeat="8 8"/>',
+        *(f'    <mesh name="{name}_hull" vertex="{_v(pts.ravel())}"/>'
+          for name, pts in zip(body_names(spec), collision_points(spec))),
         "  </asset>",
         "  <default>",
         '    <geom type="box" contype="0" conaffinity="0"/>',
@@ -300,8 +325,10 @@ def mjcf(spec: SnakeSpec = SPEC) -> str:
         '    <camera name="top" pos="0.12 0 0.8" xyaxes="1 0 0 0 1 0"/>',
         '    <camera name="perspective" pos="0.14 -0.36 0.3" xyaxes="1 0 0 0 0.64 0.77"/>',
     ]
+    hull = '<geom name="{0}_collision" type="mesh" mesh="{0}_hull" group="3" rgba="1 0 0 0.3" mass="0"/>'
     for b in _base_geometry(spec):
         out.append(f'    <geom name="{b.name}" pos="{_v(b.centre)}" size="{_v(np.array(b.size) / 2)}" rgba="{b.rgba}"/>')
+    out.append("    " + hull.format("base_link"))
     indent = "    "
     for i in range(spec.n_joints):
         boxes, parts = _link_geometry(spec, i)
@@ -316,11 +343,20 @@ def mjcf(spec: SnakeSpec = SPEC) -> str:
         for b in boxes:
             out.append(f'{indent}<geom name="{b.name}" pos="{_v(b.centre)}" '
                        f'size="{_v(np.array(b.size) / 2)}" rgba="{b.rgba}" mass="0"/>')
+        out.append(indent + hull.format(f"link{i + 1}"))
     out.append(f'{indent}<site name="tool" pos="{_f(spec.tool_offset)} 0 0" size="0.004" rgba="1 0 0 1"/>')
     for _ in range(spec.n_joints):
         indent = indent[:-2]
         out.append(f"{indent}</body>")
     out.append("  </worldbody>")
+    # The pairs that may touch, listed: cheaper per step than MuJoCo's broad phase. Neighbours
+    # overlap where a bracket holds a servo, so they never count as a contact.
+    out.append("  <contact>")
+    names = body_names(spec)
+    for a in range(len(names)):
+        for b in range(a + 2, len(names)):
+            out.append(f'    <pair geom1="{names[a]}_collision" geom2="{names[b]}_collision"/>')
+    out.append("  </contact>")
     out.append("  <actuator>")
     for name in spec.joint_names:
         out.append(f'    <general name="{name}" joint="{name}"/>')

@@ -8,8 +8,9 @@
 >>> run.limits_held(), bool(abs(state.positions - [0.5, -0.3, 0.2, 0, 0]).max() < 0.01)
 (True, True)
 
-Every backend refuses a command or trajectory outside the joint limits *before* anything
-moves, and turns torque off (or holds) when closed, even after an exception.
+Every backend refuses a command or trajectory outside the joint limits, or whose path folds
+the arm onto itself (:mod:`snakekit.collision`), *before* anything moves, and turns torque
+off (or holds) when closed, even after an exception.
 """
 
 from __future__ import annotations
@@ -198,6 +199,8 @@ class Robot(ABC):
     def __init__(self, spec: SnakeSpec = SPEC):
         self.spec = spec
         self.closed = False
+        #: the last goal sent [rad] (None before the first): a command's path starts there
+        self.last_goal: np.ndarray | None = None
 
     # --- what a backend provides -------------------------------------------------------
 
@@ -232,9 +235,26 @@ class Robot(ABC):
                                f"snakekit.make_robot('{self.backend}')")
 
     def command(self, q) -> None:
-        """Send a position goal ``q`` [rad]. Raises :class:`LimitError` outside the limits."""
+        """Send a position goal ``q`` [rad].
+
+        Raises:
+            LimitError: ``q`` is outside the joint limits.
+            CollisionError: the straight path from the last goal sent (or, before the first,
+                from the present position) to ``q`` brings two links that are not
+                neighbours closer than ``spec.collision_margin``. Nothing is sent.
+        """
         self._check_open()
-        self._send(check_limits(q, self.spec, "commanded q"))
+        q = check_limits(q, self.spec, "commanded q")
+        start = self.read().positions if self.last_goal is None else self.last_goal
+        self._check_path(np.array([0.0, 1.0]), np.array([start, q]), "command")
+        self._send(q)
+        self.last_goal = q
+
+    def _check_path(self, times: np.ndarray, positions: np.ndarray, what: str) -> None:
+        """Refuse a path that folds the arm onto itself (:func:`snakekit.collision.check_path`)."""
+        from .collision import check_path  # Pinocchio only when a goal is checked: runs load without it
+
+        check_path(times, positions, what=what, spec=self.spec)
 
     def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5,
             progress: bool | None = None) -> Run:
@@ -293,6 +313,8 @@ class Robot(ABC):
                     r += 1
             complete = True
         finally:
+            if k:  # the next command's path starts at the last goal that was sent
+                self.last_goal = goals[k - 1]
             if bar is not None:
                 bar.close(complete=complete)
         wall = time.perf_counter() - wall0
@@ -316,6 +338,7 @@ class Robot(ABC):
                            f"nothing was sent. To run one this long on purpose, set robot.max_duration = "
                            f"{np.ceil(trajectory.duration):.0f} first")
         trajectory.check_limits(self.spec)
+        self._check_path(trajectory.times, trajectory.positions, "trajectory")
         present = self.read().positions
         gap = np.abs(trajectory.positions[0] - present)
         if gap.max() > self.start_tolerance:

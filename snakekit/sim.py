@@ -155,6 +155,7 @@ class SimRobot(Robot):
             rec = self._step_paced(k0, ctrl, goal_steps, rec_steps, record_at, trajectory, before, progress)
         else:
             rec = self._step_rollout(k0, ctrl, rec_steps)
+        self.last_goal = trajectory.positions[-1]
         offset = trajectory.times[0]
         return Run(Trajectory(goal_steps * dt + offset, trajectory.positions, n_joints=n),
                    Trajectory(rec_steps * dt + offset, rec[0], rec[1], n_joints=n),
@@ -215,6 +216,8 @@ class SimRobot(Robot):
                 bar.close(complete=complete)
             if not complete:
                 sent = int(np.searchsorted(k0 + goal_steps, self._steps, side="right"))
+                if sent:
+                    self.last_goal = trajectory.positions[sent - 1]
                 self.planner = before
                 self._ref = (k0, self.planner.step_velocities(k0, dt, k0 + goal_steps[:sent],
                                                               trajectory.positions[:sent]))
@@ -228,6 +231,24 @@ class SimRobot(Robot):
         if self.realtime:
             self._pace_from_now()
         self._advance(self._now() + duration)
+
+    def contacts(self) -> list[tuple[str, str, float]]:
+        """The pairs of links touching now: ``(body, body, distance [m])``, base side first,
+        the deepest contact of each pair (negative: they overlap by that much).
+
+        The checks of :meth:`command` and :meth:`run` keep the arm from folding onto
+        itself; the servos' own side (:meth:`set_servo_goals`, the emulated bus) does not,
+        and a fold forced that way shows here: MuJoCo computes contacts between the collision
+        hulls of links that are not neighbours, and they stop each other.
+        """
+        self._check_open()
+        m, d = self.model, self.data
+        deepest: dict[tuple[str, str], float] = {}
+        for c in d.contact[: d.ncon]:
+            a, b = sorted((int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])))
+            names = tuple("base_link" if i == 0 else mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) for i in (a, b))
+            deepest[names] = min(deepest.get(names, np.inf), float(c.dist))
+        return [(a, b, dist) for (a, b), dist in sorted(deepest.items())]
 
     # --- the servos' side, for the bus emulator ------------------------------------------------
 

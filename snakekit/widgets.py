@@ -9,6 +9,9 @@ JupyterLab. :class:`ControlPanel` drives any backend that implements
   blue arm) next to the robot (solid);
 * the tool target (x, y, heading) solves inverse kinematics live; an unreachable target is
   reported in red with the closest reachable point, and Execute is disabled;
+* a goal that would fold the arm onto itself (it, or the straight move to it, brings two
+  links that are not neighbours closer than ``spec.collision_margin``) is reported in red,
+  the goal arm in the view turns red, and Execute is disabled (the robot would refuse it);
 * Execute moves the robot along a smooth, limit-respecting trajectory
   (:meth:`~snakekit.robot.Robot.move_to`), plays the measured motion back in the view, and
   plots commanded against measured joint angles.
@@ -27,6 +30,7 @@ import ipywidgets as w
 import numpy as np
 from matplotlib.figure import Figure
 
+from .collision import Clearance, collides, first_collision
 from .errors import InputTypeError, SnakekitError, UnreachableTargetError, ViewerError
 from .kinematics import closest_reachable_point, inverse_kinematics, tool_pose_2d
 from .plots import plot_move
@@ -55,6 +59,8 @@ class ControlPanel:
         last_run: the :class:`~snakekit.robot.Run` of the last move, or None.
         last_error: the :class:`~snakekit.UnreachableTargetError` of the last target, or None.
         closest: the closest reachable tool point (x, y) [m] to the last unreachable target.
+        fold: where the goal, or the move to it, folds the arm onto itself (a
+            :class:`~snakekit.collision.Clearance`), or None when the links stay apart.
         widget: the ipywidgets box (displaying the panel displays it).
     """
 
@@ -72,6 +78,7 @@ class ControlPanel:
         self.last_figure: Figure | None = None
         self.last_error: UnreachableTargetError | None = None
         self.closest: tuple[float, float] | None = None
+        self.fold: Clearance | None = None
         self.runs: list[Run] = []
         self.message = ""
         self._note = ""  # said once with the next message (the view was lost)
@@ -165,7 +172,8 @@ class ControlPanel:
         x, y, h = tool_pose_2d(self.goal, spec=self.spec)
         self._sync_target(x, y, h)
         self._view("clear", "target")
-        self._say(f"Goal: tool at ({x:.3f}, {y:.3f}) m, heading {h:.2f} rad. Press Execute to move.", ok=True)
+        if not self._say_fold():
+            self._say(f"Goal: tool at ({x:.3f}, {y:.3f}) m, heading {h:.2f} rad. Press Execute to move.", ok=True)
         return self.goal
 
     def set_joints(self, q) -> np.ndarray:
@@ -180,7 +188,9 @@ class ControlPanel:
         On success the goal and the sliders jump to the solution and Execute is enabled;
         returns the goal [rad]. If the target is out of reach, the message says so with the
         closest reachable point, the view marks both, the goal stays as it was, Execute is
-        disabled, and this returns None.
+        disabled, and this returns None. So it does, with the goal set and shown in red, when
+        the straight move from the arm's present pose to the solution would fold the arm onto
+        itself (IK itself never returns a folded pose).
         """
         self._sync_target(x, y, heading)
         try:
@@ -189,7 +199,9 @@ class ControlPanel:
             self.execute_button.disabled = True
             self.last_error = e
             cx, cy = self.closest = self._closest_point(x, y, e)
-            if heading is not None and np.hypot(cx - x, cy - y) < 1e-4:
+            if collides(e.q_closest, spec=self.spec) and np.hypot(cx - x, cy - y) < 1e-4:
+                self._say(f"Unreachable without folding the arm onto itself: {e}", ok=False)
+            elif heading is not None and np.hypot(cx - x, cy - y) < 1e-4:
                 self._say(f"Unreachable: the tool can reach ({x:.3f}, {y:.3f}) m but not with heading "
                           f"{heading:.2f} rad inside the joint limits. Change the heading or untick "
                           "'hold heading'.", ok=False)
@@ -204,6 +216,8 @@ class ControlPanel:
         self._set_goal(q, move_sliders=True)
         self._view("draw_target", x, y, heading)
         what = f"({x:.3f}, {y:.3f}) m" + (f", heading {heading:.2f} rad" if heading is not None else "")
+        if self._say_fold():
+            return None
         self._say(f"Target {what} reachable. Press Execute to move.", ok=True)
         return self.goal
 
@@ -213,6 +227,9 @@ class ControlPanel:
         Returns the :class:`~snakekit.robot.Run`, or None if the robot refused (the
         message says why; nothing moved).
         """
+        if self.fold is not None:
+            self._say(f"Nothing executed: {self._fold_text()}", ok=False)
+            return None
         if self.execute_button.disabled:
             self._say("Nothing executed: the target is unreachable. Choose a reachable target first.", ok=False)
             return None
@@ -237,6 +254,25 @@ class ControlPanel:
         return run
 
     # --- internals -------------------------------------------------------------------------
+
+    def _say_fold(self) -> bool:
+        """If the goal (or the straight move from the arm's present pose to it) folds the arm
+        onto itself, say so, disable Execute and return True (:attr:`fold` holds where)."""
+        start = np.clip(self.robot.read().positions, self.spec.lower, self.spec.upper)
+        self.fold = first_collision([0.0, 1.0], [start, self.goal], spec=self.spec)
+        if self.fold is not None and self.fold.time == 0.0:  # already folded: only the goal counts, as for command
+            self.fold = first_collision([1.0], [self.goal], spec=self.spec)
+        if self.fold is None:
+            return False
+        self.execute_button.disabled = True
+        self._say(self._fold_text() + " Execute is disabled: move the goal to open the arm.", ok=False)
+        return True
+
+    def _fold_text(self) -> str:
+        f = self.fold
+        where = "the goal" if f.time == 1.0 else f"the move to the goal, {100 * f.time:.0f} % of the way,"
+        return (f"{where} would fold the arm onto itself: {f.describe()} (they must stay "
+                f"{1000 * self.spec.collision_margin:.0f} mm apart).")
 
     def _show_figure(self, fig: Figure) -> None:
         from IPython.core.interactiveshell import InteractiveShell

@@ -172,6 +172,8 @@ def test_make_robot_maps_the_backends():
 
 def test_one_sync_write_and_one_sync_read_a_cycle(robot):
     bus = robot.emulator
+    robot.command(np.full(5, 0.1))  # the first command reads where the arm is: its path is checked from there
+    time.sleep(0.02)
     bus.clear_record()
     for _ in range(10):
         robot.read()
@@ -428,6 +430,8 @@ def test_two_threads_share_the_bus_without_port_busy(robot):
             errors.append(e)
 
     bus = robot.emulator
+    robot.command(np.full(5, 0.05))  # the first command reads where the arm is: its path is checked from there
+    time.sleep(0.02)
     bus.clear_record()
     retried = robot.retried
     threads = [threading.Thread(target=reader) for _ in range(2)]

@@ -124,6 +124,24 @@ def test_goal_arm_is_translucent_and_separate(viewer):
     assert transform_of(viewer, "snake/robot/link1") == pytest.approx(np.eye(4))
 
 
+def test_a_goal_that_folds_the_arm_turns_red_and_back(viewer):
+    from snakekit.viewer.scene import GOAL_FOLDED, GOAL_OK
+
+    def goal_colors():
+        last = {}
+        for c in scene_commands(viewer):
+            if c["type"] == "set_object" and c["path"].startswith("/meshcat/snake/goal/"):
+                last[c["path"]] = c["object"]["materials"][0]["color"]
+        return set(last.values())
+
+    c = viewer.show_goal([1.57, 1.57, 1.57, 1.57, 0])
+    assert c.distance < SPEC.collision_margin and c.links == ("base_link", "link4")
+    assert goal_colors() == {GOAL_FOLDED}
+    c = viewer.show_goal([0.3, 0.2, 0, 0, 0])
+    assert c.distance >= SPEC.collision_margin
+    assert goal_colors() == {GOAL_OK}
+
+
 def test_animation_replays_the_motion_at_real_speed(viewer):
     tr = snakekit.joint_trajectory(np.zeros(5), [0.6, -0.4, 0.3, 0.2, -0.1], 2.0)
     frames = viewer.animate(tr, fps=30)

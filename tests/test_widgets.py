@@ -179,6 +179,29 @@ def test_a_refused_move_is_reported_not_raised():
     assert panel.execute_button.disabled is False
 
 
+def test_a_goal_that_folds_the_arm_is_shown_and_not_executed(sim, viewer):
+    panel = ControlPanel(sim, viewer, show_plot=False)
+    panel.set_joints([1.57, 1.57, 1.57, 1.57, 0])
+    assert panel.execute_button.disabled and panel.fold is not None
+    assert panel.message.startswith("the move to the goal, ")
+    assert "would fold the arm onto itself: base_link and link4 are" in panel.message
+    assert "Execute is disabled" in panel.message and "#c62828" in panel.status.value
+    assert panel.execute() is None and panel.runs == []
+    assert "Nothing executed" in panel.message
+    assert np.abs(sim.read().positions).max() < 1e-3
+    panel.set_joints([0.3, 0.2, 0, 0, 0])  # open again: Execute comes back
+    assert not panel.execute_button.disabled and panel.fold is None
+    assert panel.execute() is not None
+
+
+def test_a_goal_whose_move_folds_is_shown_even_when_the_goal_does_not():
+    with snakekit.make_robot("sim", q0=[0.0, 0.5, 1.5, 1.5, -1.0]) as robot:
+        panel = ControlPanel(robot, show_plot=False)
+        panel.set_joints([0.0, 0.5, 1.5, 1.5, 1.5])
+        assert panel.execute_button.disabled
+        assert "the move to the goal" in panel.message and "base_link and link5" in panel.message
+
+
 def test_any_backend_three_goal_changes():
     """The study's Task 1 on a backend that only implements the Robot interface."""
     arm = IdealArm()

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigurationError, InputTypeError, ShapeError, ViewerError
+from ..collision import Clearance, clearance
 from ..kinematics import forward_kinematics, joint_frames, workspace_boundary
 from ..model import SPEC, SnakeSpec, urdf
 from ..robot import Run
@@ -91,6 +92,8 @@ STARTUP_TIMEOUT = 10.0
 ROBOT = "snake/robot"
 GOAL = "snake/goal"
 MARKS = "snake/marks"
+#: colours of the goal arm: one the robots take, and one that folds the arm onto itself
+GOAL_OK, GOAL_FOLDED = 0x2E86DE, 0xD62728
 
 
 class Viewer:
@@ -216,11 +219,11 @@ class Viewer:
         v["/Cameras/default/rotated/<object>"].set_property("position", [0.0, 1.45 * reach, 0.85 * reach])
         self._draw_arm(ROBOT, opacity=1.0)
 
-    def _draw_arm(self, root: str, *, opacity: float) -> None:
+    def _draw_arm(self, root: str, *, opacity: float, color: int | None = None) -> None:
         for b in self._boxes:
             node = self.vis[f"{root}/{b.link}/{b.name}"]
-            color = b.color if opacity == 1.0 else 0x2E86DE
-            node.set_object(mg.Box(b.size), mg.MeshLambertMaterial(color=color, opacity=opacity))
+            node.set_object(mg.Box(b.size), mg.MeshLambertMaterial(color=b.color if color is None else color,
+                                                                    opacity=opacity))
             node.set_transform(_translation(*b.origin))
 
     def _pose(self, root: str, q: np.ndarray) -> None:
@@ -235,15 +238,23 @@ class Viewer:
         self._pose(ROBOT, q)
         self.q = q.copy()
 
-    def show_goal(self, q) -> None:
-        """Show a translucent blue arm at ``q`` [rad]: where the next move will go."""
+    def show_goal(self, q) -> Clearance:
+        """Show a translucent arm at ``q`` [rad]: where the next move will go.
+
+        The goal arm is blue, or red when it folds onto itself (two links that are not
+        neighbours closer than ``spec.collision_margin``: a goal every robot refuses).
+        Returns the goal's :class:`~snakekit.collision.Clearance` (the closest pair of links).
+        """
         self._check_open()
         q = as_configuration(q, self.spec, "goal q")
-        if not self._goal_drawn:
-            self._draw_arm(GOAL, opacity=0.35)
-            self._goal_drawn = True
+        c = clearance(q, spec=self.spec)
+        color = GOAL_FOLDED if c.distance < self.spec.collision_margin else GOAL_OK
+        if self._goal_drawn != color:
+            self._draw_arm(GOAL, opacity=0.35, color=color)
+            self._goal_drawn = color
         self.vis[GOAL].set_property("visible", True)
         self._pose(GOAL, q)
+        return c
 
     def hide_goal(self) -> None:
         """Hide the goal arm."""
