@@ -57,6 +57,14 @@ class Need:
         return f"{self.what}\n  -> {self.fix}"
 
 
+def _find_spec(name: str):
+    """``importlib.util.find_spec``, also for a module already loaded without a spec (the viewer
+    loads part of meshcat that way): loaded counts as found."""
+    if sys.modules.get(name) is not None:
+        return sys.modules[name]
+    return importlib.util.find_spec(name)
+
+
 def system(platform: str | None = None) -> str:
     """``"linux"``, ``"darwin"`` or ``"win32"`` for ``platform`` (default: ``sys.platform``);
     any other system is returned as it is."""
@@ -125,7 +133,7 @@ def _install_python(sysname: str) -> str:
 
 def missing(*, platform: str | None = None, machine_name: str | None = None, python: tuple[int, int] | None = None,
             environ: MutableMapping[str, str] | None = None,
-            find_spec: Callable[[str], object] = importlib.util.find_spec,
+            find_spec: Callable[[str], object] | None = None,
             load_library: Callable[[str], bool] = loadable) -> list[Need]:
     """What this system lacks to run the lessons natively (empty when nothing).
 
@@ -134,7 +142,7 @@ def missing(*, platform: str | None = None, machine_name: str | None = None, pyt
         machine_name: ``platform.machine()`` of it (default: this one).
         python: the Python version (default: the running one).
         environ: its environment (default: ``os.environ``).
-        find_spec: finds an importable module (default: ``importlib.util.find_spec``).
+        find_spec: finds an importable module (default: ``importlib.util.find_spec``, a loaded module counting as found).
         load_library: whether a shared library loads (default: :func:`loadable`; Linux only).
     """
     sysname = system(platform)
@@ -169,6 +177,7 @@ def missing(*, platform: str | None = None, machine_name: str | None = None, pyt
         needs.append(Need(f"MUJOCO_GL={gl} is set, which MuJoCo refuses on {describe(platform, cpu)} "
                           f"(it takes {', '.join(valid)})",
                           f"unset MUJOCO_GL (`unset MUJOCO_GL`); the kit then uses {default}"))
+    find_spec = find_spec or _find_spec
     absent = [name for name in LESSON_PACKAGES if name not in unsupported and find_spec(name) is None]
     if absent:
         needs.append(Need("the kit's Python packages are not installed here: "
