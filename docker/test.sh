@@ -299,7 +299,8 @@ python3 - "$SNAKEKIT_COURSE" "$ASSIGNMENT" <<'EOF' || { tail -20 "$RUN/grader.lo
 import csv, os, sys
 course, assignment = sys.argv[1:]
 rows = list(csv.DictReader(open(f"{course}/gradebook/grades.csv")))
-assert rows and list(rows[0]) == ["student", "assignment", "score", "max_score", "status", "detail"], rows[:1]
+assert rows and list(rows[0]) == ["student", "assignment", "score", "max_score", "status", "raw_score", "late_penalty",
+                                  "submitted_at", "detail"], rows[:1]
 by = {r["student"]: r for r in rows}
 assert set(by) == {"alice", "bob"}, by
 for r in rows:

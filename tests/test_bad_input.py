@@ -453,7 +453,8 @@ def test_the_simulator_runs_a_profile_beyond_the_arm_only_when_asked():
         snakekit.make_robot("hardware", port="/dev/no-such-port", profile_velocity=0, any_profile=True)
 
 
-def test_make_robot_names_what_is_wrong_with_its_arguments():
+def test_make_robot_names_what_is_wrong_with_its_arguments(monkeypatch):
+    monkeypatch.delenv("SNAKEKIT_PORT", raising=False)
     with raises(snakekit.InputTypeError, "the backend is named by a string, one of 'sim', 'emulator', 'hardware'; got "
                 "['sim'] (list)"):
         snakekit.make_robot(["sim"])  # before: TypeError "unhashable type: 'list'"
@@ -463,8 +464,8 @@ def test_make_robot_names_what_is_wrong_with_its_arguments():
     with raises(snakekit.InputTypeError, "the 'emulator' backend has no option 'speed'; its options are motion, faults, "
                 "q0, timing"):
         snakekit.make_robot("emulator", speed=2)
-    with raises(snakekit.InputTypeError, "the 'hardware' backend needs port=... (the arm's serial port, e.g. "
-                "port='/dev/ttyUSB0'"):
+    with raises(snakekit.ConfigurationError, "the hardware backend needs the arm's serial port: "
+                "make_robot('hardware', port='/dev/ttyUSB0')"):
         snakekit.make_robot("hardware")  # before: "missing 1 required positional argument: 'port'"
     with raises(snakekit.InputTypeError, "baudrate must be a whole number >= 1 [baud], got 'fast' (str). Use 57600, "
                 "1000000, 2000000, 3000000 or 4000000"):

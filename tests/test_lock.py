@@ -58,6 +58,7 @@ def test_the_lock_is_universal_with_each_systems_packages_under_its_marker():
 def test_the_venv_holds_exactly_what_the_lock_selects_for_this_system():
     """The markers select, for this system and Python, the packages tools/setup installed:
     no more, no fewer, same versions (the universal lock changed nothing on Linux)."""
+    import sysconfig
     from importlib import metadata
 
     from packaging.markers import Marker
@@ -65,7 +66,8 @@ def test_the_venv_holds_exactly_what_the_lock_selects_for_this_system():
     text = (ROOT / "environment.lock").read_text()
     selected = {canonicalize_name(m[1]): Version(m[2]) for m in ENTRY.finditer(text)
                 if m[3] is None or Marker(m[3]).evaluate()}
-    installed = {canonicalize_name(d.metadata["Name"]): Version(d.version) for d in metadata.distributions()}
+    site = sorted({sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]})  # not setuptools' _vendor
+    installed = {canonicalize_name(d.metadata["Name"]): Version(d.version) for d in metadata.distributions(path=site)}
     for own in {"snakekit", "pip", "setuptools"} - selected.keys():  # the kit; what `python -m venv` brings
         installed.pop(own, None)
     assert installed == selected
