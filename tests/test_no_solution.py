@@ -330,3 +330,14 @@ def test_a_helper_that_computes_the_answer_is_found(tmp_path, kernel_env):
     passed, problems = answers_in_sight(tmp_path / "worked" / "99_double.ipynb", tmp_path / "worked" / "student.ipynb",
                                         tmp_path / "run_worked")
     assert (passed, problems) == ([], [])
+
+
+@pytest.mark.parametrize("name", LESSONS)
+def test_demonstrations_wait_for_the_exercise_instead_of_computing_it(name):
+    """Outside the answer and check cells a handed-out lesson defines no function: a demonstration
+    that needs an exercise uses the student's function inside ``checks.waiting_for``, never a
+    ready-made stand-in (which would be a solution in sight)."""
+    student = read(ROOT / "notebooks" / f"{name}.ipynb")
+    for index, cell in enumerate(student.cells):
+        if cell.cell_type == "code" and not meta(cell).get("solution") and not meta(cell).get("grade"):
+            assert helpers(cell.source) == [], f"cell {index} of notebooks/{name}.ipynb defines {helpers(cell.source)}"
