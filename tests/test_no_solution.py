@@ -1,13 +1,16 @@
 """No solution in sight: nothing a student is handed computes what an exercise asks.
 
-A handed-out check compares with worked numbers or with properties (course/README.md, "What a
-handed-out check may hold"). Two ways a check could still hand the answer out are tried here:
+A handed-out check compares with worked numbers or with properties (course/README.md,
+"Adding an exercise"), because a student can call anything a visible cell defines. Tried here:
 
-* a function (or a lambda given a name) defined in a visible test cell: every one is tried as
-  the answer of every exercise of its lesson, in a kernel running the instructor version with
-  the student's test cells, and the exercise's visible check must then fail;
-* a library function the exercise's hidden test forbids (the shortcut guard's names): the
-  visible test cell of that exercise must not call it.
+* every function (or lambda given a name) a visible test cell defines is tried as the answer
+  of every exercise of its lesson, in a kernel running the instructor version with the
+  student's test cells: each exercise's visible check must then fail;
+* the known mistakes, written as a student would, still get their hints (recognised from
+  worked numbers, not from code);
+* a visible test cell never calls the library function its exercise's shortcut guard forbids;
+* outside the answer and check cells, a handed-out lesson defines no function (a
+  demonstration waits for the exercise instead of using a ready-made version of it).
 """
 
 from __future__ import annotations
