@@ -47,7 +47,7 @@ import numpy as np
 from .errors import CheckFailed, ConfigurationError, ShortcutError, SnakekitError
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "hand_in", "outputs", "rng", "quick",
-           "yours_or", "waiting_for"]
+           "waiting_for"]
 
 _HERE = os.path.abspath(__file__)
 
@@ -362,26 +362,6 @@ def forbid(*names: str, what: str):
     finally:
         for holder, attr, value in reversed(patched):
             setattr(holder, attr, value)
-
-
-def yours_or(fn, library_fn, exercise: str):
-    """The student's ``fn``, or ``library_fn`` (with a note) while ``fn`` is still a stub.
-
-    Demonstrations after an exercise use it, so they run before the exercise is done and
-    say which exercise they wait for.
-    """
-    said = []
-
-    def use(*args, **kwargs):
-        try:
-            return fn(*args, **kwargs)
-        except NotImplementedError:
-            if not said:
-                print(f"(exercise {exercise} is not done yet: this cell uses a ready-made version instead)")
-                said.append(True)
-            return library_fn(*args, **kwargs)
-
-    return use
 
 
 class waiting_for(contextlib.AbstractContextManager):

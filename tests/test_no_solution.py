@@ -1,0 +1,346 @@
+"""No solution in sight: nothing a student is handed computes what an exercise asks.
+
+A handed-out check compares with worked numbers or with properties (course/README.md,
+"Adding an exercise"), because a student can call anything a visible cell defines. Tried here:
+
+* every function (or lambda given a name) a visible test cell defines is tried as the answer
+  of every exercise of its lesson, in a kernel running the instructor version with the
+  student's test cells: each exercise's visible check must then fail;
+* the known mistakes, written as a student would, still get their hints (recognised from
+  worked numbers, not from code);
+* a visible test cell never calls the library function its exercise's shortcut guard forbids;
+* outside the answer and check cells, a handed-out lesson defines no function (a
+  demonstration waits for the exercise instead of using a ready-made version of it).
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import re
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import need
+
+ROOT = Path(__file__).resolve().parents[1]
+HIDDEN = "### BEGIN HIDDEN TESTS"
+HIDDEN_BLOCK = re.compile(r"### BEGIN HIDDEN TESTS\n.*?### END HIDDEN TESTS\n?", re.S)
+LESSONS = sorted(p.stem for p in (ROOT / "course" / "source").glob("*/*.ipynb"))
+
+
+def read(path: Path):
+    return need("nbformat").read(path, as_version=4)
+
+
+def meta(cell) -> dict:
+    return cell.metadata.get("nbgrader", {})
+
+
+def parse(source: str) -> ast.Module:
+    """A cell's code as Python (IPython's magics turned into calls first)."""
+    from IPython.core.inputtransformer2 import TransformerManager
+
+    return ast.parse(TransformerManager().transform_cell(source))
+
+
+def helpers(source: str) -> list[str]:
+    """Names of the functions, and of the lambdas assigned to a name, that ``source`` defines."""
+    names = []
+    for node in ast.walk(parse(source)):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            names.append(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)) and isinstance(node.value, ast.Lambda):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names += [t.id for t in targets if isinstance(t, ast.Name)]
+    return names
+
+
+def answer_function(source: str) -> ast.FunctionDef:
+    """The function an answer cell asks for: the first one it defines."""
+    return next(n for n in parse(source).body if isinstance(n, ast.FunctionDef))
+
+
+def stand_ins(answer: ast.FunctionDef, helper: str) -> list[str]:
+    """Answers made of ``helper``: passing on the arguments as given, or all of them (defaults
+    filled in as the exercise's signature gives them); returning what :data:`PARTS` take."""
+    params = [a.arg for a in answer.args.posonlyargs + answer.args.args + answer.args.kwonlyargs]
+    forms = [("*a, **k", "*a, **k"), (ast.unparse(answer.args), ", ".join(params))]
+    return [f"def {answer.name}({signature}):\n    result = {helper}({call})\n    return {part}"
+            for signature, call in forms for part in PARTS]
+
+
+def exercises(instructor, student) -> list[dict]:
+    """Each exercise: its answer cell's index and function, its test cell's index and visible code.
+
+    The visible code is the student version's test cell, which must be the instructor's test
+    cell without its hidden tests.
+    """
+    shown = {meta(c)["grade_id"]: c.source for c in student.cells if meta(c).get("grade")}
+    out, answers = [], {}
+    for i, cell in enumerate(instructor.cells):
+        m = meta(cell)
+        if cell.cell_type == "code" and m.get("solution") and not m.get("grade"):
+            answers[m["grade_id"] + "_test"] = i
+        elif m.get("grade"):
+            gid = m["grade_id"]
+            visible = shown[gid]
+            assert visible.strip() == HIDDEN_BLOCK.sub("", cell.source).strip(), \
+                f"{gid}: the student's test cell is not the instructor's visible part (run `make student`)"
+            a = answers[gid]
+            function = answer_function(instructor.cells[a].source)
+            out.append({"grade_id": gid, "answer": a, "name": function.name, "function": function,
+                        "test": i, "visible": visible, "hidden": "".join(HIDDEN_BLOCK.findall(cell.source))})
+    return out
+
+
+# What a stand-in returns of a helper's result: all of it, one of its first parts (a helper may
+# return the answer with what it was made from), or its two parts as a trajectory.
+PARTS = ("result", "result[0]", "result[1]", "result[2]", '__import__("snakekit").Trajectory(*result)')
+
+
+def answers_in_sight(instructor_path: Path, student_path: Path, work: Path,
+                     mistakes: tuple = ()) -> tuple[list[str], list[str]]:
+    """Run the lesson and try every helper of its visible test cells as every exercise's answer.
+
+    The notebook is the instructor's (so every exercise is answered right) with the student's
+    test cells. ``mistakes`` are (grade id, a wrong answer cell, the hint its check must show).
+    Returns (the stand-ins that passed a visible check, problems).
+    """
+    nbformat = need("nbformat")
+    nbclient = need("nbclient")
+    instructor, student = read(instructor_path), read(student_path)
+    shutil.copytree(instructor_path.parent, work, ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.npz"))
+    found = exercises(instructor, student)
+    nb = nbformat.v4.new_notebook(metadata=instructor.metadata)
+    for cell in instructor.cells:
+        nb.cells.append(nbformat.from_dict(cell))
+    for ex in found:
+        nb.cells[ex["test"]].source = ex["visible"]
+    names = sorted({h for ex in found for h in helpers(ex["visible"])})
+    passed, problems = [], []
+    client = nbclient.NotebookClient(nb, timeout=180, kernel_name="python3", allow_errors=True,
+                                     resources={"metadata": {"path": str(work)}})
+
+    lesson_cells = list(nb.cells)
+    nb.cells.append(nbformat.v4.new_code_cell(""))     # where the trials run
+
+    def run(source: str) -> str | None:
+        """None when the cell runs, else its error's message."""
+        cell = client.execute_cell(nbformat.v4.new_code_cell(source), len(nb.cells) - 1)
+        errors = [o for o in cell.outputs if o.output_type == "error"]
+        return f"{errors[0].ename}: {errors[0].evalue}" if errors else None
+
+    with client.setup_kernel():
+        for index, cell in enumerate(lesson_cells):
+            if cell.cell_type == "code":
+                client.execute_cell(cell, index)
+                if any(o.output_type == "error" for o in cell.outputs) and meta(cell).get("grade"):
+                    problems.append(f"{meta(cell)['grade_id']} fails with the instructor's answer")
+        for ex in found:
+            tried = False
+            for helper in names:
+                if helper == ex["name"]:
+                    continue
+                for stand_in in stand_ins(ex["function"], helper):
+                    tried = True
+                    run(stand_in)
+                    if run(ex["visible"]) is None:
+                        passed.append(f"{ex['grade_id']}: this answer passes its visible check:\n{stand_in}")
+            for gid, wrong, hint in mistakes:
+                if gid == ex["grade_id"]:
+                    tried = True
+                    run(wrong)
+                    shown = run(ex["visible"])
+                    if shown is None or hint not in shown.partition("\nHint: ")[2]:
+                        problems.append(f"{gid}: the answer\n{wrong}\nshould be told {hint!r}; its check said {shown!r}")
+            # the right answer back: the check passes again (so the failures above were the trials')
+            if tried:
+                shown = run(lesson_cells[ex["answer"]].source) or run(ex["visible"])
+                if shown:
+                    problems.append(f"{ex['grade_id']} fails with the instructor's answer after the trials: {shown}")
+    return passed, problems
+
+
+# Wrong answers of the kind students write, and the hint each one's visible check must give:
+# the hints are recognised from worked numbers, so they are tried here with the mistake itself.
+MISTAKES = {
+    "00_meet_the_arm": [
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
+         "    return float(np.hypot(x - target[0], y - target[1]))", "this looks like metres")],
+    "01_forward_kinematics": [
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    L = spec.lengths\n"
+         "    return np.array([np.sum(L * np.cos(q)), np.sum(L * np.sin(q)), np.sum(q)])",
+         "a joint angle is not accumulated"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    phi = np.cumsum(q)\n"
+         "    return np.array([np.sum(spec.lengths * np.cos(phi)), np.sum(spec.lengths * np.sin(phi)), q[-1]])",
+         "the heading is the sum of all five angles"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n"
+         "    steps = spec.lengths[:, None] * np.column_stack([np.cos(q), np.sin(q)])\n"
+         "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])", "a joint angle is not accumulated"),
+        ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n"
+         "    return n_joints * link_length + tool_offset", "counts one link too many")],
+    "02_jacobian": [
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
+         "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
+         "    return np.vstack([down(L * np.sin(phi)), down(-L * np.cos(phi)), np.ones(len(q))])",
+         "the signs are flipped"),
+        ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[:2]\n"
+         "    return float(np.linalg.det(J @ J.T))", "without the square root")],
+    "03_inverse_kinematics": [
+        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n"
+         "    e = np.asarray(target, dtype=float) - snakekit.tool_pose_2d(q)[:2]\n"
+         "    J = snakekit.planar_jacobian(q)[:2]\n"
+         "    return J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "this is only the step")],
+    "04_trajectories": [
+        ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)\n"
+         "    return 3 * r ** 2 - 2 * r ** 3", "this is the cubic"),
+        ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n"
+         "    return np.array([abs(distance) / v_max, v_max])", "the accelerating and braking time counts"),
+        ("ex04_3_sample_10hz_test", "def sample_move(q_start, q_end, duration, rate=10.0):\n"
+         "    times = np.arange(1, int(round(duration * rate)) + 2) / rate\n"
+         "    s = quintic(duration, times - 1 / rate)\n"
+         "    return snakekit.Trajectory(times, q_start + np.outer(s, np.asarray(q_end) - q_start))",
+         "the times start at 1/rate")],
+    "05_simulation": [
+        ("ex05_2_overshoot_test", "def overshoot(y, target):\n    y = np.asarray(y, dtype=float)\n"
+         "    return float(max(0.0, ((y - target) / (target - y[0])).max()))", "this is a fraction"),
+        ("ex05_3_steady_state_error_test", "def steady_state_error(y, target, window=10):\n"
+         "    return float(np.mean(np.asarray(y, dtype=float)[-window:]) - target)", "the sign"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    return abs(distance) / (profile_velocity * 0.229 * 2 * np.pi / 60)",
+         "the accelerating and braking time counts")],
+    "06_coded_sweep": [
+        ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(1, points + 1) / rate",
+         "the times start at 1/rate"),
+        ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(points) / (10 * rate)",
+         "these times are 100 Hz apart"),
+        ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.linspace(0, points / rate, points)",
+         "np.linspace"),
+        ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
+         "    angle = amplitude * np.cos(2 * np.pi * sweeps * times / times[-1])\n"
+         "    return np.repeat(angle[:, None], 5, axis=1)", "use sin"),
+        ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
+         "    angle = amplitude * np.sin(2 * np.pi * sweeps * times / times[-1])\n"
+         "    return np.repeat(angle[:, None], 5, axis=1)", "the last row is not exactly home"),
+        ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
+         "    angle = amplitude * np.sin(2 * np.pi * sweeps * times / (times[-1] + times[1] - times[0]))\n"
+         "    return np.repeat(angle[:, None], 5, axis=1)", "the sweeps do not fill the run")],
+    "07_real_robot": [
+        ("ex07_1_ticks_test", "def to_ticks(q):\n"
+         "    return (2048 + np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "astype(int) cuts toward zero"),
+        ("ex07_1_ticks_test", "def to_ticks(q):\n"
+         "    return np.rint(np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "add the offset")],
+}
+
+
+@pytest.fixture
+def kernel_env(monkeypatch):
+    monkeypatch.setenv("SNAKEKIT_TEST", "1")
+    monkeypatch.delenv("SNAKEKIT_HANDIN_DIR", raising=False)
+    monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+
+
+@pytest.mark.parametrize("name", LESSONS)
+def test_no_function_of_a_visible_check_passes_as_an_answer(name, tmp_path, kernel_env):
+    """No function a visible check defines passes as an answer; the known mistakes are still named."""
+    passed, problems = answers_in_sight(ROOT / "course" / "source" / name / f"{name}.ipynb",
+                                        ROOT / "notebooks" / f"{name}.ipynb", tmp_path / name, MISTAKES.get(name, ()))
+    assert problems == [], "\n".join(problems)
+    assert passed == [], "a handed-out check holds a solution:\n" + "\n".join(passed)
+
+
+def forbidden_names(source: str, tuples: dict | None = None) -> set[str]:
+    """The library functions a test forbids ("snakekit.x.y" -> "y"): its own "snakekit.*" strings,
+    and those of the lesson's tuples of them (``FK_SHORTCUTS``) it refers to."""
+    out = set()
+    for node in ast.walk(parse(source)):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.startswith("snakekit."):
+            out.add(node.value.rsplit(".", 1)[1])
+        elif isinstance(node, ast.Name) and node.id in (tuples or {}):
+            out |= tuples[node.id]
+    return out
+
+
+def shortcut_tuples(nb) -> dict[str, set[str]]:
+    """The lesson's named tuples of library functions: ``FK_SHORTCUTS = ("snakekit.x", ...)``."""
+    out = {}
+    for cell in nb.cells:
+        if cell.cell_type != "code":
+            continue
+        for node in ast.walk(parse(cell.source)):
+            if isinstance(node, ast.Assign) and isinstance(node.value, ast.Tuple):
+                names = forbidden_names(ast.unparse(node.value))
+                out.update({t.id: names for t in node.targets if isinstance(t, ast.Name) and names})
+    return out
+
+
+def used_names(source: str, own: str) -> set[str]:
+    """Every attribute ``source`` reads, module member it imports, and name other than ``own`` it
+    refers to (string constants do not count)."""
+    out = set()
+    for node in ast.walk(parse(source)):
+        if isinstance(node, ast.Name) and node.id != own:
+            out.add(node.id)
+        elif isinstance(node, ast.Attribute):
+            out.add(node.attr)
+        elif isinstance(node, ast.alias):
+            out.add(node.name.rsplit(".", 1)[-1])
+    return out
+
+
+@pytest.mark.parametrize("name", LESSONS)
+def test_no_visible_check_calls_the_library_function_its_exercise_asks_to_write(name):
+    instructor = read(ROOT / "course" / "source" / name / f"{name}.ipynb")
+    student = read(ROOT / "notebooks" / f"{name}.ipynb")
+    tuples = shortcut_tuples(instructor)
+    for ex in exercises(instructor, student):
+        shortcuts = forbidden_names(ex["hidden"], tuples) | forbidden_names(ex["visible"], tuples)
+        shown = used_names(ex["visible"], ex["name"]) & shortcuts
+        assert not shown, f"{ex['grade_id']}'s visible check calls {sorted(shown)}, which computes its answer"
+
+
+def test_a_helper_that_computes_the_answer_is_found(tmp_path, kernel_env):
+    """The search above finds a solution a check hands out (and a check that holds none passes)."""
+    nbformat = need("nbformat")
+
+    def lesson(check: str):
+        answer = nbformat.v4.new_code_cell('def double(x):\n    ### BEGIN SOLUTION\n    return 2 * x\n'
+                                           '    ### END SOLUTION')
+        answer.metadata["nbgrader"] = {"grade_id": "ex99_1_double", "solution": True, "grade": False}
+        test = nbformat.v4.new_code_cell(check)
+        test.metadata["nbgrader"] = {"grade_id": "ex99_1_double_test", "grade": True, "points": 1}
+        return nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("from snakekit import checks"), answer, test])
+
+    hands_out = ('def expected(x):\n    return x + x\n\nscale = lambda x: 3 * x\n'
+                 'ex = checks.Exercise("99.1", "double")\n'
+                 'ex.close(ex(double, 0.25), expected(0.25), what="double", where="x=0.25")\n'
+                 'ex.close(ex(double, 1.5), expected(1.5), what="double", where="x=1.5")')
+    worked = ('scale = lambda x: 3 * x\nex = checks.Exercise("99.1", "double")\n'
+              'ex.close(ex(double, 0.25), 0.5, what="double", where="x=0.25")')
+    for folder, check in (("out", hands_out), ("worked", worked)):
+        (tmp_path / folder).mkdir()
+        path = tmp_path / folder / "99_double.ipynb"
+        nbformat.write(lesson(check + f"\n{HIDDEN}\nex.done()\n### END HIDDEN TESTS"), path)
+        nbformat.write(lesson(check), tmp_path / folder / "student.ipynb")
+    passed, problems = answers_in_sight(tmp_path / "out" / "99_double.ipynb", tmp_path / "out" / "student.ipynb",
+                                        tmp_path / "run_out")
+    assert problems == [] and len(passed) == 2, passed          # given both ways: (*a, **k) and (x)
+    assert all("result = expected(" in p and p.endswith("\n    return result") for p in passed), passed
+    passed, problems = answers_in_sight(tmp_path / "worked" / "99_double.ipynb", tmp_path / "worked" / "student.ipynb",
+                                        tmp_path / "run_worked")
+    assert (passed, problems) == ([], [])
+
+
+@pytest.mark.parametrize("name", LESSONS)
+def test_demonstrations_wait_for_the_exercise_instead_of_computing_it(name):
+    """Outside the answer and check cells a handed-out lesson defines no function: a demonstration
+    that needs an exercise uses the student's function inside ``checks.waiting_for``, never a
+    ready-made stand-in (which would be a solution in sight)."""
+    student = read(ROOT / "notebooks" / f"{name}.ipynb")
+    for index, cell in enumerate(student.cells):
+        if cell.cell_type == "code" and not meta(cell).get("solution") and not meta(cell).get("grade"):
+            assert helpers(cell.source) == [], f"cell {index} of notebooks/{name}.ipynb defines {helpers(cell.source)}"
