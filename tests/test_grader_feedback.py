@@ -8,29 +8,23 @@ and Generate Feedback buttons pressed in Chromium on a tampered submission.
 
 from __future__ import annotations
 
-import json
 import os
 import re
-import secrets
-import signal
 import subprocess
 import sys
-import time
-import urllib.request
 from pathlib import Path
 
 import nbformat
 import pytest
 
-from conftest import free_port, need, need_program
+from conftest import need, need_program
 from grader_corpus import _edit
 from grader_helpers import ASSIGNMENT, FIXTURE, GOOD, REFERENCES, make_course, submit
+from test_browser import CHROMIUM_FLAGS, JupyterLab
 
 REPO = Path(__file__).resolve().parent.parent
 ARTIFACTS = REPO / "artifacts"
 TIMEOUT = 15  # each notebook's wall clock [s]
-CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 LOOP = {"ex1_tool_xy": 'print("before the loop")\n' + GOOD["ex1_tool_xy"], "ex2_sweep": "while True:\n    pass"}
 EXTRAS = {"ex1_tool_xy": "import ipywidgets\ndisplay(ipywidgets.VBox([ipywidgets.IntSlider(description='q1')]))\n"
                          + GOOD["ex1_tool_xy"],
@@ -192,44 +186,6 @@ def test_a_page_opened_offline_in_chromium_shows_typeset_math():
 # --- formgrader's buttons, pressed in Chromium ------------------------------------------------
 
 
-class _Server:
-    """A Jupyter server with formgrader on the course (as a TA starts it: in the course folder)."""
-
-    def __init__(self, course: Path, home: Path):
-        self.port, self.token = free_port(), secrets.token_hex(16)
-        env = dict(os.environ, JUPYTER_CONFIG_DIR=str(home / "config"), JUPYTER_RUNTIME_DIR=str(home / "runtime"),
-                   JUPYTER_DATA_DIR=str(home / "data"), IPYTHONDIR=str(home / "ipython"),
-                   PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
-        self.log = open(home / "server.log", "wb")
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "jupyter", "server", "--no-browser", "--allow-root", "--ip=127.0.0.1",
-             f"--port={self.port}", "--ServerApp.port_retries=0", f"--IdentityProvider.token={self.token}",
-             f"--ServerApp.root_dir={course}",
-             "--ServerApp.jpserver_extensions", "nbgrader.server_extensions.formgrader=True"],
-            cwd=course, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
-        self.url = f"http://127.0.0.1:{self.port}"
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                urllib.request.urlopen(f"{self.url}/api/status?token={self.token}", timeout=2)
-                return
-            except OSError:
-                if self.proc.poll() is not None or time.monotonic() > deadline:
-                    self.stop()
-                    raise RuntimeError(f"the Jupyter server did not start; see {home / 'server.log'}")
-                time.sleep(0.3)
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(timeout=10)
-        self.log.close()
-
-
 def _press(page, student: str, button: str, done: str):
     row = page.locator("table tbody tr", has=page.locator("td.student-id", has_text=student))
     row.locator(f"td.{button} a").click()
@@ -254,17 +210,18 @@ def test_formgraders_autograde_and_feedback_buttons_give_the_graders_results(tmp
     submit(course, "edited", edit=_edit)  # ex2's test cell replaced: nbgrader alone gives it 7 / 7
     home = tmp_path / "home"
     home.mkdir()
-    server = _Server(course, home)
+    server = JupyterLab(course, home)  # in the course folder, as a TA starts it: formgrader reads its config
     blocked = []
     try:
         with sync_api.sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_FLAGS)
             try:
-                context = browser.new_context(viewport={"width": 1400, "height": 900})
+                context = browser.new_context(viewport={"width": 1400, "height": 900},
+                                              extra_http_headers={"Authorization": f"token {server.token}"})
                 context.route("**/*", lambda route: route.continue_() if route.request.url.startswith(server.url)
                               else (blocked.append(route.request.url), route.abort()))
                 page = context.new_page()
-                page.goto(f"{server.url}/formgrader/manage_submissions/{ASSIGNMENT}?token={server.token}")
+                page.goto(f"{server.url}/formgrader/manage_submissions/{ASSIGNMENT}")
                 page.locator("td.student-id", has_text="edited").wait_for(timeout=60_000)
                 log = _press(page, "edited", "autograde", f"Successfully autograded '{ASSIGNMENT}' for student 'edited'")
                 assert "tests tampered" in log
@@ -276,8 +233,7 @@ def test_formgraders_autograde_and_feedback_buttons_give_the_graders_results(tmp
 
                 # the TA sets a score by hand in formgrader (its grade API, as its score box does)
                 page.evaluate("""async ([assignment]) => {
-                    const xsrf = document.cookie.split('; ').find(c => c.startsWith('_xsrf=')).slice(6);
-                    const headers = {'X-XSRFToken': xsrf, 'Content-Type': 'application/json'};
+                    const headers = {'Content-Type': 'application/json'};  // the token header authenticates
                     const nbs = await (await fetch(base_url + '/formgrader/api/submitted_notebooks/' + assignment + '/'
                                                    + assignment, {headers})).json();
                     const nb = nbs.find(n => n.student === 'edited');
