@@ -74,3 +74,9 @@ c.GenerateAssignment.preprocessors = [
     CheckCellMetadata, ComputeChecksums, SaveCells, ClearHiddenTests, ClearMarkScheme, ComputeChecksums,
     CheckCellMetadata,
 ]
+
+# nbgrader's generate_feedback and formgrader's Generate Feedback and Autograde buttons give
+# the grader's results: its safe pages and its sandboxed grading (see grader/README.md).
+from grader.nbgrader_plugins import use_safe_grading  # noqa: E402
+
+use_safe_grading(c)

@@ -248,11 +248,13 @@ class Grader:
 
     def __init__(self, course: Path, assignment: str, *, jobs: int | None = None, timeout: float = 120.0,
                  references: Path | None = REFERENCES, memory: int = 4 << 30, progress=None,
-                 workroot: Path | None = None, use_sandbox: bool = True):
+                 workroot: Path | None = None, use_sandbox: bool = True, cell_timeout: float | None = None):
+        """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: ``timeout``)."""
         self.course = Path(course).resolve()
         self.assignment = assignment
         self.jobs = jobs or os.cpu_count() or 1
         self.timeout = float(timeout)
+        self.cell_timeout = min(float(cell_timeout or timeout), self.timeout)
         self.references = references
         self.limits = sandbox.Limits(wall=self.timeout + 30, cpu=self.timeout * 2 + 30, memory=memory)
         self.progress = progress
@@ -290,6 +292,8 @@ class Grader:
 
             with _on_path(self.course):  # a plugin module beside the course's config (nbgrader's late.py)
                 self.late_plugin = AssignLatePenalties(config=config(self.course))
+            # every notebook has its own deadline inside the sandbox; this one is the backstop
+            self.limits = dataclasses.replace(self.limits, wall=self.timeout * max(1, len(self.a.notebooks)) + 30)
             _template_gradebook(self.course, self.a, base / "template.db")
             self.server = self._fork_server_ready(server)  # it built matplotlib's font cache in base/mplcache
             if not (base / "mplcache").is_dir():
@@ -441,7 +445,7 @@ class Grader:
 
     def _execute(self, work: Path, student: str) -> sandbox.Outcome:
         argv = [os.path.abspath(sys.executable), "-m", "grader.worker", str(work / "course"), self.a.name, student,
-                str(int(self.timeout)), str(len(self.a.notebooks))]
+                f"{self.timeout:g}", f"{self.cell_timeout:g}", str(len(self.a.notebooks))]
         if self.use_sandbox and self.server is not None:
             return sandbox.run_forked(self.server, argv, workdir=work, env=self._env(work), limits=self.limits,
                                       hide=[str(self.course)], log=work.parent / f".{work.name}.log")
@@ -505,8 +509,11 @@ class Grader:
                 scores.append(sc)
             else:
                 scores.append(self._kernel_score(gid, cell, executed.get(cell.notebook)))
-        if outcome.timed_out or "CellTimeoutError" in errors:
+        stopped = _stopped_cells(worker.get("stopped"), executed)
+        if outcome.timed_out or stopped:
             status, detail = "timeout", f"the notebook ran longer than {self.timeout:g} s and was stopped"
+        elif "CellTimeoutError" in errors:
+            status, detail = "timeout", f"a cell ran longer than {self.cell_timeout:g} s and was interrupted"
         elif "MemoryError" in errors or "MemoryError" in log:
             status, detail = "memory limit", f"the notebook used more than {self.limits.memory >> 20} MB"
         elif "DeadKernelError" in log or "kernel died" in log.lower():
@@ -523,16 +530,18 @@ class Grader:
             status, detail = "missing notebook", "; ".join(problems)
         else:
             status, detail = "graded", ""
-        dest = self.course / "autograded" / student / a.name
-        if executed:  # for the TA (formgrader): the notebook as it ran, hidden tests included
-            shutil.rmtree(dest, ignore_errors=True)
-            dest.mkdir(parents=True)
-            for name, nb in executed.items():
-                nbformat.write(nb, dest / f"{name}.ipynb")
         score = round(sum(s.score for s in scores), 4)
         result = SubmissionResult(student, a.name, score, a.max_score, status, detail, tuple(scores),
                                   time.monotonic() - t0)
-        return self._feedback(result, nbs, executed)
+        dest = self.course / "autograded" / student / a.name
+        if executed:  # for the TA (formgrader): the notebook as it ran, hidden tests included, with the verdicts
+            shutil.rmtree(dest, ignore_errors=True)
+            dest.mkdir(parents=True)
+            for name, nb in executed.items():
+                mine = [s for s in scores if a.tests[s.grade_id].notebook == name]
+                nbformat.write(feedback.record(nb, dataclasses.replace(result, exercises=tuple(mine)),
+                                               stopped=stopped.get(name), timeout=self.timeout), dest / f"{name}.ipynb")
+        return self._feedback(result, nbs, executed, stopped)
 
     @staticmethod
     def _kernel_score(gid, cell, nb) -> ExerciseScore:
@@ -546,6 +555,9 @@ class Grader:
         c = _find_cell(nb, gid)
         if c is None:
             return ExerciseScore(gid, 0.0, cell.max_score, "missing", "the test cell is missing.")
+        if c.get("execution_count") is None and not c.get("outputs"):
+            return ExerciseScore(gid, 0.0, cell.max_score, "missing",
+                                 "the test cell did not run: the notebook was stopped before it.")
         err = feedback.cell_error(c)
         if err is None:
             return ExerciseScore(gid, cell.max_score, cell.max_score, "scored", "the test cell passed.")
@@ -562,7 +574,7 @@ class Grader:
         r = SubmissionResult(student, self.a.name, 0.0, self.a.max_score, status, detail, scores, time.monotonic() - t0)
         return self._feedback(r, {}, {})
 
-    def _feedback(self, result, submitted, executed) -> SubmissionResult:
+    def _feedback(self, result, submitted, executed, stopped=None) -> SubmissionResult:
         a = self.a
         sources = {g: c.source for g, c in a.tests.items()}
         path = self.course / "feedback" / result.student / a.name
@@ -578,7 +590,9 @@ class Grader:
                 for c in nb.cells:
                     if c.cell_type == "code":
                         c.outputs = []
-            fb = feedback.build(nb, student=result.student, assignment=a.name, result=result, test_sources=sources)
+            fb = feedback.build(nb, student=result.student, assignment=a.name, result=result, test_sources=sources,
+                                stopped=(stopped or {}).get(name), timeout=self.timeout,
+                                hide_paths={str(self.base): "<sandbox>"})
             written = feedback.write_html(fb, path / f"{name}.html")
         return SubmissionResult(**{**result.__dict__, "feedback": written})
 
@@ -602,6 +616,7 @@ class Grader:
                         grade.auto_score = by_id[grade.name].score
                         # as nbgrader's autograde: a score a grader entered by hand stays, flagged for review
                         grade.needs_manual_grade = grade.manual_score is not None
+                nb.flagged = r.status != "graded"  # formgrader shows the flag: look at this one
             gb.db.commit()
         late_penalties(self.course, a.name, r.student, self.late_plugin)
         fb = self.course / "feedback" / r.student / a.name
@@ -646,6 +661,23 @@ class _throwaway_log:
 
     def __exit__(self, *exc):
         self.log.setLevel(self.level)
+
+
+def _stopped_cells(reported, executed: dict) -> dict[str, int]:
+    """Where the worker stopped each notebook whose time ran out: notebook name -> cell index.
+
+    Only a report that points at a cell of a notebook that came back counts (the worker's
+    ``result.json`` shows where, never how many points).
+    """
+    out = {}
+    for item in reported if isinstance(reported, list) else []:
+        if not isinstance(item, dict):
+            continue
+        name, index = item.get("notebook"), item.get("cell")
+        if isinstance(name, str) and name in executed and isinstance(index, int) \
+                and 0 <= index < len(executed[name].cells):
+            out[name] = index
+    return out
 
 
 def _find_cell(nb, gid):

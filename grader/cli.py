@@ -1,7 +1,7 @@
 """``snakekit grade ASSIGNMENT``: grade a class's submissions.
 
-    snakekit grade 06_coded_sweep [--course course/] [--jobs N] [--timeout S] [--csv FILE] [--student S]...
-                                  [--regenerate]
+    snakekit grade 06_coded_sweep [--course course/] [--jobs N] [--timeout S] [--cell-timeout S] [--csv FILE]
+                                  [--student S]... [--regenerate]
 
 Before anything runs, the release and the reference are compared with the source: when they
 differ, nothing is graded (exit 2) and the command that fixes it is printed (``--regenerate``
@@ -38,7 +38,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
     p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
     p.add_argument("--jobs", type=int, default=None, help="submissions graded at once (default: one per core)")
-    p.add_argument("--timeout", type=float, default=120.0, help="wall-clock limit per notebook [s] (default: 120)")
+    p.add_argument("--timeout", type=float, default=120.0,
+                   help="wall-clock limit of a whole notebook [s]: at its end the running cell is stopped and the "
+                        "cells after it do not run (default: 120)")
+    p.add_argument("--cell-timeout", type=float, default=None,
+                   help="wall-clock limit of one cell [s]: that cell is interrupted and the notebook goes on "
+                        "(default: the --timeout)")
     p.add_argument("--memory", type=int, default=4096, help="memory limit per process [MB] (default: 4096)")
     p.add_argument("--csv", type=Path, default=None, help="write the grades here (default: <course>/grades-<assignment>.csv)")
     p.add_argument("--references", type=Path, default=REFERENCES, help="reference runs folder (default: grader/references/)")
@@ -115,6 +120,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
         problems.append(f"--jobs must be at least 1, got {args.jobs}")
     if not args.timeout > 0:
         problems.append(f"--timeout must be > 0 s, got {args.timeout:g}")
+    if args.cell_timeout is not None and not args.cell_timeout > 0:
+        problems.append(f"--cell-timeout must be > 0 s, got {args.cell_timeout:g}")
     if args.memory < 256:
         problems.append(f"--memory must be at least 256 MB, got {args.memory}")
     if not args.references.is_dir():
@@ -137,7 +144,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     from .course import backup_gradebook
 
     grader = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
-                    memory=args.memory << 20)
+                    memory=args.memory << 20, cell_timeout=args.cell_timeout)
     students = grader.students()
     if args.student:
         missing = [s for s in args.student if s not in students]

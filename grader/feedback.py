@@ -5,15 +5,25 @@ keeps the hidden tests, its issue #917): every autograded test cell shows only i
 part (the released source) and none of the output of running it; the grader's message and,
 for trajectories, a plot of the student's run against the reference take its place. Any other
 output that repeats a line of hidden test code is removed too.
+
+A page works offline and as it is: it loads nothing (no require.js, MathJax or mermaid from a
+CDN; math is turned into MathML when the page is written, which browsers typeset themselves),
+an interactive widget becomes one line saying what it was, and the grading machine's paths in
+tracebacks and outputs (the sandbox's folder, the Python installation, the kit, the home
+folder) are replaced by neutral names.
 """
 
 from __future__ import annotations
 
 import base64
+import functools
 import hashlib
 import html
 import io
+import os
 import re
+import sys
+import sysconfig
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -172,10 +182,15 @@ def _draw(curves: dict, title: str) -> bytes:
     return buf.getvalue()
 
 
-def _verdict_cell(ex, label: str):
-    png = plot_png(ex.curves, f"{label}: your run (colour) and the reference (grey)") if ex.curves else None
+def verdict_plot(ex) -> bytes | None:
+    """The plot of a trajectory exercise's run against the reference (None for other exercises)."""
+    return plot_png(ex.curves, f"{ex.grade_id}: your run (colour) and the reference (grey)") if ex.curves else None
+
+
+def _verdict_cell(ex, label: str, png: bytes | None = None):
+    png = png or verdict_plot(ex)
     rows = "".join(f"<tr><td>{html.escape(c.name)}</td><td>{c.fraction * c.weight:.2f} / {c.weight:g}</td>"
-                   f"<td>{html.escape(c.message)}</td></tr>" for c in ex.checks) if ex.curves else ""
+                   f"<td>{html.escape(c.message)}</td></tr>" for c in ex.checks) if png else ""
     body = (f"<div class='grader-verdict' style='border-left:4px solid {'#2a2' if ex.score >= ex.max_score else '#c33'};"
             f"padding:4px 10px;margin:6px 0'><b>Grader: {html.escape(label)}: {ex.score:g} / {ex.max_score:g} points"
             f"</b><br>{html.escape(ex.message)}"
@@ -188,7 +203,61 @@ def _verdict_cell(ex, label: str):
     return cell
 
 
-def _scrub(cell, secret: set[str]) -> None:
+WIDGET = "application/vnd.jupyter.widget-view+json"
+TEMPLATES = Path(__file__).resolve().parent / "templates"
+
+
+def machine_paths(extra: dict[str, str] | None = None) -> list[tuple[str, str]]:
+    """The grading machine's paths and the neutral names a page shows instead, longest first."""
+    kit = Path(__file__).resolve().parent.parent
+    names = {sysconfig.get_paths()["purelib"]: "<site-packages>", sysconfig.get_paths()["platlib"]: "<site-packages>",
+             sys.prefix: "<python>", sys.base_prefix: "<python>", sys.exec_prefix: "<python>",
+             str(kit): "<snakekit>", os.path.expanduser("~"): "~", **(extra or {})}
+    pairs = {}
+    for path, name in names.items():
+        if path and len(path) > 1:
+            pairs[path] = name
+            pairs[os.path.realpath(path)] = name
+    return sorted(pairs.items(), key=lambda kv: -len(kv[0]))
+
+
+def neutral(text: str, paths: list[tuple[str, str]]) -> str:
+    """``text`` with every machine path in ``paths`` replaced by its neutral name.
+
+    >>> neutral("File /opt/venv/lib/x.py, line 3", [("/opt/venv", "<python>")])
+    'File <python>/lib/x.py, line 3'
+    """
+    for path, name in paths:
+        if path in text:
+            text = text.replace(path, name)
+    return text
+
+
+def _neutral_output(out, paths):
+    if "text" in out:
+        out["text"] = neutral("".join(out["text"]) if isinstance(out["text"], list) else out["text"], paths)
+    if "traceback" in out:
+        out["traceback"] = [neutral(str(line), paths) for line in out["traceback"]]
+    if "evalue" in out:
+        out["evalue"] = neutral(str(out["evalue"]), paths)
+    for mime, v in list(out.get("data", {}).items()):
+        if mime.startswith("text/") and isinstance(v, str | list):
+            out["data"][mime] = neutral("".join(v) if isinstance(v, list) else v, paths)
+    return out
+
+
+def _widget_line(out):
+    """One line in place of an interactive widget (its model lives only in a running kernel)."""
+    plain = out.get("data", {}).get("text/plain", "")
+    plain = "".join(plain) if isinstance(plain, list) else str(plain)
+    m = re.match(r"\s*([A-Za-z_]\w*)\(", plain)
+    kind = f" ({m.group(1)})" if m else ""
+    return nbformat.v4.new_output("stream", name="stdout",
+                                  text=f"[an interactive widget{kind}: it works in the running notebook, not in this page]\n")
+
+
+def _scrub(cell, secret: set[str], paths=()) -> None:
+    """A code cell's outputs made fit for the page: hidden test code, widgets, machine paths, TeX."""
     if cell.cell_type != "code":
         return
     keep = []
@@ -198,21 +267,87 @@ def _scrub(cell, secret: set[str]) -> None:
             text += v if isinstance(v, str) else "".join(v) if isinstance(v, list) else ""
         if any(line in text for line in secret):
             keep.append(nbformat.v4.new_output("stream", name="stdout", text=REMOVED + "\n"))
-        else:
-            keep.append(out)
+            continue
+        data = out.get("data", {})
+        if WIDGET in data:
+            keep.append(_widget_line(out))
+            continue
+        if "text/latex" in data and not {"text/html", "image/png", "image/svg+xml"} & set(data):
+            latex = "".join(data["text/latex"]) if isinstance(data["text/latex"], list) else str(data["text/latex"])
+            out = nbformat.from_dict(dict(out))
+            out["data"] = {"text/html": math_html(latex)}
+        keep.append(_neutral_output(nbformat.from_dict(dict(out)), paths) if paths else out)
     cell.outputs = keep
 
 
-def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, str]):
+# --- math, typeset when the page is written ---------------------------------------------------
+
+_MATH = re.compile(r"\$\$(.+?)\$\$|\\\[(.+?)\\\]|\$(.+?)\$|\\\((.+?)\\\)", re.S)
+
+
+@functools.lru_cache(maxsize=4096)
+def tex_to_mathml(tex: str, display: bool = False) -> str:
+    """TeX as a MathML element (browsers typeset MathML without any script); on TeX it cannot
+    read, the TeX itself in a ``<code>``.
+
+    >>> tex_to_mathml("q_1")
+    '<math display="inline"><mrow><msub><mi>q</mi><mn>1</mn></msub></mrow></math>'
+    """
+    from latex2mathml.converter import convert
+
+    clean = re.sub(r"\\\\\[[^\]]*\]", r"\\\\", tex.strip())  # a row break's extra space (\\[2mm]) is not MathML's
+    try:
+        out = convert(clean, display="block" if display else "inline")
+    except Exception:  # noqa: BLE001 - anything latex2mathml cannot read stays readable TeX
+        return f"<code class='grader-tex'>{html.escape(tex)}</code>"
+    return out.replace(' xmlns="http://www.w3.org/1998/Math/MathML"', "")
+
+
+def math_html(latex: str) -> str:
+    """A ``text/latex`` output (``$...$``, ``$$...$$``, ``\\[...\\]``) as HTML with MathML."""
+    parts, last = [], 0
+    for m in _MATH.finditer(latex):
+        parts.append(html.escape(latex[last:m.start()]))
+        block = m.group(1) is not None or m.group(2) is not None
+        parts.append(tex_to_mathml(next(g for g in m.groups() if g is not None), block))
+        last = m.end()
+    if not parts:
+        return tex_to_mathml(latex, True)
+    parts.append(html.escape(latex[last:]))
+    return "".join(parts)
+
+
+def _stopped_cell(timeout: float | None):
+    note = STOPPED.format(timeout=timeout or 0)
+    cell = nbformat.v4.new_code_cell("", metadata={"tags": ["grader-verdict"]})
+    cell.outputs = [nbformat.v4.new_output("display_data", data={"text/html": (
+        "<div class='grader-stopped' style='border-left:4px solid #c33;padding:4px 10px;margin:6px 0'>"
+        f"<b>{html.escape(note)}</b>: this cell was interrupted, and the cells after it did not run.</div>")})]
+    return cell
+
+
+STOPPED = "stopped here: the notebook ran longer than {timeout:g} s"  # as grader.worker's note
+
+
+def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, str], stopped: int | None = None,
+          timeout: float | None = None, hide_paths: dict[str, str] | None = None, plots: dict | None = None,
+          comments: dict[str, str] | None = None):
     """The feedback notebook: ``nb`` (executed or as submitted) made safe, with verdicts.
 
     ``test_sources`` maps each test cell's grade id to its instructor source (with hidden tests).
+    ``stopped``: the index of the cell at which the notebook's time (``timeout`` s) ran out; it
+    gets a note. ``hide_paths`` adds machine paths (path -> neutral name) to :func:`machine_paths`.
+    ``plots``: a trajectory exercise's plot (PNG bytes) by grade id, when its curves are gone;
+    ``comments``: the teacher's comment on a cell, by grade id.
     """
+    plots, comments = plots or {}, comments or {}
     secret = hidden_lines(test_sources.values())
+    paths = machine_paths(hide_paths)
     by_id = {ex.grade_id: ex for ex in result.exercises}
     seen = set()
     cells = []
-    for cell in nb.cells:
+    note = STOPPED.format(timeout=timeout or 0)
+    for index, cell in enumerate(nb.cells):
         meta = cell.get("metadata", {}).get("nbgrader", {})
         gid = meta.get("grade_id")
         if gid in test_sources:
@@ -221,19 +356,26 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
             seen.add(gid)
             cell = nbformat.v4.new_code_cell(visible_part(test_sources[gid]))
             cells.append(cell)
+            if index == stopped:
+                cells.append(_stopped_cell(timeout))
             if gid in by_id:
-                cells.append(_verdict_cell(by_id[gid], gid))
+                cells.append(_verdict_cell(by_id[gid], gid, plots.get(gid)))
             continue
         cell = nbformat.from_dict(dict(cell))
         if cell.cell_type == "code":
-            cell.outputs = list(cell.get("outputs", []))
-            _scrub(cell, secret)
+            cell.outputs = [o for o in cell.get("outputs", [])
+                            if not (index == stopped and o.get("output_type") == "stream" and note in o.get("text", ""))]
+            _scrub(cell, secret, paths)
             cell.metadata = {k: v for k, v in cell.metadata.items() if k in ("tags",)}
         cells.append(cell)
+        if index == stopped:
+            cells.append(_stopped_cell(timeout))
+        if gid in comments:
+            cells.append(nbformat.v4.new_markdown_cell(f"**Comment from your teacher:** {html.escape(comments[gid])}"))
     for gid, ex in by_id.items():
         if gid not in seen:
             cells.append(nbformat.v4.new_markdown_cell(f"**Test cell `{gid}` was missing from your notebook.**"))
-            cells.append(_verdict_cell(ex, gid))
+            cells.append(_verdict_cell(ex, gid, plots.get(gid)))
     head = (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{result.score:g} / {result.max_score:g}**"
             + (f" ({result.status})" if result.status != "graded" else "") + "\n\n"
             + (f"{result.detail}\n\n" if result.detail else "")
@@ -241,11 +383,78 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
             + "".join(f"| `{e.grade_id}` | {e.score:g} / {e.max_score:g} | {'ok' if e.score >= e.max_score else 'see below'} |\n"
                       for e in result.exercises))
     out = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(head)] + cells)
+    for i, cell in enumerate(out.cells):  # the same page whenever it is written again
+        cell["id"] = f"cell-{i}"
     out.metadata = {"language_info": {"name": "python"}}
     kernelspec = nb.get("metadata", {}).get("kernelspec")
     if isinstance(kernelspec, dict) and {"name", "display_name"} <= set(kernelspec):
         out.metadata["kernelspec"] = kernelspec
     return out
+
+
+# --- the grader's verdicts, kept in the TA's copy of the notebook --------------------------------
+
+RECORD = "snakekit_grader"  # the autograded notebook's metadata key; set by the grader only
+
+
+def record(nb, result, *, stopped: int | None = None, timeout: float | None = None):
+    """The autograded notebook ``nb`` (the TA's copy) with the grader's verdicts in it.
+
+    Its metadata keeps what a feedback page is built from (status, every exercise's points,
+    message and checks, the plots), so pages can be written again later from the gradebook's
+    scores (:mod:`grader.nbgrader_plugins`); each test cell also shows its verdict as an output,
+    where formgrader shows it to the TA. Whatever the submission put under that key is dropped.
+    """
+    nb = nbformat.from_dict(dict(nb))
+    nb.metadata = {k: v for k, v in nb.get("metadata", {}).items() if k != RECORD}
+    exercises = {}
+    for ex in result.exercises:
+        png = verdict_plot(ex)
+        exercises[ex.grade_id] = {"score": ex.score, "max_score": ex.max_score, "status": ex.status,
+                                  "message": ex.message,
+                                  "checks": [[c.name, c.fraction, c.weight, c.message] for c in ex.checks] if png else [],
+                                  "plot": base64.b64encode(png).decode() if png else ""}
+    nb.metadata[RECORD] = {"status": result.status, "detail": result.detail, "stopped": stopped, "timeout": timeout,
+                           "exercises": exercises}
+    for cell in nb.cells:
+        if cell.cell_type != "code":
+            continue
+        cell.outputs = [o for o in cell.get("outputs", []) if RECORD not in o.get("metadata", {})]
+        gid = cell.get("metadata", {}).get("nbgrader", {}).get("grade_id")
+        ex = next((e for e in result.exercises if e.grade_id == gid), None)
+        if ex is not None:
+            shown = _verdict_cell(ex, gid, verdict_plot(ex)).outputs[0]
+            if result.status != "graded":
+                shown["data"]["text/html"] += (f"<div><b>Submission: {html.escape(result.status)}</b>"
+                                               f" ({html.escape(result.detail)})</div>")
+            shown["metadata"] = {RECORD: True}
+            cell.outputs.append(shown)
+    return nb
+
+
+def recorded(nb):
+    """What :func:`record` kept in ``nb``: ``(status, detail, stopped, timeout, exercises, plots)``, or None.
+
+    ``exercises`` are :class:`grader.score.ExerciseScore` (checks as ``grader.compare.Check``);
+    values of the wrong type are not trusted and give None.
+    """
+    from .compare import Check
+    from .score import ExerciseScore
+
+    rec = nb.get("metadata", {}).get(RECORD)
+    try:
+        exercises, plots = [], {}
+        for gid, e in rec["exercises"].items():
+            checks = tuple(Check(str(n), float(f), str(m), float(w)) for n, f, w, m in e["checks"])
+            exercises.append(ExerciseScore(str(gid), float(e["score"]), float(e["max_score"]), str(e["status"]),
+                                           str(e["message"]), checks))
+            if e["plot"]:
+                plots[str(gid)] = base64.b64decode(e["plot"])
+        stopped = rec.get("stopped")
+        return (str(rec["status"]), str(rec["detail"]), stopped if isinstance(stopped, int) else None,
+                float(rec["timeout"]) if rec.get("timeout") is not None else None, exercises, plots)
+    except (TypeError, KeyError, ValueError, AttributeError):
+        return None
 
 
 _exporters = threading.local()
@@ -276,10 +485,13 @@ def _frozen(v):
 
 
 def exporter_config():
-    """nbconvert's settings for a feedback page: the verdict cells show their output only, no prompts."""
+    """nbconvert's settings for a feedback page: the verdict cells show their output only, no prompts,
+    and the page template loads nothing from the network."""
     from traitlets.config import Config
 
     c = Config()
+    c.HTMLExporter.extra_template_basedirs = [str(TEMPLATES)]
+    c.HTMLExporter.template_name = "snakekit_feedback"
     c.TagRemovePreprocessor.remove_input_tags = {"grader-verdict"}
     c.TagRemovePreprocessor.enabled = True
     c.HTMLExporter.exclude_input_prompt = True
@@ -287,17 +499,56 @@ def exporter_config():
     return c
 
 
+def exporter_class():
+    """nbconvert's HTML exporter, with the math of markdown cells written as MathML."""
+    from jinja2 import pass_context
+    from nbconvert import HTMLExporter
+    from nbconvert.filters.markdown_mistune import IPythonRenderer, MarkdownWithMath
+
+    class MathMLRenderer(IPythonRenderer):
+        def block_math(self, body: str) -> str:
+            return tex_to_mathml(body, True)
+
+        def inline_math(self, body: str) -> str:
+            return tex_to_mathml(body, False)
+
+        def latex_environment(self, name: str, body: str) -> str:
+            return tex_to_mathml(f"\\begin{{{name}}}{body}\\end{{{name}}}", True)
+
+    class FeedbackPageExporter(HTMLExporter):
+        @pass_context
+        def markdown2html(self, context, source):
+            cell = context.get("cell", {})
+            renderer = MathMLRenderer(
+                escape=False, attachments=cell.get("attachments", {}), embed_images=self.embed_images,
+                path=context.get("resources", {}).get("metadata", {}).get("path", ""),
+                anchor_link_text=self.anchor_link_text, exclude_anchor_links=self.exclude_anchor_links,
+                **self.lexer_options)
+            return MarkdownWithMath(renderer=renderer).render(source)
+
+        def from_notebook_node(self, nb, resources=None, **kw):
+            body, resources = super().from_notebook_node(nb, resources, **kw)
+            # the page's style sheets credit web pages in comments; a page with no address in it is simpler to check
+            return _STYLE.sub(lambda m: _CSS_COMMENT.sub(lambda c: "" if "http" in c.group(0) else c.group(0),
+                                                         m.group(0)), body), resources
+
+    return FeedbackPageExporter
+
+
+_STYLE = re.compile(r"<style[^>]*>.*?</style>", re.S)
+_CSS_COMMENT = re.compile(r"/\*.*?\*/", re.S)
+
+
 def _exporter():
     """One HTML exporter per thread (its templates load once; an exporter is not shared between threads).
 
     Every page of a class shows the same lesson text and test cells, so the exporter keeps
-    the results of its per-cell filters (syntax highlighting, HTML sanitising) for reuse.
+    the results of its per-cell filters (syntax highlighting, HTML sanitising, markdown) for reuse.
     """
     if not hasattr(_exporters, "html"):
-        from nbconvert import HTMLExporter
         from nbconvert.filters.highlight import Highlight2HTML
 
-        class FeedbackExporter(HTMLExporter):
+        class FeedbackExporter(exporter_class()):
             def default_filters(self):
                 for name, fn in super().default_filters():
                     yield name, (_memo(fn) if name == "clean_html" else fn)

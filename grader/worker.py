@@ -1,21 +1,34 @@
 """Inside the sandbox: nbgrader's autograde of one submission, on the sandbox's own course copy.
 
-``python -m grader.worker COURSE_DIR ASSIGNMENT STUDENT CELL_TIMEOUT [NOTEBOOKS]`` runs nbgrader's
-``autograde`` (its sanitising, hidden-test injection from the gradebook copy, execution and
-scoring) and writes ``result.json`` next to the course copy: whether nbgrader succeeded, and
-the tail of its log. The grader's parent process trusts none of it for points.
+``python -m grader.worker COURSE_DIR ASSIGNMENT STUDENT TIMEOUT CELL_TIMEOUT [NOTEBOOKS]`` runs
+nbgrader's ``autograde`` (its sanitising, hidden-test injection from the gradebook copy, execution
+and scoring) and writes ``result.json`` next to the course copy: whether nbgrader succeeded, the
+tail of its log, and where a notebook was stopped. The grader's parent process trusts none of it
+for points.
+
+Time: each notebook has ``TIMEOUT`` seconds of wall clock in all (from its kernel's start), and
+each cell at most ``CELL_TIMEOUT`` of them. A cell over its own limit is interrupted and the
+notebook goes on; a cell still running when the notebook's time is up is interrupted, marked
+with a note, and the cells after it do not run. nbgrader then saves the notebook as it is, so
+the feedback shows every output up to the stopped cell.
 """
 
 from __future__ import annotations
 
 import json
 import sys
+import time
 from pathlib import Path
+
+#: the note put on the cell that was running when a notebook's time ran out (``{timeout}``: seconds)
+STOPPED_NOTE = "stopped here: the notebook ran longer than {timeout:g} s"
+_stopped: list[dict] = []  # where each notebook was stopped, filled in by the execute preprocessor
 
 
 def main(argv: list[str], *, warm: bool = False) -> int:
     """Autograde one submission; ``warm``: fork the kernels from this process (see :mod:`grader.warmkernel`)."""
-    course, assignment, student, timeout = Path(argv[0]), argv[1], argv[2], int(argv[3])
+    course, assignment, student = Path(argv[0]), argv[1], argv[2]
+    timeout, cell_timeout = float(argv[3]), float(argv[4])
     result_path = course.parent / "result.json"
     result = {"success": False, "error": "", "log": ""}
     result_path.write_text(json.dumps(result))  # replaced below; its presence means the worker started
@@ -26,7 +39,7 @@ def main(argv: list[str], *, warm: bool = False) -> int:
         if warm:
             from . import warmkernel
 
-            warmkernel.prefork(int(argv[4]) if len(argv) > 4 else 1)  # one kernel per notebook
+            warmkernel.prefork(int(argv[5]) if len(argv) > 5 else 1)  # one kernel per notebook
         _throwaway_gradebook()
         from nbgrader.apps import NbGraderAPI
         from nbgrader.coursedir import CourseDirectory
@@ -34,8 +47,9 @@ def main(argv: list[str], *, warm: bool = False) -> int:
 
         config = Config()
         config.CourseDirectory.root = str(course)
-        config.Execute.timeout = timeout
+        config.Execute.timeout = max(1, int(cell_timeout))
         config.Execute.interrupt_on_timeout = True
+        config.Autograde.autograde_preprocessors = _with_deadline(timeout, cell_timeout)
         config.Execute.extra_arguments = ["--HistoryManager.hist_file=:memory:"]
         config.NbGraderAPI.timezone = "UTC"
         if warm:
@@ -45,13 +59,52 @@ def main(argv: list[str], *, warm: bool = False) -> int:
         api = NbGraderAPI(CourseDirectory(config=config), config=config)
         out = api.autograde(assignment, student, force=True, create=True)
         result = {"success": bool(out.get("success")), "error": str(out.get("error", ""))[-4000:],
-                  "log": str(out.get("log", ""))[-8000:]}
+                  "log": str(out.get("log", ""))[-8000:], "stopped": _stopped}
     except BaseException as e:  # noqa: BLE001 - report whatever stopped nbgrader
         result = {"success": False, "error": f"{type(e).__name__}: {e}"[-4000:], "log": ""}
     if "grader.warmkernel" in sys.modules:
         sys.modules["grader.warmkernel"].discard()
     result_path.write_text(json.dumps(result))
     return 0 if result["success"] else 3
+
+
+def _with_deadline(timeout: float, cell_timeout: float) -> list:
+    """nbgrader's autograde steps, with its ``Execute`` replaced by one that keeps the notebook's deadline."""
+    from nbgrader.converters import Autograde
+    from nbgrader.preprocessors import Execute
+
+    class DeadlineExecute(Execute):
+        """nbgrader's ``Execute`` with a wall clock for the whole notebook beside the per-cell one."""
+
+        def preprocess(self, nb, resources=None, km=None):
+            self._deadline = time.monotonic() + timeout
+            self._stopped_at = None
+            self._notebook = ((resources or {}).get("nbgrader") or {}).get("notebook", "")
+            # each cell: its own limit, or what is left of the notebook's, whichever is shorter
+            self.timeout_func = lambda cell: max(0.05, min(cell_timeout, self._deadline - time.monotonic()))
+            return super().preprocess(nb, resources, km)
+
+        def preprocess_cell(self, cell, resources, index):
+            if self._stopped_at is not None:
+                return cell, resources  # the notebook's time is up: not run
+            try:
+                cell, resources = super().preprocess_cell(cell, resources, index)
+                late = time.monotonic() >= self._deadline - 0.05
+                timed_out = any(o.get("ename") == "CellTimeoutError" for o in cell.get("outputs", []))
+            except Exception:  # noqa: BLE001 - the kernel did not come back after the interrupt
+                if time.monotonic() < self._deadline - 0.05:
+                    raise
+                late = timed_out = True
+            if late and timed_out and cell.cell_type == "code":
+                from nbformat.v4 import new_output
+
+                self._stopped_at = index
+                cell.outputs.append(new_output("stream", name="stderr", text=STOPPED_NOTE.format(timeout=timeout) + "\n"))
+                _stopped.append({"notebook": self._notebook, "cell": index, "id": cell.get("id", "")})
+            return cell, resources
+
+    steps = list(Autograde.class_traits()["autograde_preprocessors"].default())
+    return [DeadlineExecute if step is Execute else step for step in steps]
 
 
 def _throwaway_gradebook() -> None:

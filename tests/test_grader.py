@@ -344,8 +344,8 @@ def test_feedback_plot_drawn_once_for_the_same_run_and_again_for_any_other(monke
 
 
 def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
-    """The feedback exporter keeps its filters' results between pages; the pages stay nbconvert's."""
-    from nbconvert import HTMLExporter
+    """The feedback exporter keeps its filters' results between pages; the pages stay what the exporter writes
+    without them (nbconvert's, with math as MathML)."""
     from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
 
     from grader import feedback
@@ -359,12 +359,13 @@ def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
         nb.metadata = {"language_info": {"name": "python"}}
         return nb
 
-    plain = HTMLExporter(config=feedback.exporter_config())  # nbconvert's own, with no results kept
+    plain = feedback.exporter_class()(config=feedback.exporter_config())  # with no results kept
     for student in ("ann", "ben", "ann"):
         nb = page(student)
         written = feedback.write_html(nb, tmp_path / f"{student}.html").read_text()
         assert written == plain.from_notebook_node(nb)[0]
         assert f"<b>{student}</b>" in written and f"# {student}" in written
+        assert "<math display=\"inline\"><mrow><msub><mi>q</mi><mn>1</mn></msub></mrow></math>" in written
 
 
 # --- grader.exercises: rules that recompute what a hidden test judges ---------------------------

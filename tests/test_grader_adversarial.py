@@ -21,7 +21,8 @@ from grader_corpus import CASES, PWNED
 from grader_helpers import ASSIGNMENT, REFERENCES, make_course, read_csv
 
 REPO = Path(__file__).resolve().parent.parent
-TIMEOUT = 20
+TIMEOUT = 30  # a notebook's wall clock [s]
+CELL_TIMEOUT = 10  # a cell's: a cell that hangs is interrupted and the exercises after it are still graded
 
 
 def _host_ip() -> str:
@@ -85,7 +86,7 @@ def batch(tmp_path_factory):
         case.make(course, case.student, ctx)
     csv = tmp / "grades.csv"
     r = subprocess.run([sys.executable, "-m", "grader.cli", ASSIGNMENT, "--course", str(course), "--jobs", "2",
-                        "--timeout", str(TIMEOUT), "--memory", "1536", "--csv", str(csv),
+                        "--timeout", str(TIMEOUT), "--cell-timeout", str(CELL_TIMEOUT), "--memory", "1536", "--csv", str(csv),
                         "--references", str(REFERENCES)],
                        capture_output=True, text=True, timeout=900, cwd=REPO,
                        env={**os.environ, "TMPDIR": str(work)})
