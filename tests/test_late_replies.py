@@ -96,7 +96,9 @@ def test_late_status_packets_are_drained_and_counted():
         wrong, _, _ = drive_and_read(robot, 30, gap=0.13)
         assert wrong == []
         assert robot.bus.stray_bytes > 0  # the late replies arrived, and were thrown away
-        assert robot.bus.lateness == pytest.approx(0.1, abs=0.03)  # learnt from them
+        # learnt from them: 100 ms late, plus what a loaded machine adds; the quiet wait follows
+        assert 0.09 <= robot.bus.lateness <= 0.4
+        assert robot.bus.quiet_time >= 1.25 * 0.09
     finally:
         robot.close()
 
