@@ -14,7 +14,6 @@ Exit codes: 0 the batch completed (even if some submissions failed: see the CSV)
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 

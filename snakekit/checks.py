@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CheckFailed, ConfigurationError, ShortcutError, SnakekitError
+from .errors import CheckFailed, ConfigurationError, ShortcutError
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "hand_in", "outputs", "rng", "quick",
            "waiting_for"]

@@ -14,7 +14,7 @@ import pytest
 from conftest import need_program
 from grader import compare
 from grader.references import REFERENCES as COURSE_REFERENCES
-from grader.references import Reference, differences, main as references_main, record, spec_hash
+from grader.references import Reference, differences, main as references_main, spec_hash
 from grader.score import score_exercise
 from grader_helpers import ASSIGNMENT, FIXTURE, REFERENCES, make_course, read_csv, submit
 from snakekit.trajectory import Trajectory, side_sweep

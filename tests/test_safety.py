@@ -12,14 +12,12 @@ import signal
 import subprocess
 import sys
 import textwrap
-import threading
 import time
 
 import numpy as np
 import pytest
 
-import snakekit
-from snakekit import BackendError, CommunicationError, ConfigurationError, SnakekitError
+from snakekit import BackendError, ConfigurationError, SnakekitError
 from snakekit.emulator import BusEmulator, Faults, make_emulated_robot
 from snakekit.robot import Run
 from snakekit.trajectory import Trajectory

@@ -7,7 +7,7 @@ import pytest
 
 import snakekit
 from snakekit import SPEC, Trajectory
-from snakekit.profile_planner import ACCELERATION_UNIT, VELOCITY_UNIT
+from snakekit.profile_planner import VELOCITY_UNIT
 from snakekit.sim import SimRobot
 from snakekit.trajectory import joint_trajectory
 

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import html
 import os
-import warnings
 import weakref
 from pathlib import Path
 
