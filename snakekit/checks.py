@@ -39,12 +39,14 @@ import importlib
 import os
 import sys
 import traceback
+import warnings
 import zlib
 from pathlib import Path
 
 import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
+from .handin import encode_results, fetch_cases
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "hand_in", "outputs", "rng", "quick",
            "waiting_for"]
@@ -201,6 +203,47 @@ class Exercise:
         hint = _mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()) * 10 + 1e-9)
         self.fail(f"{name}{_where(where)} is {_fmt(float(arr[i]), u)}, expected {_fmt(float(exp[i]), u)}: "
                   f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
+
+    def hand_in(self, grade_id: str, fn, *, forbid: tuple = (), what: str = "") -> int:
+        """Hand in ``fn``'s results at the grader's hidden cases of this exercise.
+
+        While a notebook is graded, ``SNAKEKIT_CASES`` names the grader's socket: the grader
+        sends, at this moment, the arguments of the hidden cases of ``grade_id`` (drawn anew for
+        every grading batch, outside the kernel), ``fn(*args)`` runs at each, and what it returns
+        (numbers, an array, or a dict of them) or the exception it raises is written to
+        ``<SNAKEKIT_HANDIN_DIR>/<grade_id>.npz`` (:func:`encode_results`). The grader scores that
+        file in its own process, against the instructor solution's results at the same cases.
+
+        It prints nothing and raises nothing (a test cell calls it first, so a visible check
+        that fails after it does not lose what the hidden cases earn). ``forbid``: library
+        functions that raise :class:`ShortcutError` while ``fn`` runs (see :func:`forbid`).
+        Outside grading it does nothing. Returns the number of cases handed in.
+        """
+        folder, socket_path = os.environ.get("SNAKEKIT_HANDIN_DIR"), os.environ.get("SNAKEKIT_CASES")
+        if not folder or not socket_path:
+            return 0
+        try:
+            cases = fetch_cases(socket_path, grade_id)
+        except OSError:
+            return 0  # no grader answered: nothing handed in, the grader says "missing"
+        results = []
+        with contextlib.ExitStack() as stack:
+            stack.enter_context(np.errstate(all="ignore"))
+            stack.enter_context(warnings.catch_warnings())
+            warnings.simplefilter("ignore")  # a warning on stderr would fail the cell in nbgrader
+            if forbid:
+                stack.enter_context(globals()["forbid"](*forbid, what=what or self.name))
+            for args in cases:
+                try:
+                    results.append(fn(*args))
+                except BaseException as e:  # noqa: BLE001 - a student's SystemExit is a result too
+                    if isinstance(e, KeyboardInterrupt):
+                        raise
+                    results.append(e)
+        path = Path(folder) / f"{grade_id}.npz"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(encode_results(results))
+        return len(results)
 
     def done(self, note: str = "") -> None:
         """Print that the checks passed (the last line of a test cell)."""

@@ -1,0 +1,122 @@
+"""The hidden cases: what crosses between the grader and a student's kernel.
+
+Cases go from the grader to the kernel over a Unix socket, at the moment a test cell asks for
+them (:meth:`snakekit.checks.Exercise.hand_in`); the results go back as a file in the hand-in
+folder. Both are npz without pickles: the grader decodes what a student's kernel wrote with
+``allow_pickle=False``. One request: a JSON line ``{"grade_id": ...}``; one answer: an 8-byte
+big-endian length, then the npz of :func:`encode_cases` (length 0: no cases for that id).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import socket
+import struct
+
+import numpy as np
+
+from .errors import FileFormatError, InputTypeError
+
+__all__ = ["encode_cases", "decode_cases", "fetch_cases", "encode_results", "decode_results"]
+
+
+
+
+def _npz(arrays: dict) -> bytes:
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
+def encode_cases(cases) -> bytes:
+    """The arguments of each case (a sequence of tuples of numbers, strings or arrays) as bytes."""
+    arrays = {"__cases__": np.array(len(cases))}
+    for k, args in enumerate(cases):
+        for j, a in enumerate(args):
+            arr = np.asarray(a)
+            if arr.dtype == object:
+                raise InputTypeError(f"case {k}, argument {j}: {type(a).__name__} is not numbers, a string or an array")
+            arrays[f"{k}/{j}"] = arr
+    return _npz(arrays)
+
+
+def decode_cases(data: bytes) -> list[tuple]:
+    """The cases :func:`encode_cases` wrote; 0-d values come back as Python int, float, bool or str."""
+    with np.load(io.BytesIO(data), allow_pickle=False) as z:
+        n = int(z["__cases__"])
+        out = []
+        for k in range(n):
+            args, j = [], 0
+            while f"{k}/{j}" in z.files:
+                a = z[f"{k}/{j}"]
+                args.append(a.item() if a.ndim == 0 else a)
+                j += 1
+            out.append(tuple(args))
+    return out
+
+
+def fetch_cases(socket_path: str, grade_id: str, timeout: float = 30.0) -> list[tuple]:
+    """Ask the grader's socket for the cases of ``grade_id`` (none if it has none)."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.settimeout(timeout)
+        s.connect(socket_path)
+        s.sendall(json.dumps({"grade_id": grade_id}).encode() + b"\n")
+        head = _recv(s, 8)
+        (size,) = struct.unpack(">Q", head)
+        return decode_cases(_recv(s, size)) if size else []
+
+
+def _recv(s, size: int) -> bytes:
+    chunks, left = [], size
+    while left:
+        chunk = s.recv(min(left, 1 << 20))
+        if not chunk:
+            raise ConnectionError("the grader's socket closed early")
+        chunks.append(chunk)
+        left -= len(chunk)
+    return b"".join(chunks)
+
+
+def encode_results(results) -> bytes:
+    """One entry per case: ``<k>/value`` (an array), ``<k>/<name>`` (a dict's arrays), or
+    ``<k>/__error__`` (an exception raised, ``"<type>: <message>"``; a result that is not numbers
+    is one too: ``"returned None"``, ``"returned str"``)."""
+    arrays = {"__cases__": np.array(len(results))}
+    for k, r in enumerate(results):
+        if isinstance(r, BaseException):
+            arrays[f"{k}/__error__"] = np.array(f"{type(r).__name__}: {str(r)[:500]}")
+            continue
+        parts = r if isinstance(r, dict) else {"value": r}
+        entry = {}
+        for name, v in parts.items():
+            try:
+                a = None if v is None else np.asarray(v)
+            except Exception:  # noqa: BLE001 - a student's object that numpy cannot read
+                a = None
+            if a is None or a.dtype == object or a.dtype.kind not in "biuf":
+                what = "None" if v is None else type(v).__name__
+                entry = {"__error__": np.array(f"returned {what}" + ("" if name == "value" else f" for {name}"))}
+                break
+            entry[str(name).replace("/", "_")] = a
+        arrays.update({f"{k}/{n}": a for n, a in entry.items()})
+    return _npz(arrays)
+
+
+def decode_results(data: bytes) -> list[dict | str]:
+    """The results :func:`encode_results` wrote: per case a dict of arrays, or the error's text."""
+    with np.load(io.BytesIO(data), allow_pickle=False) as z:
+        n = int(z["__cases__"])
+        out: list[dict | str] = [{} for _ in range(n)]
+        for key in z.files:
+            if key == "__cases__":
+                continue
+            k, _, name = key.partition("/")
+            k = int(k)
+            if not 0 <= k < n:
+                raise FileFormatError(f"result {key} outside the {n} cases")
+            if name == "__error__":
+                out[k] = str(z[key])
+            elif isinstance(out[k], dict):
+                out[k][name] = z[key]
+    return out
