@@ -64,6 +64,8 @@ def steps(submissions: int) -> list[Step]:
         Step("collision", "self-collision check: a pose, Task 2's path, Task 2 with contacts", ["collision.py"], 15),
         Step("interactive", "Task 1 through the control panel and viewer", ["interactive.py", "--repeats", "3"], 60),
         Step("setups", "time to a lesson kernel and to JupyterLab; install size", ["setups.py", "--repeats", "3"], 40),
+        Step("viewer_proxy", "the 3D view through Jupyter's port (jupyter-server-proxy) vs its own port",
+             ["viewer_proxy.py"], 45),
         Step("optimisations", "this round's changes, before and after", ["before_after.py"], 130),
         Step("grading", f"{submissions} submissions: snakekit grade vs nbgrader vs bare",
              ["run.py", "--grading-step", str(submissions)], 30 + 7 * submissions),
@@ -388,6 +390,18 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     if b:
         add(f"| bus control cycle (SyncRead + SyncWrite, 5 servos, emulated): `DynamixelSnake` vs bare dynamixel-sdk | "
             f"{med(b['ours_hz']):.0f} Hz | {med(b['bare_hz']):.0f} Hz | {b['ratio']:.2f} | >= 0.80 |")
+    vp = results.get("viewer_proxy")
+    if vp:
+        u, pg = vp["update_ms"], vp["page_ms"]
+        add(f"| 3D view update, `viewer.show(q)` to the page's websocket: through Jupyter's port (jupyter-server-proxy) "
+            f"vs the viewer's own port (p95 {u['proxied']['p95']:.1f} / {u['direct']['p95']:.1f} ms) | "
+            f"{u['proxied']['median']:.2f} ms | {u['direct']['median']:.2f} ms | {vp['update_ratio']:.2f} | - |")
+        add(f"| 3D view page + script (0.85 MB) loaded through Jupyter's port vs the viewer's own port | "
+            f"{pg['proxied']['median']:.1f} ms | {pg['direct']['median']:.1f} ms | {vp['page_ratio']:.2f} | - |")
+        m = vp["server_rss_mb"]
+        add(f"| Jupyter server memory with jupyter-server-proxy vs without (just started; {m['with_proxy']:.0f} MB "
+            f"once it served the view) | {m['with_proxy_idle']:.0f} MB | {m['without_proxy']:.0f} MB | "
+            f"{m['with_proxy_idle'] / m['without_proxy']:.2f} | - |")
     br = results.get("bridge")
     if br:
         for r in br["bridge"]:

@@ -9,7 +9,7 @@
 # hadolint the Dockerfile; validate compose.yaml with compose v2; build with the user's command
 # (`docker compose -f docker/compose.yaml build lab`: the builder compose picks, the classic one
 # on Debian's docker.io); run `lab` and check /lab with the token, the user, the health check,
-# the work volume and the 3D viewer's port; open it in headless Chromium from the host
+# the work volume and the 3D viewer through the lab's port; open it in headless Chromium from the host
 # (docker/browser-check: the lessons listed, lesson 0 run, the arm drawn and moving in the 3D
 # view); execute a lesson inside (instructor and student versions); run `grader` with networking off
 # on sample submissions and check its CSV, gradebook and feedback.
@@ -92,22 +92,6 @@ $DOCKER history --format '{{.Size}}\t{{.CreatedBy}}' "$IMAGE" \
 
 # --- time from docker run to /lab answering -------------------------------------------------
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
-free_range() {  # 10 consecutive free ports
-  python3 - <<'EOF'
-import random, socket
-for _ in range(200):
-    base = random.randrange(20000, 60000)
-    try:
-        socks = []
-        for p in range(base, base + 10):
-            s = socket.socket(); socks.append(s); s.bind(("127.0.0.1", p))
-        print(f"{base}-{base + 9}"); break
-    except OSError:
-        pass
-    finally:
-        for s in socks: s.close()
-EOF
-}
 http_code() { curl -s -o /dev/null -w '%{http_code}' --max-time 2 "$1" || true; }
 TOKEN=$(od -An -N16 -tx1 /dev/urandom | tr -d ' \n')
 # the engine has no default bridge (--bridge=none): a network of our own, as compose makes one
@@ -130,9 +114,8 @@ median=$(printf '%s\n' "${times[@]}" | sort -n | sed -n 2p)
 figure "docker run to /lab answering: median $median s of ${times[*]} (target <= 3 s)"
 
 # --- the lab service ---------------------------------------------------------------------
-export JUPYTER_TOKEN=$TOKEN SNAKEKIT_LAB_PORT SNAKEKIT_VIEWER_PORTS
+export JUPYTER_TOKEN=$TOKEN SNAKEKIT_LAB_PORT
 SNAKEKIT_LAB_PORT=$(free_port)
-SNAKEKIT_VIEWER_PORTS=$(free_range)
 LAB="http://127.0.0.1:$SNAKEKIT_LAB_PORT"
 t=$(now)
 "${COMPOSE[@]}" up -d lab >"$RUN/compose.log" 2>&1 || { cat "$RUN/compose.log" >&2; die "compose up lab failed"; }
@@ -188,7 +171,8 @@ print(f'{t1 - t:.1f} s to a ready kernel, {t2 - t1:.1f} s for the first cell (nu
   || die "lab: a kernel did not start or import the kit"
 figure "lesson kernel: $kt"
 
-# the 3D viewer, as a lesson makes it, is reachable from the host on its published port
+# the 3D viewer, as a script in the container makes it, is reachable from the host through the
+# lab's port alone (jupyter-server-proxy, with the lab's token): its own port is not published
 $DOCKER exec -d "$CID" python -c "
 from snakekit.viewer import Viewer
 import time
@@ -201,15 +185,19 @@ until $DOCKER exec "$CID" test -s /tmp/viewer-url; do
   sleep 0.2
 done
 vurl=$($DOCKER exec "$CID" cat /tmp/viewer-url)
-vport=${SNAKEKIT_VIEWER_PORTS%-*}
-[ "$vurl" = "http://localhost:$vport/static/" ] || die "viewer: URL $vurl, expected http://localhost:$vport/static/"
-curl -s --max-time 5 "http://127.0.0.1:$vport/static/" | grep -i "meshcat" >/dev/null \
-  || die "viewer: $vurl does not serve meshcat's page on the host"
-say "viewer: a lesson's 3D view is served on $vurl, reachable from the host"
+vport=$(sed -nE 's#^http://localhost:([0-9]+)/static/$#\1#p' <<<"$vurl")
+[ -n "$vport" ] || die "viewer: URL $vurl, expected http://localhost:<port>/static/ (a script's viewer: its own port)"
+curl -s --max-time 5 -H "Authorization: token $TOKEN" "$LAB/proxy/$vport/static/" | grep -i "meshcat" >/dev/null \
+  || die "viewer: the lab's port does not serve its page at $LAB/proxy/$vport/static/"
+code=$(http_code "$LAB/proxy/$vport/static/")
+[ "$code" != 200 ] || die "viewer: $LAB/proxy/$vport/static/ answered without the token"
+! curl -s --max-time 2 "http://127.0.0.1:$vport/static/" 2>/dev/null | grep -qi "meshcat" \
+  || die "viewer: its own port $vport answers on the host: it must not be published"
+say "viewer: a 3D view served on the container's port $vport reaches the host at $LAB/proxy/$vport/static/ (with the token), not on its own port"
 
 # the lab in a browser on the host: the lessons listed, lesson 0 run, the arm drawn and moving
 t=$(now)
-"$VENV_BIN/python" docker/browser-check "$LAB" "$TOKEN" "$SNAKEKIT_VIEWER_PORTS" "$ROOT/artifacts" >"$RUN/browser.log" 2>&1 \
+"$VENV_BIN/python" docker/browser-check "$LAB" "$TOKEN" "$ROOT/artifacts" >"$RUN/browser.log" 2>&1 \
   || { tail -30 "$RUN/browser.log" >&2; die "the lab in headless Chromium: see above (screenshots in artifacts/)"; }
 sed 's/^/docker-test: /' "$RUN/browser.log"
 figure "browser check of the lab (lessons listed, lesson 0 run, arm drawn and moved) in $(since "$t") s"

@@ -48,7 +48,7 @@ def port_open(port: int) -> bool:
 class JupyterLab:
     """A JupyterLab server in its own session, with everything it starts tracked for cleanup."""
 
-    def __init__(self, root: Path, home: Path):
+    def __init__(self, root: Path, home: Path, base_url: str = "/"):
         self.psutil = need("psutil")
         self.port = free_port()
         self.token = secrets.token_hex(16)
@@ -61,12 +61,13 @@ class JupyterLab:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "jupyter", "lab", "--no-browser", "--allow-root", "--ip=127.0.0.1",
              f"--port={self.port}", "--ServerApp.port_retries=0", f"--IdentityProvider.token={self.token}",
+             f"--ServerApp.base_url={base_url}",
              f"--ServerApp.root_dir={root}", "--LabApp.expose_app_in_browser=True",
              f"--LabApp.workspaces_dir={home / 'workspaces'}", f"--LabApp.user_settings_dir={home / 'settings'}",
              "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate", "--LabApp.news_url=None"],
             cwd=root, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
         self.seen: dict[int, str] = {}
-        self.url = f"http://127.0.0.1:{self.port}"
+        self.url = f"http://127.0.0.1:{self.port}{base_url.rstrip('/')}"
         deadline = time.monotonic() + 60
         while True:
             try:
@@ -148,6 +149,36 @@ def steady_screenshot(element, *, timeout: float = 20.0) -> bytes:
     raise AssertionError(f"the 3D view kept changing for {timeout} s with nothing moving it")
 
 
+#: true once the notebook in front has a kernel that is idle (JupyterLab exposed as window.jupyterapp)
+KERNEL_IDLE = ("() => window.jupyterapp && window.jupyterapp.shell.currentWidget"
+               " && window.jupyterapp.shell.currentWidget.sessionContext"
+               " && window.jupyterapp.shell.currentWidget.sessionContext.session"
+               " && window.jupyterapp.shell.currentWidget.sessionContext.session.kernel"
+               " && window.jupyterapp.shell.currentWidget.sessionContext.session.kernel.status === 'idle'")
+
+
+def drag_slider(page, label: str) -> tuple[float, float]:
+    """Drag the slider labelled ``label`` 120 px left, 12 px at a time, as a hand does, and wait
+    until its readout moved by more than 0.2; returns the readout before and after."""
+    slider = page.locator(".widget-slider", has_text=label).first
+    readout = slider.locator(".widget-readout")
+    before = float(readout.inner_text().replace("\u2212", "-"))  # a real minus sign
+    handle = slider.locator(".noUi-handle")
+    handle.scroll_into_view_if_needed()
+    box = handle.bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(x, y)
+    page.mouse.down()
+    for step in range(1, 11):
+        page.mouse.move(x - 12 * step, y)
+        time.sleep(0.03)
+    page.mouse.up()
+    page.wait_for_function(
+        "([el, v]) => Math.abs(parseFloat(el.textContent.replace('\u2212', '-')) - v) > 0.2",
+        arg=[readout.element_handle(), before], timeout=10_000)
+    return before, float(readout.inner_text().replace("\u2212", "-"))
+
+
 def test_lesson0_student_fills_exercise_moves_view_and_validates(tmp_path):
     sync_api = need("playwright.sync_api")
     need("jupyterlab")
@@ -168,13 +199,7 @@ def test_lesson0_student_fills_exercise_moves_view_and_validates(tmp_path):
             try:
                 page = browser.new_page(viewport={"width": 1400, "height": 1000})
                 page.goto(f"{lab.url}/lab/tree/{LESSON}?token={lab.token}")
-                page.wait_for_function(
-                    "() => window.jupyterapp && window.jupyterapp.shell.currentWidget"
-                    " && window.jupyterapp.shell.currentWidget.sessionContext"
-                    " && window.jupyterapp.shell.currentWidget.sessionContext.session"
-                    " && window.jupyterapp.shell.currentWidget.sessionContext.session.kernel"
-                    " && window.jupyterapp.shell.currentWidget.sessionContext.session.kernel.status === 'idle'",
-                    timeout=90_000)
+                page.wait_for_function(KERNEL_IDLE, timeout=90_000)
                 cells = page.locator(".jp-Notebook .jp-Cell")
                 # as handed out: running everything stops at the exercise's check, which says why
                 page.evaluate("() => window.jupyterapp.commands.execute('notebook:run-all-cells')")
@@ -216,31 +241,15 @@ def test_lesson0_student_fills_exercise_moves_view_and_validates(tmp_path):
                 view = page.locator("iframe[title='snakekit 3D view']").first
                 view.scroll_into_view_if_needed()
                 src = view.get_attribute("src")
-                assert src.startswith("http://127.0.0.1:")
-                meshcat_ports.append(int(src.split(":")[2].split("/")[0]))
+                assert src.startswith("/proxy/") and src.endswith("/static/"), src   # through Jupyter's own port
+                meshcat_ports.append(int(src.split("/")[2]))
                 view.content_frame.locator("canvas").first.wait_for(state="visible", timeout=30_000)
 
                 before = steady_screenshot(view)  # the last move's playback has ended
                 (ARTIFACTS / "browser_lesson0_before.png").write_bytes(before)
                 page.screenshot(path=str(ARTIFACTS / "browser_lesson0_page.png"))
 
-                slider = page.locator(".widget-slider", has_text="joint 1 [rad]").first
-                readout = slider.locator(".widget-readout")
-                value_before = float(readout.inner_text().replace("\u2212", "-"))  # a real minus sign
-                handle = slider.locator(".noUi-handle")
-                handle.scroll_into_view_if_needed()
-                box = handle.bounding_box()
-                x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
-                page.mouse.move(x, y)
-                page.mouse.down()
-                for step in range(1, 11):  # a real drag, 12 px at a time
-                    page.mouse.move(x - 12 * step, y)
-                    time.sleep(0.03)
-                page.mouse.up()
-                page.wait_for_function(
-                    "([el, v]) => Math.abs(parseFloat(el.textContent.replace('\u2212', '-')) - v) > 0.2",
-                    arg=[readout.element_handle(), value_before], timeout=10_000)
-                value_after = float(readout.inner_text().replace("\u2212", "-"))
+                value_before, value_after = drag_slider(page, "joint 1 [rad]")
 
                 view.scroll_into_view_if_needed()
                 after = steady_screenshot(view)

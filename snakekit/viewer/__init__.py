@@ -6,8 +6,9 @@
 ...     viewer                                      # the last line of a cell shows it
 
 Modules: :mod:`.scene` (:class:`Viewer`: the arm, goals, marks, playback),
-:mod:`.server` (the meshcat server, a thread of the kernel), :mod:`.urdf_visuals` (the boxes drawn, read
-from the generated URDF). The workspace boundary is computed in
+:mod:`.server` (the meshcat server, a thread of the kernel), :mod:`.urls` (where the browser finds
+the page: through the Jupyter server's proxy in a notebook, docs/viewer.md), :mod:`.urdf_visuals`
+(the boxes drawn, read from the generated URDF). The workspace boundary is computed in
 :func:`snakekit.kinematics.workspace_boundary`.
 """
 

@@ -9,9 +9,14 @@ is a thread of the kernel (:mod:`snakekit.viewer.server` starts and stops it). H
 
 * the web server binds ``127.0.0.1`` unless told otherwise (``host="0.0.0.0"`` inside a
   container whose port is published), and the ZeroMQ socket always binds ``127.0.0.1``;
+* in a notebook, the page and its websocket are reached through the Jupyter server's own
+  URL, ``<base_url>proxy/<port>/`` (jupyter-server-proxy), so the view works wherever
+  JupyterLab does (a hub, Binder, a container or an SSH tunnel with Jupyter's port alone);
+  elsewhere on the viewer's own port. :mod:`.urls` says what decides it, and
+  ``SNAKEKIT_VIEWER_URL`` overrides it;
 * the environment may set the defaults: ``SNAKEKIT_VIEWER_HOST`` (the interface) and
   ``SNAKEKIT_VIEWER_PORTS`` (a range such as ``7000-7009``: the first free port in it is
-  used). The container image sets both, so the view is reachable on its published ports;
+  used);
 * the page and its JavaScript come from the meshcat package itself: nothing is fetched from
   the internet;
 * the server stops with :meth:`Viewer.close`, at the end of a ``with`` block, when the
@@ -43,6 +48,7 @@ from ..robot import Run
 from ..trajectory import Trajectory
 from ..validate import as_configuration
 from .server import LIVE, Window, start_in_range, start_server, stop_server
+from .urls import viewer_root
 from .urdf_visuals import visual_boxes
 
 from .client import load as _load_meshcat
@@ -104,8 +110,10 @@ class Viewer:
             Default: ``$SNAKEKIT_VIEWER_HOST``, else ``"127.0.0.1"``.
         port: web server port (default: the first free one in ``$SNAKEKIT_VIEWER_PORTS``,
             e.g. ``7000-7009``, else any free port).
-        url_host: host name the browser uses to reach the server (default: ``host``, or
-            ``localhost`` when listening on every interface).
+        url_host: host name the browser uses to reach the server's own port; given, the
+            page is not proxied (default: in a notebook, through the Jupyter server,
+            ``<base_url>proxy/<port>/static/``, or ``$SNAKEKIT_VIEWER_URL``; elsewhere
+            ``host``, or ``localhost`` when listening on every interface).
         height: height of the view in a notebook cell [px].
         timeout: longest wait for the server to answer a request [s]; starting it may take
             up to ``max(timeout, STARTUP_TIMEOUT)`` (a busy machine can be slow).
@@ -116,6 +124,7 @@ class Viewer:
 
     Raises:
         ViewerError: the server could not start (port in use, meshcat missing).
+        ConfigurationError: ``SNAKEKIT_VIEWER_URL`` is not an address with ``{port}``.
     """
 
     def __init__(self, *, host: str | None = None, port: int | None = None, url_host: str | None = None,
@@ -138,10 +147,12 @@ class Viewer:
         else:
             self._server = start_server(host, port or 0, max(timeout, STARTUP_TIMEOUT))
         self.port = self._server.port
-        shown = url_host or ("localhost" if host in ("0.0.0.0", "", "::") else host)
-        if ":" in shown and not shown.startswith("["):
-            shown = f"[{shown}]"
-        self.url = f"http://{shown}:{self.port}/static/"
+        try:
+            root = viewer_root(self.port, host, in_kernel=_in_kernel(), url_host=url_host)
+        except ConfigurationError:
+            self._server.stop()
+            raise
+        self.url = f"{root}static/"
         self._window = Window(self.url, self._server, timeout)
         self._finalizer = weakref.finalize(self, stop_server, self._server, self._window.zmq_socket)
         LIVE.add(self)

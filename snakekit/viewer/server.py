@@ -17,7 +17,10 @@ itself, on its own event loop:
 * the kernel's busy cells do not stop it: Python hands the thread the interpreter lock every
   few milliseconds, and while a cell waits (a real-time move, ``time.sleep``) it runs freely;
 * no request waits for a browser: every request times out with a
-  :class:`~snakekit.errors.ViewerError` instead of hanging a headless notebook run.
+  :class:`~snakekit.errors.ViewerError` instead of hanging a headless notebook run;
+* the page connects its websocket beside its own address, not to the root of its host, so
+  it works on the server's own port and through jupyter-server-proxy alike
+  (``<base_url>proxy/<port>/static/`` and its websocket ``<base_url>proxy/<port>/``).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import atexit
 import socket
 import threading
 import weakref
+from pathlib import Path
 
 from ..errors import MissingDependencyError, ViewerError
 
@@ -44,6 +48,22 @@ except ImportError as _e:  # pragma: no cover - the kit's environment has meshca
 LIVE: weakref.WeakSet = weakref.WeakSet()
 
 
+#: meshcat's page connects its websocket to ``ws://<host>/``, the root of the host it came from;
+#: through a proxy its websocket is beside its own address instead (``.../proxy/7001/`` for a page
+#: at ``.../proxy/7001/static/``), so the page is served with this call in place of meshcat's
+CONNECT = 'viewer.connect(new URL("..", location.href).href.replace(/^http/, "ws"));'
+
+
+def _page(meshcat_server) -> str:
+    """meshcat's viewer page, connecting its websocket beside its own address (:data:`CONNECT`)."""
+    text = (Path(meshcat_server.VIEWER_ROOT) / meshcat_server.VIEWER_HTML).read_text(encoding="utf-8")
+    if text.count("viewer.connect();") != 1:
+        raise ViewerError(f"meshcat's page {meshcat_server.VIEWER_HTML} no longer calls viewer.connect() once, "
+                          "so the kit cannot point its websocket through Jupyter's proxy: install the meshcat "
+                          "version of environment.lock (tools/setup)")
+    return text.replace("viewer.connect();", CONNECT)
+
+
 def _bridge_class():
     """meshcat's bridge, listening on the host asked for only (meshcat's own listen() binds
     every interface), remembering its HTTP server so that it can be stopped, and quiet: in
@@ -54,6 +74,13 @@ def _bridge_class():
     import tornado.websocket
 
     meshcat_server = _server_module()
+    page = _page(meshcat_server)
+
+    class Page(tornado.web.RequestHandler):
+        def get(self):
+            self.set_header("Content-Type", "text/html; charset=UTF-8")
+            self.set_header("Cache-Control", "no-store")
+            self.write(page)
 
     class PageSocket(meshcat_server.WebSocketHandler):
         def open(self):  # meshcat's, without printing "opened: <handler>"
@@ -65,7 +92,8 @@ def _bridge_class():
 
     class Bridge(meshcat_server.ZMQWebSocketBridge):
         def make_app(self):
-            app = tornado.web.Application([  # meshcat's two routes: the page and its websocket
+            app = tornado.web.Application([  # meshcat's two routes, the page and its websocket, and ours
+                (r"/static/(?:index\.html)?", Page),
                 (r"/static/(.*)", meshcat_server.StaticFileHandlerNoCache,
                  {"path": meshcat_server.VIEWER_ROOT, "default_filename": meshcat_server.VIEWER_HTML}),
                 (r"/", PageSocket, {"bridge": self}),
