@@ -296,3 +296,17 @@ def test_a_saved_page_draws_the_arm_in_chromium_with_the_network_off(tmp_path):
     assert {urllib.parse.urlsplit(u).scheme for u in asked} <= {"file", "data", "blob"}, asked
     arm = changed_fraction(pixels(shots["drawn"]), pixels(shots["blank"]))
     assert arm > 0.01, f"the saved page drew no arm offline ({arm:.3%} of its pixels are the arm's)"
+
+
+def test_a_meshcat_page_that_no_longer_connects_once_is_refused_clearly(tmp_path):
+    need("meshcat")
+    from types import SimpleNamespace
+
+    from snakekit.errors import ViewerError
+    from snakekit.viewer.server import _page
+
+    (tmp_path / "index.html").write_text("<script>var viewer = new MeshCat.Viewer(pane); viewer.connect(url);</script>")
+    changed = SimpleNamespace(VIEWER_ROOT=str(tmp_path), VIEWER_HTML="index.html")
+    with pytest.raises(ViewerError, match=r"no longer calls viewer.connect\(\) once.*install the meshcat version "
+                                          r"of environment.lock"):
+        _page(changed)

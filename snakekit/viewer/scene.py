@@ -7,8 +7,8 @@ robot description.
 meshcat's viewer is a web page (three.js) fed by a small server over a websocket; the server
 is a thread of the kernel (:mod:`snakekit.viewer.server` starts and stops it). Here:
 
-* the web server binds ``127.0.0.1`` unless told otherwise (``host="0.0.0.0"`` inside a
-  container whose port is published), and the ZeroMQ socket always binds ``127.0.0.1``;
+* the web server binds ``127.0.0.1`` unless told otherwise (``host="0.0.0.0"`` only to serve
+  its own port to other machines), and the ZeroMQ socket always binds ``127.0.0.1``;
 * in a notebook, the page and its websocket are reached through the Jupyter server's own
   URL, ``<base_url>proxy/<port>/`` (jupyter-server-proxy), so the view works wherever
   JupyterLab does (a hub, Binder, a container or an SSH tunnel with Jupyter's port alone);
@@ -105,8 +105,9 @@ class Viewer:
     """The arm in a meshcat scene, shown in a notebook cell.
 
     Args:
-        host: interface the web server listens on. Keep ``"127.0.0.1"`` unless the browser
-            runs on another machine (``"0.0.0.0"`` inside a container with a published port).
+        host: interface the web server listens on. Keep ``"127.0.0.1"``: a browser on
+            another machine reaches the view through the Jupyter server's port; ``"0.0.0.0"``
+            only for its own port to be reached from elsewhere.
             Default: ``$SNAKEKIT_VIEWER_HOST``, else ``"127.0.0.1"``.
         port: web server port (default: the first free one in ``$SNAKEKIT_VIEWER_PORTS``,
             e.g. ``7000-7009``, else any free port).
