@@ -1,8 +1,9 @@
 """The 3D view through the Jupyter server's own port, as on a hub, Binder or an SSH tunnel.
 
-JupyterLab runs under a hub-like base URL (``/user/ana/``); headless Chromium may reach that
-server's port and nothing else: every other request is refused by the browser's own
-routing, and every websocket it opens is recorded. Lesson 0's first cells (the viewer and the
+JupyterLab runs under a hub-like base URL (``/user/ana/``) and headless Chromium reaches it
+through a TCP tunnel on another port, as ``ssh -L`` makes one: the browser may reach that
+tunnel and nothing else (not even JupyterLab's own port): every other request is refused by
+the browser's own routing, and every websocket it opens is recorded. Lesson 0's first cells (the viewer and the
 control panel, as handed out) run in a small notebook; the view must draw the arm (pixels
 against the same view with the arm hidden), follow a dragged slider, and play the move
 Execute makes (pixels), all while the viewer's own port, open on the machine, is never asked.
@@ -13,6 +14,9 @@ still draws the arm by itself.
 """
 
 import json
+import socket
+import socketserver
+import threading
 import time
 import urllib.parse
 import urllib.request
@@ -62,6 +66,44 @@ def changed_view(view, reference: bytes, *, timeout: float = 30.0, threshold: fl
         time.sleep(0.3)
 
 
+class Tunnel(socketserver.ThreadingTCPServer):
+    """A TCP tunnel from a free loopback port to ``127.0.0.1:<port>``, as ``ssh -L`` makes one."""
+
+    daemon_threads = True
+
+    def __init__(self, port: int):
+        self.target = port
+
+        class Relay(socketserver.BaseRequestHandler):
+            def handle(self):
+                with socket.create_connection(("127.0.0.1", self.server.target)) as far:
+                    back = threading.Thread(target=self.pipe, args=(far, self.request), daemon=True)
+                    back.start()
+                    self.pipe(self.request, far)
+                    back.join()
+
+            @staticmethod
+            def pipe(src, dst):
+                try:
+                    while data := src.recv(65536):
+                        dst.sendall(data)
+                except OSError:
+                    pass
+                finally:
+                    try:
+                        dst.shutdown(socket.SHUT_WR)
+                    except OSError:
+                        pass
+
+        super().__init__(("127.0.0.1", 0), Relay)
+        self.port = self.server_address[1]
+        threading.Thread(target=self.serve_forever, daemon=True).start()
+
+    def close(self) -> None:
+        self.shutdown()
+        self.server_close()
+
+
 def run_next_cell(page, expect: str | None = None, timeout: float = 120_000) -> None:
     page.keyboard.press("Shift+Enter")
     if expect:
@@ -83,7 +125,8 @@ def test_view_and_panel_work_through_the_jupyter_port_alone_under_a_hub_base_url
     home.mkdir()
 
     lab = JupyterLab(root, home, base_url=BASE_URL)
-    jupyter = f"127.0.0.1:{lab.port}"
+    tunnel = Tunnel(lab.port)
+    jupyter = f"127.0.0.1:{tunnel.port}"   # all the browser may reach
     refused: list[str] = []
     asked: list[str] = []
     sockets: list[str] = []
@@ -106,7 +149,7 @@ def test_view_and_panel_work_through_the_jupyter_port_alone_under_a_hub_base_url
                 context.route("**/*", only_jupyter)
                 page = context.new_page()
                 page.on("websocket", lambda ws: sockets.append(ws.url))
-                page.goto(f"{lab.url}/lab/tree/{NOTEBOOK}?token={lab.token}")
+                page.goto(f"http://{jupyter}{BASE_URL}lab/tree/{NOTEBOOK}?token={lab.token}")
                 page.wait_for_function(KERNEL_IDLE, timeout=90_000)
                 cells = page.locator(".jp-Notebook .jp-Cell")
                 cells.first.locator(".cm-content").click()
@@ -164,7 +207,8 @@ def test_view_and_panel_work_through_the_jupyter_port_alone_under_a_hub_base_url
                 browser.close()
     finally:
         lab.stop()
-    assert refused == [], f"the browser asked beyond Jupyter's port: {refused[:5]}"
+        tunnel.close()
+    assert refused == [], f"the browser asked beyond the tunnel to Jupyter's port: {refused[:5]}"
     assert asked and all(urllib.parse.urlsplit(u).netloc == jupyter for u in asked)
     assert any(u.startswith(f"{BASE_URL}proxy/{viewer_port}/static/", len(f"http://{jupyter}")) for u in asked), asked
     view_sockets = [u for u in sockets if "/proxy/" in u]
