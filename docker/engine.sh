@@ -16,6 +16,8 @@
 #   engine_build IMAGE LOG     build the image as a user does: `docker compose -f docker/compose.yaml
 #                              build lab` (compose v2 from the venv, VENV_BIN), tagged IMAGE
 #   engine_stop                remove containers, stop dockerd, restore the host; returns 1 unless clean
+#   engine_exit                the caller's EXIT trap: engine_stop, dockerd's log's end when anything
+#                              failed, this run's folder removed; exits with the status (1 if not clean)
 # and may define engine_on_stop (run first in engine_stop while the engine still answers).
 # Variables: CACHE, DATA (data root), RUN (this run's temporary folder), DOCKER (the client),
 # ENGINE_COLD (1 when the data root was empty), DOCKERD_PID.
@@ -130,6 +132,15 @@ engine_stop() {  # remove what ran, stop dockerd, restore the host; returns 1 un
     return 0
   fi
   return 1
+}
+
+engine_exit() {
+  local rc=$?
+  set +e
+  engine_stop || rc=1
+  [ "$rc" = 0 ] || [ -z "$RUN" ] || { echo "--- dockerd log (last 30 lines)" >&2; tail -30 "$RUN/dockerd.log" >&2; }
+  [ -z "$RUN" ] || rm -rf "$RUN"
+  exit "$rc"
 }
 
 # --- the engine ----------------------------------------------------------------------------
