@@ -2,7 +2,9 @@
 # The Binder test: jupyter-repo2docker builds the repository as mybinder.org does, on the
 # private Docker engine of docker/engine.sh, then the image is started with repo2docker's own
 # command (`jupyter notebook ... --NotebookApp.default_url=/lab`, as Binder starts it) and a
-# lesson is opened: the server lands on the lessons, and lesson 00's kernel runs a cell.
+# lesson is opened: the server lands on the lessons, lesson 00's kernel runs a cell, and
+# headless Chromium opens the lesson in JupyterLab and runs that cell from the page
+# (screenshot in artifacts/).
 #
 #   binder/test.sh            (as root; tests/test_binder.py runs it within `make test`)
 #
@@ -66,7 +68,7 @@ $DOCKER run -d --rm --name snakekit-binder-run --network snakekit-binder-run -p 
   jupyter notebook --ip=0.0.0.0 --port=8888 "--NotebookApp.custom_display_url=http://127.0.0.1:$port" \
   --NotebookApp.default_url=/lab 2>&1 >/dev/null | grep -v "IPv4 forwarding is disabled" >&2 || true
 engine_on_stop() { $DOCKER rm -f snakekit-binder-run >/dev/null 2>&1; $DOCKER network rm snakekit-binder-run >/dev/null 2>&1; }
-"$VENV_BIN/python" "$ROOT/binder/open-lesson" "http://127.0.0.1:$port" "$TOKEN" \
+"$VENV_BIN/python" "$ROOT/binder/open-lesson" "http://127.0.0.1:$port" "$TOKEN" --browser "$ROOT/artifacts" \
   || { $DOCKER logs snakekit-binder-run 2>&1 | tail -30 >&2; die "the lesson did not open in the Binder image"; }
 figure "repo2docker image: docker run to a lesson's cell executed in $(since "$t") s"
 say "passed"

@@ -43,6 +43,8 @@ def test_binder_image_builds_with_repo2docker_and_opens_a_lesson(capsys):
         pytest.skip(why)
     need("repo2docker")  # jupyter-repo2docker, in .venv (the dev extra)
     need_program("ip")
+    need_program("chromium")  # binder/open-lesson opens the lesson in JupyterLab from the host
+    need("playwright.sync_api")
     env = dict(os.environ, PATH=f"{ROOT / '.venv/bin'}:{os.environ['PATH']}")
     proc = subprocess.run(["bash", str(ROOT / "binder/test.sh")], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=30 * 60)
@@ -59,5 +61,6 @@ def test_binder_image_builds_with_repo2docker_and_opens_a_lesson(capsys):
     assert f"opens JupyterLab; the server's folder lists the {lessons} lessons" in out, out[-3000:]
     if "jupyter-server-proxy" in (ROOT / "pyproject.toml").read_text():  # the 3D view through the server
         assert "the 3D view's page answers through the Jupyter server" in out, out[-3000:]
+    assert "in headless Chromium, /lab/tree/00_meet_the_arm.ipynb opened and its first cell ran from the page" in out
     assert re.search(r"00_meet_the_arm\.ipynb's first code cell ran in its kernel .* it printed: <snakekit Viewer",
                      out), out[-3000:]
