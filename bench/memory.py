@@ -124,6 +124,7 @@ def one_run(run: int) -> dict:
 
 def with_view(cid: str, lab: str, view_url: str) -> dict:
     """The lesson open in JupyterLab and the 3D view's page, both in headless Chromium."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
     from playwright.sync_api import sync_playwright
 
     from tests.test_browser import CHROMIUM_FLAGS
@@ -134,8 +135,14 @@ def with_view(cid: str, lab: str, view_url: str) -> dict:
             page = browser.new_page(viewport={"width": 1400, "height": 1000})
             page.goto(f"{lab}/lab/tree/{LESSON}?token={TOKEN}")
             page.locator(".jp-NotebookPanel .jp-CodeCell").first.wait_for(timeout=90_000)
-            page.locator(".jp-Notebook-ExecutionIndicator[data-status='idle'], "
-                         ".jp-KernelStatus-success, .jp-Toolbar-kernelStatus").first.wait_for(timeout=60_000)
+            # the lesson's running kernel: JupyterLab may ask which one (the session exists already)
+            accept = page.locator(".jp-Dialog button.jp-mod-accept")
+            try:
+                accept.first.wait_for(timeout=5_000)
+                accept.first.click()
+            except PlaywrightTimeout:
+                pass
+            page.locator(".jp-StatusBar-Widget", has_text=re.compile(r"\| Idle")).first.wait_for(timeout=120_000)
             view = browser.new_page(viewport={"width": 900, "height": 700})
             with urllib.request.urlopen(view_url, timeout=10) as r:
                 if r.status != 200:
