@@ -116,6 +116,10 @@ def test_hub_config_names_real_settings_of_the_classes_it_configures(values):
         assert not unknown, f"hub.config.{name}: {sorted(unknown)} are not settings of {classes[name].__name__}"
         for key, value in settings.items():
             traits[key].validate(classes[name].__new__(classes[name]), value)  # raises TraitError on a bad value
+    # the chart builds these lists itself (the culler's service and role, hub.services, hub.loadRoles)
+    # and then applies hub.config over them: set there, they would drop the culler's
+    assert not {"load_roles", "services"} & set(config["JupyterHub"])
+    assert values["hub"]["loadRoles"]["user"]["scopes"] == ["self", "access:services!service=exchange"]
     assert config["JupyterHub"]["authenticator_class"] == "ltiauthenticator.lti13.auth.LTI13Authenticator"
     lti = config["LTI13Authenticator"]
     assert lti["issuer"].startswith("https://") and lti["client_id"]
@@ -142,3 +146,32 @@ def test_values_give_a_class_our_image_limits_culling_storage_and_the_exchange(v
     exchange = values["hub"]["services"]["exchange"]
     assert exchange["url"].endswith(":10102")
     assert {"name": "exchange", "port": 10102, "targetPort": 10102} in values["hub"]["service"]["extraPorts"]
+    # reachable through the network policies: into the hub pod, and out of the students' pods
+    assert any({"port": 10102} in rule["ports"] for rule in values["hub"]["networkPolicy"]["ingress"])
+    assert any({"port": 10102, "protocol": "TCP"} in rule["ports"] for rule in single["networkPolicy"]["egress"])
+    assert single["extraEnv"]["SNAKEKIT_EXCHANGE_URL"] == "http://hub:10102/services/exchange/"
+
+
+def test_instructors_servers_get_the_course_volume_and_students_do_not(values):
+    """hub.extraConfig's pre-spawn hook, run as the hub runs it on KubeSpawner's spawner."""
+    from types import SimpleNamespace
+
+    traitlets = need("traitlets.config")
+    c = traitlets.Config()
+    for name, code in values["hub"]["extraConfig"].items():
+        exec(compile(code, f"hub.extraConfig.{name}", "exec"), {"c": c})  # noqa: S102 (our values file)
+    hook = c.KubeSpawner.pre_spawn_hook
+
+    def spawner(*groups):
+        user = SimpleNamespace(groups=[SimpleNamespace(name=g) for g in groups])
+        return SimpleNamespace(user=user, volumes=[{"name": "home"}], volume_mounts=[{"name": "home"}],
+                               environment={"SNAKEKIT_EXCHANGE_URL": "x"}, mem_guarantee="256M", mem_limit="1G")
+
+    ta, student = spawner("instructors"), spawner("students")
+    hook(ta)
+    hook(student)
+    assert {"name": "course", "mountPath": "/home/student/course"} in ta.volume_mounts
+    assert {"name": "course", "persistentVolumeClaim": {"claimName": "snakekit-course"}} in ta.volumes
+    assert ta.environment == {"SNAKEKIT_EXCHANGE_URL": "x", "SNAKEKIT_ROLE": "instructor"}
+    assert student.volumes == [{"name": "home"}] and student.volume_mounts == [{"name": "home"}]
+    assert "SNAKEKIT_ROLE" not in student.environment and student.mem_limit == "1G"
