@@ -90,8 +90,8 @@ def viewer_page(lab: str, printed: str) -> str:
     if not m:
         raise RuntimeError(f"lesson 00's first cell did not print its viewer: {printed[-300:]!r}")
     url = m.group(1)
-    if url.startswith("/"):  # under the Jupyter server (jupyter-server-proxy)
-        return f"{lab}{url}"
+    if url.startswith("/"):  # under the Jupyter server (jupyter-server-proxy), with its login
+        return f"{lab}{url}?token={TOKEN}"
     port = re.search(r"://[^/:]+:(\d+)", url)
     return f"http://127.0.0.1:{port.group(1)}/static/" if port else url
 
