@@ -70,5 +70,5 @@ $DOCKER run -d --rm --name snakekit-binder-run --network snakekit-binder-run -p 
 engine_on_stop() { $DOCKER rm -f snakekit-binder-run >/dev/null 2>&1; $DOCKER network rm snakekit-binder-run >/dev/null 2>&1; }
 "$VENV_BIN/python" "$ROOT/binder/open-lesson" "http://127.0.0.1:$port" "$TOKEN" --browser "$ROOT/artifacts" \
   || { $DOCKER logs snakekit-binder-run 2>&1 | tail -30 >&2; die "the lesson did not open in the Binder image"; }
-figure "repo2docker image: docker run to a lesson's cell executed in $(since "$t") s"
+figure "repo2docker image: docker run to lesson 00 opened and its first cell run (API and Chromium) in $(since "$t") s"
 say "passed"
