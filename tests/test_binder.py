@@ -61,6 +61,7 @@ def test_binder_image_builds_with_repo2docker_and_opens_a_lesson(capsys):
     assert f"opens JupyterLab; the server's folder lists the {lessons} lessons" in out, out[-3000:]
     if "jupyter-server-proxy" in (ROOT / "pyproject.toml").read_text():  # the 3D view through the server
         assert "the 3D view's page answers through the Jupyter server" in out, out[-3000:]
+        assert "the control panel's 3D view, through the Jupyter server, draws the arm" in out, out[-3000:]
     assert "in headless Chromium, /lab/tree/00_meet_the_arm.ipynb opened and its first cell ran from the page" in out
     assert re.search(r"00_meet_the_arm\.ipynb's first code cell ran in its kernel .* it printed: <snakekit Viewer",
                      out), out[-3000:]
