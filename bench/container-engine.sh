@@ -24,15 +24,7 @@ command -v dockerd >/dev/null && [ -x /usr/bin/docker ] || die "Debian's docker.
 [ -x "$VENV_BIN/docker-compose" ] || die "docker-compose missing from $VENV_BIN; run 'make setup'"
 engine_lock "${SNAKEKIT_ENGINE_WAIT:-600}"
 
-cleanup() {
-  local rc=$?
-  set +e
-  engine_stop >&2 || rc=1
-  [ "$rc" = 0 ] || [ -z "$RUN" ] || { echo "--- dockerd log (last 20 lines)" >&2; tail -20 "$RUN/dockerd.log" >&2; }
-  [ -z "$RUN" ] || rm -rf "$RUN"
-  exit "$rc"
-}
-trap cleanup EXIT
+trap 'engine_exit >&2' EXIT  # the command's standard output stays its own
 trap 'exit 130' INT TERM
 
 engine_start

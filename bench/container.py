@@ -184,13 +184,9 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=3)
     add_json_argument(parser)
     args = parser.parse_args(argv)
-    why = engine()
-    if why and not os.environ.get("SNAKEKIT_BENCH_ENGINE") and private_engine_possible():
-        return under_private_engine(argv if argv is not None else sys.argv[1:], args.json)
-    if why:
-        print(why)
-        write_json(args.json, {"not_measured": why, "container": {"not_measured": why}, "compose": {"not_measured": why}})
-        return 0
+    elsewhere = engine_here_or_private(argv, args.json, Path(__file__).resolve(), ("container", "compose"))
+    if elsewhere is not None:
+        return elsewhere
     size = int(docker("image", "inspect", "-f", "{{.Size}}", IMAGE).stdout.strip())
     results: dict = {"image": IMAGE}
     if os.environ.get("SNAKEKIT_BENCH_ENGINE"):
@@ -216,15 +212,30 @@ def main(argv=None) -> int:
     return 0
 
 
+def engine_here_or_private(argv: list[str] | None, json_path: str | None, script: Path,
+                           parts: tuple[str, ...] = ()) -> int | None:
+    """None when a Docker engine with the image answers here. Otherwise ``script`` runs again under
+    the private engine when it can (its exit code), or the reason is printed and written as the
+    figures ("not measured", also under each of ``parts``) and 0 returned."""
+    why = engine()
+    if why and not os.environ.get("SNAKEKIT_BENCH_ENGINE") and private_engine_possible():
+        return under_private_engine(argv if argv is not None else sys.argv[1:], json_path, script=script)
+    if why:
+        print(why)
+        write_json(json_path, {"not_measured": why, **{p: {"not_measured": why} for p in parts}})
+        return 0
+    return None
+
+
 def private_engine_possible() -> bool:
     return os.geteuid() == 0 and shutil.which("dockerd", path="/usr/sbin:/usr/bin") is not None and Path("/usr/bin/docker").exists()
 
 
-def under_private_engine(argv: list[str], json_path: str | None) -> int:
-    """This script again, under bench/container-engine.sh (the private engine of docker/engine.sh)."""
+def under_private_engine(argv: list[str], json_path: str | None, script: Path | None = None) -> int:
+    """This script (or ``script``) again, under bench/container-engine.sh (the private engine of docker/engine.sh)."""
     print("no Docker engine running: starting the private one (docker/engine.sh), building or reusing the image",
           flush=True)
-    proc = subprocess.run(["bash", str(HERE / "container-engine.sh"), sys.executable, str(Path(__file__).resolve()),
+    proc = subprocess.run(["bash", str(HERE / "container-engine.sh"), sys.executable, str(script or Path(__file__).resolve()),
                            *argv], stdout=sys.stdout, stderr=subprocess.PIPE, text=True)
     sys.stderr.write(proc.stderr)
     done = json_path and Path(json_path).exists() and json.loads(Path(json_path).read_text())

@@ -71,6 +71,8 @@ def steps(submissions: int) -> list[Step]:
              ["run.py", "--grading-step", str(submissions)], 30 + 7 * submissions),
         Step("container", "the container and compose set-ups (starts the private Docker engine if needed)",
              ["container.py"], 330),
+        Step("memory", "memory per user: the single-user server idle, with a lesson kernel, with the 3D view; "
+             "users per 24 GB node", ["memory.py", "--repeats", "3"], 150),
     ]
 
 
@@ -454,6 +456,28 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
             add(f"| {row['change']} | {row['figure']} | {row['before']} | {row['after']} | {row['effect']} |")
         add("")
 
+    # --- memory per user (a hub's single-user server)
+    mem = results.get("memory") or {}
+    if mem.get("view"):
+        add("## Memory per user on a hub")
+        add("")
+        add(f"One student's server (the image's `start-lab`, one container each), its memory cgroup as a hub's "
+            f"limit counts it; medians of {len(mem['runs'])} runs (bench/memory.py). Working set: usage less "
+            "inactive file pages (what `docker stats` shows and Kubernetes evicts by).")
+        add("")
+        add("| point | usage (MiB) | working set (MiB) | peak (MiB) |")
+        add("|---|---|---|---|")
+        for point, label in (("idle", "idle"), ("kernel", "lesson 00's kernel, its first cell run"),
+                             ("view", "and the lesson and its 3D view open in headless Chromium")):
+            r = mem[point]
+            add(f"| {label} | {r['usage']:.0f} | {r['working_set']:.0f} | {r['peak']:.0f} |")
+        add("")
+        add(f"Users per {mem['node_gb']} GB node with a kernel and the 3D view each, at their peak "
+            f"({mem['node_reserved_gb']} GB kept for the node): **{mem['users_per_node']}** (target: at least 80).")
+        add("")
+    elif mem.get("not_measured"):
+        add(f"## Memory per user on a hub\n\n{mem['not_measured']}\n")
+
     # --- methodology
     add("## Methodology")
     add("")
@@ -525,7 +549,7 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     for s in plan:
         state = ("figures given, targets met" if s.code == 0 else "figures given, a target MISSED" if s.result
                  else f"FAILED (exit code {s.code})")
-        if s.name == "container" and s.result and s.result.get("not_measured"):
+        if s.name in ("container", "memory") and s.result and s.result.get("not_measured"):
             state = s.result["not_measured"]
         add(f"| {s.name} | {s.what} | {fmt(s.seconds)} | {state} |")
     add("")

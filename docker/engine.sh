@@ -16,6 +16,8 @@
 #   engine_build IMAGE LOG     build the image as a user does: `docker compose -f docker/compose.yaml
 #                              build lab` (compose v2 from the venv, VENV_BIN), tagged IMAGE
 #   engine_stop                remove containers, stop dockerd, restore the host; returns 1 unless clean
+#   engine_exit                the caller's EXIT trap: engine_stop, dockerd's log's end when anything
+#                              failed, this run's folder removed; exits with the status (1 if not clean)
 # and may define engine_on_stop (run first in engine_stop while the engine still answers).
 # Variables: CACHE, DATA (data root), RUN (this run's temporary folder), DOCKER (the client),
 # ENGINE_COLD (1 when the data root was empty), DOCKERD_PID.
@@ -86,8 +88,11 @@ engine_record_host() {
   command -v ip6tables-save >/dev/null && ip6tables-save > "$RUN/ip6tables.before" 2>/dev/null || true
 }
 engine_stop() {  # remove what ran, stop dockerd, restore the host; returns 1 unless the host is as before
-  local restored=() clean=1 ids pid l
+  local restored=() foreign=() clean=1 ids pid l own=""
   if [ -n "$DOCKERD_PID" ] && kill -0 "$DOCKERD_PID" 2>/dev/null; then
+    # this engine's links: its networks' bridges (br-<network id>) and what is attached to them
+    own=$($DOCKER network ls -q --filter driver=bridge 2>/dev/null | while read -r n; do
+      echo "br-$n"; ip -o link show master "br-$n" 2>/dev/null | awk -F': ' '{print $2}' | sed 's/@.*//'; done)
     declare -F engine_on_stop >/dev/null && engine_on_stop
     ids=$($DOCKER ps -aq 2>/dev/null); [ -z "$ids" ] || $DOCKER rm -f $ids >/dev/null 2>&1
     $DOCKER volume prune -f >/dev/null 2>&1
@@ -109,8 +114,14 @@ engine_stop() {  # remove what ran, stop dockerd, restore the host; returns 1 un
   if ! diff -q <(sysctl_state) "$RUN/sysctl.before" >/dev/null; then
     while read -r f v; do [ "$(cat "$f")" = "$v" ] || { echo "$v" > "$f"; restored+=("$f=$v"); }; done < "$RUN/sysctl.before"
   fi
+  # A link that appeared since the start is removed if it is this engine's, or if no other Docker
+  # engine runs here (then nothing else made it); another engine's containers keep theirs.
   for l in $(comm -13 "$RUN/links.before" <(link_state)); do
-    ip link delete "$l" 2>/dev/null && restored+=("link $l removed")
+    if grep -qx -F -- "$l" <<<"$own" || ! other_engine; then
+      ip link delete "$l" 2>/dev/null && restored+=("link $l removed")
+    else
+      foreign+=("$l")
+    fi
   done
   if ! diff -q <(net_state) "$RUN/net.before" >/dev/null; then
     if [ -s "$RUN/nft.before" ] || command -v nft >/dev/null; then
@@ -122,7 +133,13 @@ engine_stop() {  # remove what ran, stop dockerd, restore the host; returns 1 un
   [ ${#restored[@]} = 0 ] || say "restored on the host: ${restored[*]}"
   diff <(net_state) "$RUN/net.before" >&2 || { say "iptables/nftables differ from before"; clean=0; }
   diff <(sysctl_state) "$RUN/sysctl.before" >&2 || { say "forwarding/bridge settings differ from before"; clean=0; }
-  diff <(link_state) "$RUN/links.before" >&2 || { say "network links differ from before"; clean=0; }
+  if other_engine; then  # its links come and go: only this engine's must be gone
+    l=$(comm -13 "$RUN/links.before" <(link_state) | grep -x -F -f <(printf '%s\n' "$own") || true)
+    [ -z "$l" ] || { say "this engine's network links are still there: $l"; clean=0; }
+    [ ${#foreign[@]} = 0 ] || say "another Docker engine runs here: its new links left alone (${foreign[*]})"
+  else
+    diff <(link_state) "$RUN/links.before" >&2 || { say "network links differ from before"; clean=0; }
+  fi
   diff <(mount_state) "$RUN/mounts.before" >&2 || { say "the engine's mounts are still there"; clean=0; }
   pgrep -f -- "--data-root $DATA" >/dev/null && { say "a dockerd on $DATA still runs"; clean=0; }
   if [ "$clean" = 1 ]; then
@@ -131,6 +148,17 @@ engine_stop() {  # remove what ran, stop dockerd, restore the host; returns 1 un
   fi
   return 1
 }
+
+engine_exit() {
+  local rc=$?
+  set +e
+  engine_stop || rc=1
+  [ "$rc" = 0 ] || [ -z "$RUN" ] || { echo "--- dockerd log (last 30 lines)" >&2; tail -30 "$RUN/dockerd.log" >&2; }
+  [ -z "$RUN" ] || rm -rf "$RUN"
+  exit "$rc"
+}
+
+other_engine() { pgrep -f -- '^dockerd ' >/dev/null; }  # after ours has stopped: another one
 
 # --- the engine ----------------------------------------------------------------------------
 engine_start() {

@@ -46,16 +46,8 @@ COMPOSE=("$VENV_BIN/docker-compose" -p "$PROJECT" -f "$ROOT/docker/compose.yaml"
 # --- one run at a time on this machine ---------------------------------------------------
 engine_lock 1800
 
-cleanup() {
-  local rc=$?
-  set +e
-  engine_stop || rc=1
-  [ "$rc" = 0 ] || [ -z "$RUN" ] || { echo "--- dockerd log (last 30 lines)" >&2; tail -30 "$RUN/dockerd.log" >&2; }
-  [ -z "$RUN" ] || rm -rf "$RUN"
-  exit "$rc"
-}
 engine_on_stop() { "${COMPOSE[@]}" --profile grader --profile hardware --profile hardware-usb down --volumes --remove-orphans >/dev/null 2>&1; }
-trap cleanup EXIT
+trap engine_exit EXIT
 trap 'exit 130' INT TERM
 
 # --- the engine and the base image -------------------------------------------------------

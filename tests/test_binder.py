@@ -1,0 +1,67 @@
+"""Binder: the repository as jupyter-repo2docker builds it, and the image it makes.
+
+binder/test.sh builds the repository with repo2docker (`--no-run`) on the private Docker engine
+of docker/engine.sh, starts the image with the command Binder starts it with and opens lesson
+00 (binder/open-lesson); it needs root. Outside CI a machine without root or apt skips it;
+with CI=true it runs or fails.
+"""
+
+import os
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import IN_CI, need, need_program
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_binder_builds_the_containers_dockerfile():
+    """repo2docker's Dockerfile route: binder/Dockerfile is docker/Dockerfile, and it reaches the build."""
+    link = ROOT / "binder/Dockerfile"
+    assert link.is_symlink() and os.readlink(link) == "../docker/Dockerfile"
+    assert link.resolve() == (ROOT / "docker/Dockerfile").resolve()
+    # the build's context is the repository, filtered by .dockerignore: the link's target is in it
+    ignore = (ROOT / ".dockerignore").read_text().splitlines()
+    assert "*" in ignore and "!docker/Dockerfile" in ignore
+    # only the Dockerfile decides the build: no other repo2docker configuration beside it
+    others = {p.name for p in (ROOT / "binder").iterdir()} & {
+        "environment.yml", "requirements.txt", "apt.txt", "postBuild", "start", "runtime.txt", "install.R",
+        "Project.toml", "setup.py", "default.nix", "pyproject.toml"}
+    assert not others, others
+
+
+def test_binder_image_builds_with_repo2docker_and_opens_a_lesson(capsys):
+    """binder/test.sh: repo2docker --no-run, then the image as Binder runs it: /lab, the lessons, a cell run."""
+    if os.geteuid() != 0 or not shutil.which("apt-get"):
+        why = "the Binder test needs root and apt-get (it installs docker.io and runs dockerd)"
+        if IN_CI:
+            pytest.fail(f"{why}; under CI=true it must run")
+        pytest.skip(why)
+    need("repo2docker")  # jupyter-repo2docker, in .venv (the dev extra)
+    need_program("ip")
+    need_program("chromium")  # binder/open-lesson opens the lesson in JupyterLab from the host
+    need("playwright.sync_api")
+    env = dict(os.environ, PATH=f"{ROOT / '.venv/bin'}:{os.environ['PATH']}")
+    proc = subprocess.run(["bash", str(ROOT / "binder/test.sh")], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=30 * 60)
+    out = proc.stdout + proc.stderr
+    with capsys.disabled():
+        print()
+        for line in out.splitlines():
+            if line.startswith(("figure:", "open-lesson:", "binder-test: restored", "binder-test: host state")):
+                print(line)
+    assert proc.returncode == 0, out[-6000:]
+    assert "binder-test: passed" in out and "host state checked" in out
+    assert re.search(r"figure: repo2docker build: [\d.]+ s .*repo2docker", out), out[-3000:]
+    lessons = len(list((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb")))
+    assert f"opens JupyterLab; the server's folder lists the {lessons} lessons" in out, out[-3000:]
+    if "jupyter-server-proxy" in (ROOT / "pyproject.toml").read_text():  # the 3D view through the server
+        assert "the 3D view's page answers through the Jupyter server" in out, out[-3000:]
+        assert "the control panel's 3D view, through the Jupyter server, draws the arm" in out, out[-3000:]
+    assert "in headless Chromium, /lab/tree/00_meet_the_arm.ipynb opened and its first cell ran from the page" in out
+    assert re.search(r"00_meet_the_arm\.ipynb's first code cell ran in its kernel .* it printed: <snakekit Viewer",
+                     out), out[-3000:]
