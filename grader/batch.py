@@ -38,6 +38,7 @@ from snakekit.errors import SnakekitError
 from snakekit.host import mujoco_gl
 
 from . import feedback, sandbox
+from .cases import CaseServer, cases_path, draw
 from .course import CourseError, course_id, db_url, generate
 from .references import REFERENCES, Reference
 from .score import ExerciseScore, read_handin, score_exercise
@@ -248,8 +249,10 @@ class Grader:
 
     def __init__(self, course: Path, assignment: str, *, jobs: int | None = None, timeout: float = 120.0,
                  references: Path | None = REFERENCES, memory: int = 4 << 30, progress=None,
-                 workroot: Path | None = None, use_sandbox: bool = True, cell_timeout: float | None = None):
-        """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: ``timeout``)."""
+                 workroot: Path | None = None, use_sandbox: bool = True, cell_timeout: float | None = None,
+                 seed: int | None = None):
+        """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: ``timeout``);
+        ``seed``: the batch's hidden cases (default: drawn from ``os.urandom``, printed)."""
         self.course = Path(course).resolve()
         self.assignment = assignment
         self.jobs = jobs or os.cpu_count() or 1
@@ -262,6 +265,9 @@ class Grader:
         self.use_sandbox = use_sandbox
         self.late_plugin = None
         self.server = None
+        self.seed = seed
+        self.draw = None
+        self.cases = None
         self._lock = threading.Lock()
 
     def students(self) -> list[str]:
@@ -286,6 +292,11 @@ class Grader:
                 sandbox.check_available()
                 server = self._start_fork_server(base)  # it imports for a second while the batch is set up
             self.a = load_assignment(self.course, self.assignment, self.references)
+            if cases_path(self.course, self.assignment).is_file():
+                self.draw = draw(self.course, self.assignment, self.seed)
+                self.cases = CaseServer(self.draw)
+                print(f"snakekit grade: {self.assignment}'s hidden cases drawn with seed {self.draw.seed} "
+                      f"(--seed {self.draw.seed} draws them again)", file=sys.stderr)
             from nbgrader.preprocessors import AssignLatePenalties
 
             from .course import _on_path, config
@@ -302,6 +313,8 @@ class Grader:
         finally:
             if server is not None:
                 server.close()
+            if self.cases is not None:
+                self.cases.close()
             self.server = None
             shutil.rmtree(base, ignore_errors=True)
 
@@ -424,7 +437,13 @@ class Grader:
         for d in ("handin", "home", "home/.jupyter-runtime"):
             (work / d).mkdir()
         shutil.copytree(self.base / "mplcache", work / "home" / ".mpl")
-        outcome = self._execute(work, student)
+        if self.cases is not None:  # in the sandbox's own folder: it sees the socket at the same path
+            self.cases.listen(work / "cases.sock")
+        try:
+            outcome = self._execute(work, student)
+        finally:
+            if self.cases is not None:
+                self.cases.stop(work / "cases.sock")
 
         def finish() -> SubmissionResult:
             try:
@@ -436,7 +455,8 @@ class Grader:
     def _env(self, work: Path) -> dict:
         venv_bin = str(Path(os.path.abspath(sys.executable)).parent)
         return {"PATH": f"{venv_bin}:/usr/local/bin:/usr/bin:/bin", "HOME": str(work / "home"),
-                "SNAKEKIT_HANDIN_DIR": str(work / "handin"), "MPLBACKEND": "Agg",
+                "SNAKEKIT_HANDIN_DIR": str(work / "handin"), "SNAKEKIT_CASES": str(work / "cases.sock"),
+                "MPLBACKEND": "Agg",
                 "MPLCONFIGDIR": str(work / "home" / ".mpl"), "JUPYTER_RUNTIME_DIR": str(work / "home" / ".jupyter-runtime"),
                 "IPYTHONDIR": str(work / "home" / ".ipython"), "TMPDIR": "/tmp", "LANG": "C.UTF-8",
                 "MUJOCO_GL": mujoco_gl("linux"), "PYTHONDONTWRITEBYTECODE": "1", "OMP_NUM_THREADS": "1",  # sandbox: Linux

@@ -48,6 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--references", type=Path, default=REFERENCES, help="reference runs folder (default: grader/references/)")
     p.add_argument("--student", action="append", default=None,
                    help="grade only this student (repeatable); the other rows of the CSV are kept")
+    p.add_argument("--seed", type=int, default=None, help="draw the hidden cases of an earlier batch again (its "
+                   "seed is printed when it starts; default: a fresh draw from the system's randomness)")
     p.add_argument("--regenerate", action="store_true", help="if the release or the reference no longer matches "
                    "the source, regenerate them (nbgrader generate_assignment --force; grader.references) first")
     return p
@@ -143,7 +145,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     from .course import backup_gradebook
 
     grader = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
-                    memory=args.memory << 20, cell_timeout=args.cell_timeout)
+                    memory=args.memory << 20, cell_timeout=args.cell_timeout, seed=args.seed)
     students = grader.students()
     if args.student:
         missing = [s for s in args.student if s not in students]
