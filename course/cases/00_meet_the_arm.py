@@ -2,6 +2,9 @@
 
 import numpy as np
 
+#: The grader's tolerance per grade id: as the visible check's (distance in mm).
+TOLERANCES = {"ex00_1_tool_distance_test": {"rtol": 1e-9, "atol": 1e-9}}
+
 
 def ex00_1_tool_distance_test(rng, spec):
     """distance_mm(q, target): 8 cases, joint angles inside the limits, targets around the arm;
