@@ -319,7 +319,8 @@ def execute(notebook: Path, batch: Draw, *, timeout: int = 600, allow_errors: bo
         env = {"SNAKEKIT_HANDIN_DIR": str(handin), "SNAKEKIT_CASES": sock, "MPLBACKEND": "Agg"}
         with _environ(env):
             client = nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3", allow_errors=allow_errors,
-                                             resources={"metadata": {"path": str(work)}})
+                                             resources={"metadata": {"path": str(work)}},
+                                             extra_arguments=["--IPKernelApp.log_level=ERROR"])  # no TCP warning
             try:
                 client.execute()
             except nbclient.exceptions.CellExecutionError as e:

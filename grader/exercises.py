@@ -23,11 +23,11 @@ from snakekit.model import SPEC
 __all__ = ["RULES"]
 
 
-def _value(result: dict, shape: tuple, what: str):
-    """The result's array of ``shape``, or (None, why not)."""
-    if "value" not in result:
-        return None, f"{what} handed in {', '.join(sorted(result))}, expected one array."
-    a = np.asarray(result["value"], dtype=float)
+def _value(result: dict, shape: tuple, what: str, name: str = "value"):
+    """The result's array ``name`` of ``shape``, or (None, why not)."""
+    if name not in result:
+        return None, f"{what} handed in {', '.join(sorted(result))}, expected {name if name != 'value' else 'one array'}."
+    a = np.asarray(result[name], dtype=float)
     if a.shape != shape:
         return None, f"{what} returned shape {a.shape}, expected {shape}."
     if not np.isfinite(a).all():
@@ -79,9 +79,14 @@ def ik_loop(args, result, tol):
 
 
 def task1(args, result, tol):
-    """Task 1 on the simulator: one move per target, each ending with the tool within 3 mm of it."""
+    """Task 1 on the simulator: one move per target, each ending with the tool within 3 mm of it.
+
+    Where each move ended is the recorded run's last angles (``final_q``: the grader computes
+    the tool from them); the poses the function returned (``poses``, one (x, y, heading) per
+    move) must say the same."""
     targets = np.atleast_2d(np.asarray(args[0], dtype=float))
-    q, why = _value(result, (len(targets), SPEC.n_joints), "the final angles of the moves")
+    name = "final_q" if "final_q" in result else "value"
+    q, why = _value(result, (len(targets), SPEC.n_joints), "the moves (their final angles)", name)
     if q is None:
         return False, why
     tool = _tool_xy(q)
@@ -92,6 +97,15 @@ def task1(args, result, tol):
         return False, (f"move {k + 1} to ({targets[k, 0]:.4f}, {targets[k, 1]:.4f}) m ended with the tool at "
                        f"({tool[k, 0]:.4f}, {tool[k, 1]:.4f}) m, {off[k] * 1000:.3g} mm off (tolerance "
                        f"{tol['atol'] * 1000:.3g} mm).")
+    if "poses" in result:
+        poses, why = _value(result, (len(targets), 3), "task1", "poses")
+        if poses is None:
+            return False, why + " One tool pose (x, y, heading) per move."
+        off = np.abs(poses[:, :2] - tool).max(axis=1)
+        if (off > tol["atol"]).any():
+            k = int(np.argmax(off))
+            return False, (f"task1 returned the pose ({poses[k, 0]:.4f}, {poses[k, 1]:.4f}) m for move {k + 1}, but "
+                           f"that move ended with the tool at ({tool[k, 0]:.4f}, {tool[k, 1]:.4f}) m.")
     return True, ""
 
 

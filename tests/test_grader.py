@@ -511,6 +511,14 @@ def test_task1_judged_by_where_each_move_ends():
     assert score_exercise(e.grade_id, [{"value": finals}], e, 2).score == 2
     s = score_exercise(e.grade_id, [{"value": finals[:1]}], e, 2)
     assert s.score == 0 and "returned shape (1, 5), expected (2, 5)" in s.message
+    # the lesson's form: the poses task1 returned, and where the recorded moves ended
+    poses = np.array([tool_pose_2d(q) for q in finals])
+    e = Expected(e.grade_id, "values", e.cases, [{"final_q": finals, "poses": poses}], e.tolerances, "graded_task1")
+    assert score_exercise(e.grade_id, [{"final_q": finals, "poses": poses}], e, 2).score == 2
+    angles = score_exercise(e.grade_id, [{"final_q": finals, "poses": finals}], e, 2)   # angles for poses
+    assert angles.score == 0 and "returned shape (2, 5), expected (2, 3)" in angles.message
+    lied = score_exercise(e.grade_id, [{"final_q": finals, "poses": poses[::-1]}], e, 2)
+    assert lied.score == 0 and "but that move ended with the tool at" in lied.message
 
 
 def test_a_kit_installed_under_tmp_is_seen_inside_the_sandbox(tmp_path, monkeypatch):
