@@ -85,16 +85,6 @@ def test_limits_and_smoothness_give_partial_credit_with_numbers():
     assert sm.fraction == 0.0 and "joint 1 at t=" in sm.message
 
 
-def test_values_partial_credit_per_case():
-    expected = np.arange(10.0).reshape(5, 2)
-    got = expected.copy()
-    got[3, 1] += 1e-3
-    c = compare.values(got, expected, rtol=1e-9, atol=1e-12, what="xy", inputs=np.arange(5.0))
-    assert c.fraction == pytest.approx(0.8)
-    assert "1 of 5 hidden cases wrong; first at input 3: entry 1 is 7.001, expected 7" in c.message
-    assert compare.values(got.T, expected, rtol=0, atol=1, what="xy").message.endswith("transpose?")
-
-
 # --- references ------------------------------------------------------------------------------
 
 
@@ -459,6 +449,20 @@ def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
         assert written == plain.from_notebook_node(nb)[0]
         assert f"<b>{student}</b>" in written and f"# {student}" in written
         assert "<math display=\"inline\"><mrow><msub><mi>q</mi><mn>1</mn></msub></mrow></math>" in written
+
+
+def test_a_trajectory_is_held_only_to_the_properties_its_reference_has():
+    """A sampled move (not a sweep, not home to home) is not asked for sweeps or home."""
+    t = np.arange(11) / 10.0
+    r = np.clip(t / 1.0, 0, 1)
+    move = np.outer(10 * r ** 3 - 15 * r ** 4 + 6 * r ** 5, [0.3, -0.2, 0.4, 0.1, 0.5])
+    e = Expected("ex04_3_sample_10hz_test", "trajectory", [(np.zeros(5), move[-1], 1.0, 10.0)],
+                 [{"times": t, "positions": move}], {"max": 1e-12, "rms": 1e-12}, "sample_10hz")
+    s = score_exercise(e.grade_id, [{"times": t, "positions": move}], e, 3)
+    assert s.score == 3 and {c.name for c in s.checks} == {"points", "rate", "limits", "smoothness",
+                                                            "commanded vs reference"}
+    late = score_exercise(e.grade_id, [{"times": t + 0.1, "positions": move}], e, 3)
+    assert late.score < 3 and "the first point is at t=0.1 s, expected 0 s" in late.message
 
 
 # --- grader.exercises: rules that judge a case by a property -----------------------------------
