@@ -568,9 +568,9 @@ def _grade_in_process(course, *, warm: bool, monkeypatch):
     used = {}
     real_execute = runner.Runner.execute
 
-    def execute(self, work, student):
+    def execute(self, work, student, **kw):
         used[student] = self.server is not None
-        return real_execute(self, work, student)
+        return real_execute(self, work, student, **kw)
 
     monkeypatch.setattr(runner.Runner, "execute", execute)
     results = batch.Grader(course, ASSIGNMENT, jobs=2, timeout=60, references=REFERENCES, seed=5).run()
