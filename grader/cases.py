@@ -10,10 +10,9 @@ arguments (Python int/float/bool/str or numpy arrays)::
     def ex06_1_sweep_times_test(rng, spec):
         return [(int(rng.integers(2, 800)), float(rng.uniform(1.0, 200.0))) for _ in range(6)]
 
-Optional module-level settings (all keyed by grade id; see grader/README.md, "Cases"):
+An optional module-level setting, keyed by grade id (see grader/README.md, "Cases"):
 ``TOLERANCES`` (``{"rtol": .., "atol": ..}`` for values, ``{"max": .., "rms": ..}`` for
-trajectories and runs, merged over the grader's defaults) and ``TASK2`` (expected points,
-rate and sweeps of a trajectory: the keys of :data:`grader.references.TASK2`).
+trajectories and runs, merged over the grader's defaults).
 
 A batch draws every grade id's cases once, from one seed (:func:`draw`: ``os.urandom``
 unless given), each grade id from its own stream (``[seed, crc32(grade_id)]``), so adding a
@@ -70,7 +69,7 @@ class Draw:
         assignment: the assignment's name.
         seed: the batch's seed (``--seed`` repeats the draw).
         cases: grade id -> list of argument tuples.
-        settings: grade id -> the module's optional settings for it (``tolerances``, ``task2``).
+        settings: grade id -> the module's optional settings for it (``tolerances``).
     """
 
     assignment: str
@@ -139,10 +138,13 @@ def draw(course: Path, assignment: str, seed: int | None = None, spec=None) -> D
             raise CasesError(f"{path}: {gid}: {e}") from e
         cases[gid] = list(drawn)
         own = {}
-        for key in ("TOLERANCES", "TASK2"):
-            value = getattr(module, key, {}).get(gid)
-            if value is not None:
-                own[key.lower()] = dict(value)
+        for key in ("TOLERANCES",):
+            table = getattr(module, key, {})
+            if not isinstance(table, dict) or not all(isinstance(v, dict) for v in table.values()):
+                raise CasesError(f"{path}: {key} must map grade ids to dicts of tolerances, e.g. "
+                                 f'{{"{gid}": {{"atol": 1e-9}}}}')
+            if gid in table:
+                own[key.lower()] = dict(table[gid])
         settings[gid] = own
     if not cases:
         raise CasesError(f"{path} defines no case function (one per handed-in grade id, taking (rng, spec))")

@@ -63,6 +63,7 @@ def test_each_grade_id_draws_from_its_own_stream(course):
     ("def ex_a_test(rng, spec):\n    raise KeyError('x')", "raised KeyError"),
     ("import no_such_module", "cannot be imported"),
     ("X = 1", "defines no case function"),
+    ("TOLERANCES = {'ex_a_test': 1e-9}\ndef ex_a_test(rng, spec):\n    return [(1,)]", "must map grade ids to dicts"),
 ])
 def test_a_broken_cases_module_is_refused_with_what_is_wrong(course, body, says):
     from grader.cases import CasesError, draw
