@@ -48,6 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--references", type=Path, default=REFERENCES, help="reference runs folder (default: grader/references/)")
     p.add_argument("--student", action="append", default=None,
                    help="grade only this student (repeatable); the other rows of the CSV are kept")
+    p.add_argument("--seed", type=int, default=None, help="draw the hidden cases of an earlier batch again (its "
+                   "seed is printed when it starts; default: a fresh draw from the system's randomness)")
     p.add_argument("--regenerate", action="store_true", help="if the release or the reference no longer matches "
                    "the source, regenerate them (nbgrader generate_assignment --force; grader.references) first")
     return p
@@ -65,7 +67,7 @@ def _refs_command(args, assignment: str) -> str:
 def check_current(args, out) -> list[str]:
     """Problems (each with the command that fixes it) if the release, the gradebook or the
     reference no longer match ``source/<a>``; with ``--regenerate`` they are fixed instead."""
-    from .course import backup_gradebook, generate, gradebook, release_differences
+    from .course import backup_gradebook, generate, gradebook, release_differences, source_hash
     from .references import Reference, record
 
     course, a = args.course, args.assignment
@@ -89,11 +91,14 @@ def check_current(args, out) -> list[str]:
     ref = Reference.load(args.references / f"{a}.npz")
     changed = ref.source_changed(course)
     if changed and args.regenerate:
-        print(f"snakekit grade: {course}/source/{a} changed since its reference was recorded; recording it again",
+        print(f"snakekit grade: {course}/source/{a} or its cases changed since its reference was recorded; "
+              "recording it again",
               file=out)
         record(a, course).save(args.references / f"{a}.npz")
     elif changed:
-        problems.append(f"{course}/source/{a} changed since {args.references}/{a}.npz was recorded from it. "
+        what = f"{course}/source/{a}" if ref.meta.get("source_hash") != source_hash(course, a) else \
+            f"{course}/cases/{a}.py"
+        problems.append(f"{what} changed since {args.references}/{a}.npz was recorded from it. "
                         f"Record it again: `{_refs_command(args, a)}`, or run `snakekit grade {a} --regenerate`")
     elif changed is None:
         print(f"snakekit grade: {args.references}/{a}.npz does not say which source it was recorded from; "
@@ -143,7 +148,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     from .course import backup_gradebook
 
     grader = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
-                    memory=args.memory << 20, cell_timeout=args.cell_timeout)
+                    memory=args.memory << 20, cell_timeout=args.cell_timeout, seed=args.seed)
     students = grader.students()
     if args.student:
         missing = [s for s in args.student if s not in students]

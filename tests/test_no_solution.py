@@ -150,12 +150,13 @@ def answers_in_sight(instructor_path: Path, student_path: Path, work: Path,
                     run(stand_in)
                     if run(ex["visible"]) is None:
                         passed.append(f"{ex['grade_id']}: this answer passes its visible check:\n{stand_in}")
-            for gid, wrong, hint in mistakes:
+            for gid, wrong, hint, *anywhere in mistakes:
                 if gid == ex["grade_id"]:
                     tried = True
                     run(wrong)
                     shown = run(ex["visible"])
-                    if shown is None or hint not in shown.partition("\nHint: ")[2]:
+                    said = shown if anywhere or shown is None else shown.partition("\nHint: ")[2]
+                    if shown is None or hint not in said:
                         problems.append(f"{gid}: the answer\n{wrong}\nshould be told {hint!r}; its check said {shown!r}")
             # the right answer back: the check passes again (so the failures above were the trials')
             if tried:
@@ -167,52 +168,150 @@ def answers_in_sight(instructor_path: Path, student_path: Path, work: Path,
 
 # Wrong answers of the kind students write, and the hint each one's visible check must give:
 # the hints are recognised from worked numbers, so they are tried here with the mistake itself.
+# With a fourth element (True) the words may be anywhere in the message, not only in its hint:
+# a beginner's slip (a missing return, a list), a shortcut, a missing ValueError.
+_FK = "    phi = np.cumsum(q)\n    L = spec.lengths\n"
+_DLS = ("    e = np.asarray(target, dtype=float) - snakekit.tool_pose_2d(q)[:2]\n"
+        "    J = snakekit.planar_jacobian(q)[:2]\n")
+_SOLVE = ("def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n"
+          "    q = np.zeros(5) if q0 is None else np.asarray(q0, dtype=float)\n"
+          "    for _ in range(max_iter):\n"
+          "        if np.linalg.norm(np.asarray(target) - snakekit.tool_pose_2d(q)[:2]) < tol:\n"
+          "            break\n"
+          "        q = np.clip(dls_step(q, target), spec.lower, spec.upper)\n"
+          "    return q")
+_TASK1 = ("def task1(panel, targets):\n    out = []\n    for x, y, heading in targets:\n"
+          "        panel.set_target(x, y, heading)\n        run = panel.execute()\n"
+          "        out.append({})\n    return np.array(out)")
 MISTAKES = {
     "00_meet_the_arm": [
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
-         "    return float(np.hypot(x - target[0], y - target[1]))", "this looks like metres")],
+         "    return float(np.hypot(x - target[0], y - target[1]))", "this looks like metres"),
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
+         "    d = 1000 * float(np.hypot(x - target[0], y - target[1]))", "returned None (nothing)", True)],
     "01_forward_kinematics": [
         ("ex01_1_planar_fk_test", "def planar_fk(q):\n    L = spec.lengths\n"
          "    return np.array([np.sum(L * np.cos(q)), np.sum(L * np.sin(q)), np.sum(q)])",
          "a joint angle is not accumulated"),
-        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    phi = np.cumsum(q)\n"
-         "    return np.array([np.sum(spec.lengths * np.cos(phi)), np.sum(spec.lengths * np.sin(phi)), q[-1]])",
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    L = spec.lengths\n"
+         "    return np.array([np.sum(L * np.cos(q)), np.sum(L * np.sin(q)), q[-1]])",
+         "a joint angle is not accumulated"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), q[-1]])",
          "the heading is the sum of all five angles"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), np.angle(np.exp(1j * phi[-1]))])",
+         "the heading is wrapped"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(L * np.sin(phi)), np.sum(L * np.cos(phi)), phi[-1]])", "cos and sin are swapped"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(1000 * L * np.cos(phi)), np.sum(1000 * L * np.sin(phi)), phi[-1]])",
+         "the lengths look like millimetres"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    return snakekit.tool_pose_2d(q)",
+         "`snakekit.tool_pose_2d` was called", True),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), phi[-1]])", "returned None (nothing)", True),
         ("ex01_2_joint_positions_test", "def joint_positions(q):\n"
          "    steps = spec.lengths[:, None] * np.column_stack([np.cos(q), np.sin(q)])\n"
          "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])", "a joint angle is not accumulated"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n" + _FK +
+         "    xy = [[0.0, 0.0]]\n    for l, p in zip(L, phi):\n"
+         "        xy.append([xy[-1][0] + l * np.cos(p), xy[-1][1] + l * np.sin(p)])\n    return xy",
+         "not a numpy array", True),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n    return snakekit.joint_frames(q)[:, :2, 3]",
+         "`snakekit.joint_frames` was called", True),
         ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n"
-         "    return n_joints * link_length + tool_offset", "counts one link too many")],
+         "    return n_joints * link_length + tool_offset", "counts one link too many"),
+        ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n    return spec.reach",
+         "`snakekit.SnakeSpec.reach` was called", True)],
     "02_jacobian": [
         ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
          "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
          "    return np.vstack([down(L * np.sin(phi)), down(-L * np.cos(phi)), np.ones(len(q))])",
          "the signs are flipped"),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    return snakekit.planar_jacobian(q)",
+         "`snakekit.planar_jacobian` was called", True),
+        ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n"
+         "    q = np.asarray(q, dtype=float)\n"
+         "    return np.column_stack([(np.asarray(f(q + h * e)) - np.asarray(f(q))) / h for e in np.eye(len(q))])",
+         "one-sided difference"),
         ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[:2]\n"
          "    return float(np.linalg.det(J @ J.T))", "without the square root")],
     "03_inverse_kinematics": [
-        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n"
-         "    e = np.asarray(target, dtype=float) - snakekit.tool_pose_2d(q)[:2]\n"
-         "    J = snakekit.planar_jacobian(q)[:2]\n"
-         "    return J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "this is only the step")],
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n"
+         "    c2 = np.clip((x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1, 1)\n"
+         "    q2 = np.arccos(c2)\n"
+         "    rows = [[np.arctan2(y, x) - np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)]\n"
+         "    return np.degrees(np.array(rows))", "the angles look like degrees"),
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n"
+         "    c2 = np.clip((x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1, 1)\n"
+         "    q2 = np.arccos(c2)\n"
+         "    rows = [[np.arctan2(y, x) - np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)]\n"
+         "    return np.array(rows)", "raise a ValueError there", True),
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n"
+         "    c2 = (x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2)\n"
+         "    if abs(c2) > 1:\n        raise ValueError('out of reach')\n    q2 = np.arccos(c2)\n"
+         "    rows = [[np.arctan2(y, x) - np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)]\n"
+         "    return np.array(rows)", "np.clip the cosine"),
+        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
+         "    return J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "this is only the step"),
+        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
+         "    return q + J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(2), e)", "use the `damping` argument"),
+        ("ex03_3_ik_loop_test", _SOLVE, "raise a ValueError there", True),
+        ("ex03_3_ik_loop_test", "def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n"
+         "    return snakekit.inverse_kinematics(target)", "`snakekit.inverse_kinematics` was called", True),
+        ("ex03_4_task1_test", _TASK1.format("run.measured.positions[-1]"), "are joint angles"),
+        ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])"),
+         "raise a ValueError there", True)],
     "04_trajectories": [
         ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)\n"
          "    return 3 * r ** 2 - 2 * r ** 3", "this is the cubic"),
+        ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.asarray(t, dtype=float) / T\n"
+         "    return 10 * r ** 3 - 15 * r ** 4 + 6 * r ** 5", "t is not clipped"),
         ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n"
          "    return np.array([abs(distance) / v_max, v_max])", "the accelerating and braking time counts"),
+        ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = abs(distance)\n"
+         "    return np.array([d / v_max + v_max / a_max, v_max])", "use the triangle"),
+        ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = distance\n"
+         "    if d >= v_max ** 2 / a_max:\n        return np.array([d / v_max + v_max / a_max, v_max])\n"
+         "    return np.array([2 * np.sqrt(d / a_max), np.sqrt(a_max * d)])", "take abs(distance)"),
         ("ex04_3_sample_10hz_test", "def sample_move(q_start, q_end, duration, rate=10.0):\n"
          "    times = np.arange(1, int(round(duration * rate)) + 2) / rate\n"
          "    s = quintic(duration, times - 1 / rate)\n"
          "    return snakekit.Trajectory(times, q_start + np.outer(s, np.asarray(q_end) - q_start))",
-         "the times start at 1/rate")],
+         "the times start at 1/rate"),
+        ("ex04_3_sample_10hz_test", "def sample_move(q_start, q_end, duration, rate=10.0):\n"
+         "    times = np.arange(int(round(duration * 100)) + 1) / 100\n"
+         "    return snakekit.Trajectory(times, q_start + np.outer(quintic(duration, times), np.asarray(q_end) - q_start))",
+         "the rate looks like 100 Hz"),
+        ("ex04_4_limit_check_test", "def limit_violations(trajectory):\n    return np.array([])",
+         "an empty result has shape (0, 3)")],
     "05_simulation": [
+        ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
+         "    progress = y / target\n"
+         "    return float(t[np.argmax(progress >= 0.9)] - t[np.argmax(progress >= 0.1)])",
+         "measured from the start y[0]"),
+        ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
+         "    progress = (y - y[0]) / (target - y[0])\n    return float(t[np.argmax(progress >= 0.9)])",
+         "the time to reach 90 %"),
         ("ex05_2_overshoot_test", "def overshoot(y, target):\n    y = np.asarray(y, dtype=float)\n"
          "    return float(max(0.0, ((y - target) / (target - y[0])).max()))", "this is a fraction"),
+        ("ex05_2_overshoot_test", "def overshoot(y, target):\n    y = np.asarray(y, dtype=float)\n"
+         "    return float(100 * ((y - target) / (target - y[0])).max())", "no overshoot: 0, not a negative number"),
         ("ex05_3_steady_state_error_test", "def steady_state_error(y, target, window=10):\n"
          "    return float(np.mean(np.asarray(y, dtype=float)[-window:]) - target)", "the sign"),
+        ("ex05_3_steady_state_error_test", "def steady_state_error(y, target, window=10):\n"
+         "    return float(target - y[-1])", "not one sample"),
         ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
          "    return abs(distance) / (profile_velocity * 0.229 * 2 * np.pi / 60)",
-         "the accelerating and braking time counts")],
+         "the accelerating and braking time counts"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
+         "    return abs(distance) / v + v / a", "a triangle"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
+         "    if distance >= v * v / a:\n        return distance / v + v / a\n    return 2 * np.sqrt(distance / a)",
+         "take abs(distance)")],
     "06_coded_sweep": [
         ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(1, points + 1) / rate",
          "the times start at 1/rate"),
@@ -220,6 +319,8 @@ MISTAKES = {
          "these times are 100 Hz apart"),
         ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.linspace(0, points / rate, points)",
          "np.linspace"),
+        ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(points) / 10.0",
+         "the rate is an argument"),
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
          "    angle = amplitude * np.cos(2 * np.pi * sweeps * times / times[-1])\n"
          "    return np.repeat(angle[:, None], 5, axis=1)", "use sin"),
@@ -228,12 +329,44 @@ MISTAKES = {
          "    return np.repeat(angle[:, None], 5, axis=1)", "the last row is not exactly home"),
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
          "    angle = amplitude * np.sin(2 * np.pi * sweeps * times / (times[-1] + times[1] - times[0]))\n"
-         "    return np.repeat(angle[:, None], 5, axis=1)", "the sweeps do not fill the run")],
+         "    return np.repeat(angle[:, None], 5, axis=1)", "the sweeps do not fill the run"),
+        ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
+         "    angle = np.degrees(amplitude * np.sin(2 * np.pi * sweeps * times / times[-1]))\n    angle[-1] = 0.0\n"
+         "    return np.repeat(angle[:, None], 5, axis=1)", "degrees"),
+        ("ex06_3_task2_test", "def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n"
+         "    times = sweep_times(500, 10.0)\n"
+         "    return snakekit.Trajectory(times, sweep_positions(times, 50, 0.2)).check_limits()", "use the arguments"),
+        ("ex06_3_task2_test", "def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n"
+         "    times = sweep_times(points, rate)\n"
+         "    return snakekit.Trajectory(times, sweep_positions(times, sweeps, amplitude))", "check_limits"),
+        ("ex06_3_task2_test", "def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n"
+         "    times = sweep_times(points, rate)\n    snakekit.Trajectory(times, sweep_positions(times, sweeps, amplitude))",
+         "and return it"),
+        ("ex06_4_phase_lag_test", "def estimate_lag(run, joint=0):\n    t = run.measured.times\n"
+         "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
+         "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 501)\n"
+         "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag / 1000, ct, cq)) ** 2)) for lag in lags]\n"
+         "    return float(lags[int(np.argmin(rms))])", "in milliseconds")],
     "07_real_robot": [
         ("ex07_1_ticks_test", "def to_ticks(q):\n"
          "    return (2048 + np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "astype(int) cuts toward zero"),
         ("ex07_1_ticks_test", "def to_ticks(q):\n"
-         "    return np.rint(np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "add the offset")],
+         "    return np.rint(np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "add the offset"),
+        ("ex07_1_ticks_test", "def to_ticks(q):\n"
+         "    return np.rint(2048 + np.asarray(q, dtype=float) * 4096 / 360).astype(int)", "2 pi rad (not 360)"),
+        ("ex07_2_safe_move_test", "def safe_move(robot, q, margin=0.05):\n    q = np.asarray(q, dtype=float)\n"
+         "    if np.any(np.abs(q) > spec.upper - margin):\n        raise snakekit.LimitError('too close')\n"
+         "    return robot.move_to(q, max(1.875 * np.abs(q).max() / 1.5, 0.2))", "from where the arm is now"),
+        ("ex07_2_safe_move_test", "def safe_move(robot, q, margin=0.05):\n    q = np.asarray(q, dtype=float)\n"
+         "    if np.any(np.abs(q) > spec.upper - 0.05):\n        raise snakekit.LimitError('too close')\n"
+         "    d = np.abs(q - robot.read().positions).max()\n"
+         "    return robot.move_to(q, max(1.875 * d / 1.5, 0.2))", "use the margin argument"),
+        ("ex07_2_safe_move_test", "def safe_move(robot, q, margin=0.05):\n    q = np.asarray(q, dtype=float)\n"
+         "    if np.any(np.abs(q) > spec.upper - margin):\n        raise ValueError('too close')\n"
+         "    d = np.abs(q - robot.read().positions).max()\n"
+         "    return robot.move_to(q, max(1.875 * d / 1.5, 0.2))", "raise snakekit.LimitError"),
+        ("ex07_3_fault_test", "def recover(robot):\n    for i in robot.ids:\n        robot.reboot(i)\n"
+         "    robot.torque_on()\n    return list(robot.ids)", "reboot only the servos")],
 }
 
 
