@@ -11,15 +11,22 @@ In a notebook the student sees the message only, never a stack of frames from th
 the exceptions render themselves (IPython's ``_render_traceback_``), showing at most the
 frames of the student's own code.
 
-Four things the grader relies on (see ``course/README.md``, "For the grader"):
+What the grader relies on (see ``course/README.md``, "For the grader"):
 
-* :func:`hand_in` writes ``<SNAKEKIT_HANDIN_DIR>/<grade_id>.npz`` when that variable is set
-  (and does nothing otherwise);
-* :func:`rng` gives the same seeded inputs in the instructor's run and the student's;
+* :meth:`Exercise.hand_in` asks the grader's socket (``SNAKEKIT_CASES``) for an exercise's
+  hidden cases when its check cell runs, and writes the student's results there to
+  ``<SNAKEKIT_HANDIN_DIR>/<grade_id>.npz`` (and does nothing outside grading);
 * :func:`forbid` makes library functions raise :class:`ShortcutError` while the student's
   code runs, so an exercise can't be passed by calling the function it asks to write;
 * :func:`quick` is the one switch that shortens long runs under test
   (``SNAKEKIT_QUICK=1``; the test suite's ``SNAKEKIT_TEST=1`` counts too).
+
+:func:`hand_in`, :func:`rng`, :func:`outputs`, :func:`rows` and :func:`passes` are the older
+scheme (seeded inputs and verdicts computed in the notebook), kept while a lesson still uses it.
+
+A check says a beginner's slip in plain words: a function that returned None (a forgotten
+``return``), a list where an array is asked (``close(..., array=True)``), and, in a notebook,
+a name whose answer cell has not run or stopped with a ``SyntaxError``.
 
 >>> import numpy as np
 >>> ex = Exercise("9.9", "double")
@@ -139,6 +146,9 @@ class Exercise:
             self.fail(f"`{self.name}` is not written yet (it raises NotImplementedError"
                       f"{': ' + str(e) if str(e) else ''}). Write it in the answer cell above, run that cell, "
                       "then run this check again.")
+        except ShortcutError as e:   # named with the exercise it happened in
+            said = str(e) if str(e).startswith("exercise ") else f"{self.prefix}: {e}"
+            raise _shorten(ShortcutError(said, _student_frames(e.__traceback__))) from None
         except CheckFailed as e:
             raise _shorten(e) from None
         except Exception as e:

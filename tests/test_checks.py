@@ -67,8 +67,8 @@ def test_a_shortcut_inside_a_checked_call_is_reported_as_the_shortcut():
     with checks.forbid("snakekit.tool_pose_2d", what="planar FK"):
         with pytest.raises(ShortcutError) as e:
             ex(lambda q: snakekit.tool_pose_2d(q), np.zeros(5))
-    assert str(e.value).startswith("this exercise asks you to write planar FK yourself; `snakekit.tool_pose_2d` "
-                                   "was called")
+    assert str(e.value).startswith("exercise 9.4 fk: this exercise asks you to write planar FK yourself; "
+                                   "`snakekit.tool_pose_2d` was called")
 
 
 def test_a_check_cell_after_a_broken_answer_cell_says_the_answer_did_not_run(tmp_path, monkeypatch):
