@@ -488,6 +488,9 @@ _install_name_error_note()
 class waiting_for(contextlib.AbstractContextManager):
     """A demonstration that needs an exercise: until it is written, say so and skip the rest.
 
+    When the block stops with another error (the answer returned None, say), the cell says
+    which exercise it uses and points to that exercise's check, instead of a bare traceback.
+
     >>> def task2_sweep():
     ...     raise NotImplementedError("exercise 6.3: task2_sweep")
     >>> with waiting_for("6.3"):
@@ -504,4 +507,11 @@ class waiting_for(contextlib.AbstractContextManager):
             print(f"This cell waits for exercise {self.exercise}{what}: write it, run it, then run this "
                   "cell again.")
             return True
+        if kind is not None and issubclass(kind, Exception) and not issubclass(kind, CheckFailed):
+            # most often the exercise's answer is not right yet (it returned None, a list...): its
+            # check cell says what is wrong, in more words than this cell's error can
+            raise _shorten(CheckFailed(
+                f"this cell uses your answer to exercise {self.exercise}, and it stopped with {kind.__name__}: "
+                f"{value}. Run exercise {self.exercise}'s check cell first: it says what is wrong.",
+                _student_frames(tb))) from None
         return False
