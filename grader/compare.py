@@ -1,4 +1,4 @@
-"""Trajectory and value checks: each scores a fraction in [0, 1] and says why, with numbers.
+"""Trajectory checks: each scores a fraction in [0, 1] and says why, with numbers.
 
 Every check returns a :class:`Check`: a ``fraction`` of its ``weight`` (partial credit) and a
 message a student can act on: which joint, when, by how much, and the tolerance. The
@@ -24,7 +24,7 @@ from snakekit.model import SPEC, SnakeSpec
 from snakekit.trajectory import Trajectory
 
 __all__ = ["Check", "falloff", "align", "tracking", "point_count", "rate", "limits", "sweep_count",
-           "home", "smoothness", "values", "count_sweeps"]
+           "home", "smoothness", "count_sweeps"]
 
 
 @dataclass(frozen=True)
@@ -256,42 +256,3 @@ def smoothness(traj: Trajectory, reference: Trajectory, *, factor: float = 1.5, 
     return Check("smoothness", f, f"smoothness: joint {j + 1} at t={traj.times[i]:.2f} s accelerates at "
                                   f"{got:.3g} rad/s^2, expected at most {tol:.3g} rad/s^2 "
                                   f"({factor:g}x the reference's peak); is there a jump in the trajectory?", weight)
-
-
-# --- function values at hidden inputs ---------------------------------------------------------
-
-
-def values(got: np.ndarray, expected: np.ndarray, *, rtol: float, atol: float, what: str = "value",
-           inputs: np.ndarray | None = None, unit: str = "", weight: float = 1.0) -> Check:
-    """Outputs at hidden inputs, case by case: credit is the share of cases within tolerance.
-
-    The first axis indexes the cases; a case passes when every entry satisfies
-    ``|got - expected| <= atol + rtol * |expected|``.
-    """
-    got = np.asarray(got, dtype=float)
-    expected = np.asarray(expected, dtype=float)
-    if got.shape != expected.shape:
-        hint = " Did you return the transpose?" if got.shape == expected.shape[::-1] and got.ndim == 2 else ""
-        return Check(what, 0.0, f"{what}: shape {got.shape}, expected {expected.shape}.{hint}", weight)
-    if expected.ndim == 0:
-        got, expected = got[None], expected[None]
-    bad_entry = ~(np.abs(got - expected) <= atol + rtol * np.abs(expected))  # NaN counts as bad
-    bad_case = bad_entry.reshape(len(expected), -1).any(axis=1)
-    n, nbad = len(expected), int(bad_case.sum())
-    if nbad == 0:
-        return Check(what, 1.0, f"{what}: all {n} hidden cases within tolerance.", weight)
-    k = int(np.argmax(bad_case))
-    g, e = got[k].ravel(), expected[k].ravel()
-    m = int(np.argmax(np.where(np.isfinite(g), np.abs(g - e), np.inf)))
-    if inputs is not None and len(inputs) == n:
-        x = np.asarray(inputs[k])
-        where = f" at input {float(x):.6g}" if x.ndim == 0 else \
-            " at input (" + ", ".join(f"{float(v):.6g}" for v in x.ravel()[:12]) + (", ..." if x.size > 12 else "") + ")"
-    else:
-        where = f" in case {k + 1}"
-    u = f" {unit}" if unit else ""
-    tol = atol + rtol * abs(e[m])
-    diff = g[m] - e[m]
-    return Check(what, 1.0 - nbad / n,
-                 f"{what}: {nbad} of {n} hidden cases wrong; first{where}: entry {m} is {g[m]:.6g}{u}, "
-                 f"expected {e[m]:.6g}{u}: off by {diff:.3g}{u} (tolerance {tol:.2g}{u}).", weight)

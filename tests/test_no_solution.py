@@ -298,21 +298,52 @@ MISTAKES = {
     "04_trajectories": [
         ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)\n"
          "    return 3 * r ** 2 - 2 * r ** 3", "this is the cubic"),
+        ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.asarray(t, dtype=float) / T\n"
+         "    return 10 * r ** 3 - 15 * r ** 4 + 6 * r ** 5", "t is not clipped"),
         ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n"
          "    return np.array([abs(distance) / v_max, v_max])", "the accelerating and braking time counts"),
+        ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = abs(distance)\n"
+         "    return np.array([d / v_max + v_max / a_max, v_max])", "use the triangle"),
+        ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = distance\n"
+         "    if d >= v_max ** 2 / a_max:\n        return np.array([d / v_max + v_max / a_max, v_max])\n"
+         "    return np.array([2 * np.sqrt(d / a_max), np.sqrt(a_max * d)])", "take abs(distance)"),
         ("ex04_3_sample_10hz_test", "def sample_move(q_start, q_end, duration, rate=10.0):\n"
          "    times = np.arange(1, int(round(duration * rate)) + 2) / rate\n"
          "    s = quintic(duration, times - 1 / rate)\n"
          "    return snakekit.Trajectory(times, q_start + np.outer(s, np.asarray(q_end) - q_start))",
-         "the times start at 1/rate")],
+         "the times start at 1/rate"),
+        ("ex04_3_sample_10hz_test", "def sample_move(q_start, q_end, duration, rate=10.0):\n"
+         "    times = np.arange(int(round(duration * 100)) + 1) / 100\n"
+         "    return snakekit.Trajectory(times, q_start + np.outer(quintic(duration, times), np.asarray(q_end) - q_start))",
+         "the rate looks like 100 Hz"),
+        ("ex04_4_limit_check_test", "def limit_violations(trajectory):\n    return np.array([])",
+         "an empty result has shape (0, 3)")],
     "05_simulation": [
+        ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
+         "    progress = y / target\n"
+         "    return float(t[np.argmax(progress >= 0.9)] - t[np.argmax(progress >= 0.1)])",
+         "measured from the start y[0]"),
+        ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
+         "    progress = (y - y[0]) / (target - y[0])\n    return float(t[np.argmax(progress >= 0.9)])",
+         "the time to reach 90 %"),
         ("ex05_2_overshoot_test", "def overshoot(y, target):\n    y = np.asarray(y, dtype=float)\n"
          "    return float(max(0.0, ((y - target) / (target - y[0])).max()))", "this is a fraction"),
+        ("ex05_2_overshoot_test", "def overshoot(y, target):\n    y = np.asarray(y, dtype=float)\n"
+         "    return float(100 * ((y - target) / (target - y[0])).max())", "no overshoot: 0, not a negative number"),
         ("ex05_3_steady_state_error_test", "def steady_state_error(y, target, window=10):\n"
          "    return float(np.mean(np.asarray(y, dtype=float)[-window:]) - target)", "the sign"),
+        ("ex05_3_steady_state_error_test", "def steady_state_error(y, target, window=10):\n"
+         "    return float(target - y[-1])", "not one sample"),
         ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
          "    return abs(distance) / (profile_velocity * 0.229 * 2 * np.pi / 60)",
-         "the accelerating and braking time counts")],
+         "the accelerating and braking time counts"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
+         "    return abs(distance) / v + v / a", "a triangle"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
+         "    if distance >= v * v / a:\n        return distance / v + v / a\n    return 2 * np.sqrt(distance / a)",
+         "take abs(distance)")],
     "06_coded_sweep": [
         ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(1, points + 1) / rate",
          "the times start at 1/rate"),
@@ -320,6 +351,8 @@ MISTAKES = {
          "these times are 100 Hz apart"),
         ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.linspace(0, points / rate, points)",
          "np.linspace"),
+        ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(points) / 10.0",
+         "the rate is an argument"),
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
          "    angle = amplitude * np.cos(2 * np.pi * sweeps * times / times[-1])\n"
          "    return np.repeat(angle[:, None], 5, axis=1)", "use sin"),
@@ -328,12 +361,44 @@ MISTAKES = {
          "    return np.repeat(angle[:, None], 5, axis=1)", "the last row is not exactly home"),
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
          "    angle = amplitude * np.sin(2 * np.pi * sweeps * times / (times[-1] + times[1] - times[0]))\n"
-         "    return np.repeat(angle[:, None], 5, axis=1)", "the sweeps do not fill the run")],
+         "    return np.repeat(angle[:, None], 5, axis=1)", "the sweeps do not fill the run"),
+        ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
+         "    angle = np.degrees(amplitude * np.sin(2 * np.pi * sweeps * times / times[-1]))\n    angle[-1] = 0.0\n"
+         "    return np.repeat(angle[:, None], 5, axis=1)", "degrees"),
+        ("ex06_3_task2_test", "def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n"
+         "    times = sweep_times(500, 10.0)\n"
+         "    return snakekit.Trajectory(times, sweep_positions(times, 50, 0.2)).check_limits()", "use the arguments"),
+        ("ex06_3_task2_test", "def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n"
+         "    times = sweep_times(points, rate)\n"
+         "    return snakekit.Trajectory(times, sweep_positions(times, sweeps, amplitude))", "check_limits"),
+        ("ex06_3_task2_test", "def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n"
+         "    times = sweep_times(points, rate)\n    snakekit.Trajectory(times, sweep_positions(times, sweeps, amplitude))",
+         "and return it"),
+        ("ex06_4_phase_lag_test", "def estimate_lag(run, joint=0):\n    t = run.measured.times\n"
+         "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
+         "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 501)\n"
+         "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag / 1000, ct, cq)) ** 2)) for lag in lags]\n"
+         "    return float(lags[int(np.argmin(rms))])", "in milliseconds")],
     "07_real_robot": [
         ("ex07_1_ticks_test", "def to_ticks(q):\n"
          "    return (2048 + np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "astype(int) cuts toward zero"),
         ("ex07_1_ticks_test", "def to_ticks(q):\n"
-         "    return np.rint(np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "add the offset")],
+         "    return np.rint(np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "add the offset"),
+        ("ex07_1_ticks_test", "def to_ticks(q):\n"
+         "    return np.rint(2048 + np.asarray(q, dtype=float) * 4096 / 360).astype(int)", "2 pi rad (not 360)"),
+        ("ex07_2_safe_move_test", "def safe_move(robot, q, margin=0.05):\n    q = np.asarray(q, dtype=float)\n"
+         "    if np.any(np.abs(q) > spec.upper - margin):\n        raise snakekit.LimitError('too close')\n"
+         "    return robot.move_to(q, max(1.875 * np.abs(q).max() / 1.5, 0.2))", "from where the arm is now"),
+        ("ex07_2_safe_move_test", "def safe_move(robot, q, margin=0.05):\n    q = np.asarray(q, dtype=float)\n"
+         "    if np.any(np.abs(q) > spec.upper - 0.05):\n        raise snakekit.LimitError('too close')\n"
+         "    d = np.abs(q - robot.read().positions).max()\n"
+         "    return robot.move_to(q, max(1.875 * d / 1.5, 0.2))", "use the margin argument"),
+        ("ex07_2_safe_move_test", "def safe_move(robot, q, margin=0.05):\n    q = np.asarray(q, dtype=float)\n"
+         "    if np.any(np.abs(q) > spec.upper - margin):\n        raise ValueError('too close')\n"
+         "    d = np.abs(q - robot.read().positions).max()\n"
+         "    return robot.move_to(q, max(1.875 * d / 1.5, 0.2))", "raise snakekit.LimitError"),
+        ("ex07_3_fault_test", "def recover(robot):\n    for i in robot.ids:\n        robot.reboot(i)\n"
+         "    robot.torque_on()\n    return list(robot.ids)", "reboot only the servos")],
 }
 
 

@@ -1,0 +1,54 @@
+"""Lesson 06's hidden cases, drawn by the grader anew for every grading batch.
+
+One function per handed-in grade id, taking ``(rng, spec)`` and returning the cases: each a
+tuple of the positional arguments the test cell's hand-in calls (see grader/README.md, "Cases").
+The sweeps are short (at most 20 s of robot time), so a simulator run costs a fraction of Task 2's.
+"""
+
+import numpy as np
+
+#: The lag is the minimum of a flat rms curve: 10 ms apart is the same lag (the lesson's check).
+TOLERANCES = {"ex06_4_phase_lag_test": {"rtol": 0.0, "atol": 0.010}}
+
+
+def ex06_1_sweep_times_test(rng, spec):
+    """sweep_times(points, rate): 6 cases, and one goal alone."""
+    cases = [(int(n), float(f)) for n, f in zip(rng.integers(2, 800, 6), rng.uniform(1.0, 200.0, 6))]
+    return cases + [(1, float(rng.uniform(1.0, 50.0)))]
+
+
+def ex06_2_sweep_positions_test(rng, spec):
+    """sweep_positions(times, sweeps, amplitude): 5 runs of 20 to 300 goals at 5 to 50 Hz."""
+    return [(np.arange(int(n)) / f, int(k), float(a)) for n, f, k, a in
+            zip(rng.integers(20, 300, 5), rng.uniform(5.0, 50.0, 5), rng.integers(1, 6, 5), rng.uniform(0.05, 0.5, 5))]
+
+
+def _sweep(rng, spec, max_points):
+    """(points, rate, sweeps, amplitude) of a sweep well inside the limits: at least 8 goals a sweep,
+    a peak speed of at most 2/3 of the velocity limit, at most 20 s long."""
+    rate = float(rng.choice([5.0, 10.0, 20.0]))
+    points = int(rng.integers(40, min(max_points, int(20 * rate) + 2)))     # at most 20 s of robot time
+    amplitude = float(rng.uniform(0.05, 0.3))
+    fastest = spec.velocity_limit * 2 / 3 * (points - 1) / (amplitude * 2 * np.pi * rate)
+    sweeps = int(rng.integers(1, max(2, min(points // 8, int(fastest)) + 1)))
+    return points, rate, sweeps, amplitude
+
+
+def ex06_3_task2_test(rng, spec):
+    """task2_sweep(points, rate, sweeps, amplitude): 3 sweeps inside the limits (run on the simulator),
+    and one beyond the position limits (the instructor's raises LimitError: so must the student's)."""
+    cases = [_sweep(rng, spec, 200) for _ in range(3)]
+    points, rate, sweeps, _ = _sweep(rng, spec, 200)
+    return cases + [(points, rate, sweeps, float(rng.uniform(spec.upper + 0.1, 2.5)))]
+
+
+def ex06_4_phase_lag_test(rng, spec):
+    """graded_lag(points, rate, sweeps, amplitude, joint): 3 sweeps at 10 Hz, 100 to 200 goals, one joint
+    each (the lesson's text: 10 Hz goals, so the lag is about half a goal period plus the servo's)."""
+    cases = []
+    for joint in rng.choice(5, 3, replace=False):
+        points = int(rng.integers(100, 200))
+        sweeps = int(rng.integers(3, points // 12))
+        amplitude = float(rng.uniform(0.05, 0.15))
+        cases.append((points, 10.0, sweeps, amplitude, int(joint)))
+    return cases
