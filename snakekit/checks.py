@@ -21,9 +21,6 @@ What the grader relies on (see ``course/README.md``, "For the grader"):
 * :func:`quick` is the one switch that shortens long runs under test
   (``SNAKEKIT_QUICK=1``; the test suite's ``SNAKEKIT_TEST=1`` counts too).
 
-:func:`hand_in`, :func:`rng`, :func:`outputs`, :func:`rows` and :func:`passes` are the older
-scheme (seeded inputs and verdicts computed in the notebook), kept while a lesson still uses it.
-
 A check says a beginner's slip in plain words: a function that returned None (a forgotten
 ``return``), a list where an array is asked (``close(..., array=True)``), and, in a notebook,
 a name whose answer cell has not run or stopped with a ``SyntaxError``.
@@ -47,7 +44,6 @@ import os
 import sys
 import traceback
 import warnings
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -55,8 +51,7 @@ import numpy as np
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import encode_results, fetch_cases
 
-__all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "hand_in", "outputs", "rng", "quick",
-           "waiting_for"]
+__all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "quick", "waiting_for"]
 
 _HERE = os.path.abspath(__file__)
 
@@ -329,72 +324,7 @@ def _mistake_hint(arr, exp, unit, mistakes, *, tol: float) -> str:
     return ""
 
 
-# --- what the grader relies on -------------------------------------------------------------
-
-
-def rng(grade_id: str) -> np.random.Generator:
-    """A random generator seeded by ``grade_id``: the same hidden inputs in every run."""
-    return np.random.default_rng(zlib.crc32(grade_id.encode()))
-
-
-def outputs(fn, inputs, *, forbid_names: tuple = (), what: str = "") -> np.ndarray | None:
-    """``fn`` applied to each row of ``inputs``, stacked; None if it fails or takes a shortcut."""
-    try:
-        with forbid(*forbid_names, what=what or "this"):
-            return np.array([np.asarray(fn(x), dtype=float) for x in inputs])
-    except Exception:
-        return None
-
-
-def passes(check, *args, **kwargs) -> float:
-    """1.0 if ``check(*args, **kwargs)`` returns, 0.0 if it raises: a hidden check's verdict to hand in."""
-    try:
-        check(*args, **kwargs)
-    except Exception:
-        return 0.0
-    return 1.0
-
-
-def rows(fn, inputs, *, forbid_names: tuple = (), what: str = "") -> np.ndarray | None:
-    """``fn``'s rows for each input, each row led by the input's index, stacked into one array.
-
-    For results with a different number of rows per input (a trajectory's samples, a list of
-    violations), which :func:`outputs` cannot stack. None if ``fn`` fails or takes a shortcut.
-    """
-    try:
-        with forbid(*forbid_names, what=what or "this"):
-            parts = []
-            for k, x in enumerate(inputs):
-                r = np.asarray(fn(x), dtype=float)
-                r = r.reshape(len(r), -1) if r.ndim else r.reshape(1, 1)
-                parts.append(np.column_stack([np.full(len(r), float(k)), r]))
-            return np.vstack(parts)
-    except Exception:
-        return None
-
-
-def hand_in(grade_id: str, **values) -> Path | None:
-    """Save ``values`` as arrays for the grader, if ``SNAKEKIT_HANDIN_DIR`` is set.
-
-    Writes ``<SNAKEKIT_HANDIN_DIR>/<grade_id>.npz`` (``np.savez``, no pickles; an existing
-    file is replaced). Values that are None are left out (the student's code failed).
-    Without the variable this does nothing and returns None.
-    """
-    folder = os.environ.get("SNAKEKIT_HANDIN_DIR")
-    if not folder:
-        return None
-    arrays = {}
-    for k, v in values.items():
-        if v is None:
-            continue
-        a = np.asarray(v)
-        if a.dtype == object:
-            continue  # ragged or not numbers: nothing the grader could score
-        arrays[k] = a
-    path = Path(folder) / f"{grade_id}.npz"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **arrays)
-    return path
+# --- the shortcut guard ---------------------------------------------------------------------
 
 
 def _resolve(name: str):
