@@ -11,15 +11,19 @@ In a notebook the student sees the message only, never a stack of frames from th
 the exceptions render themselves (IPython's ``_render_traceback_``), showing at most the
 frames of the student's own code.
 
-Four things the grader relies on (see ``course/README.md``, "For the grader"):
+What the grader relies on (see ``course/README.md``, "For the grader"):
 
-* :func:`hand_in` writes ``<SNAKEKIT_HANDIN_DIR>/<grade_id>.npz`` when that variable is set
-  (and does nothing otherwise);
-* :func:`rng` gives the same seeded inputs in the instructor's run and the student's;
+* :meth:`Exercise.hand_in` asks the grader's socket (``SNAKEKIT_CASES``) for an exercise's
+  hidden cases when its check cell runs, and writes the student's results there to
+  ``<SNAKEKIT_HANDIN_DIR>/<grade_id>.npz`` (and does nothing outside grading);
 * :func:`forbid` makes library functions raise :class:`ShortcutError` while the student's
   code runs, so an exercise can't be passed by calling the function it asks to write;
 * :func:`quick` is the one switch that shortens long runs under test
   (``SNAKEKIT_QUICK=1``; the test suite's ``SNAKEKIT_TEST=1`` counts too).
+
+A check says a beginner's slip in plain words: a function that returned None (a forgotten
+``return``), a list where an array is asked (``close(..., array=True)``), and, in a notebook,
+a name whose answer cell has not run or stopped with a ``SyntaxError``.
 
 >>> import numpy as np
 >>> ex = Exercise("9.9", "double")
@@ -40,7 +44,6 @@ import os
 import sys
 import traceback
 import warnings
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -48,8 +51,7 @@ import numpy as np
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import encode_results, fetch_cases
 
-__all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "hand_in", "outputs", "rng", "quick",
-           "waiting_for"]
+__all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "quick", "waiting_for"]
 
 _HERE = os.path.abspath(__file__)
 
@@ -139,6 +141,9 @@ class Exercise:
             self.fail(f"`{self.name}` is not written yet (it raises NotImplementedError"
                       f"{': ' + str(e) if str(e) else ''}). Write it in the answer cell above, run that cell, "
                       "then run this check again.")
+        except ShortcutError as e:   # named with the exercise it happened in
+            said = str(e) if str(e).startswith("exercise ") else f"{self.prefix}: {e}"
+            raise _shorten(ShortcutError(said, _student_frames(e.__traceback__))) from None
         except CheckFailed as e:
             raise _shorten(e) from None
         except Exception as e:
@@ -319,72 +324,7 @@ def _mistake_hint(arr, exp, unit, mistakes, *, tol: float) -> str:
     return ""
 
 
-# --- what the grader relies on -------------------------------------------------------------
-
-
-def rng(grade_id: str) -> np.random.Generator:
-    """A random generator seeded by ``grade_id``: the same hidden inputs in every run."""
-    return np.random.default_rng(zlib.crc32(grade_id.encode()))
-
-
-def outputs(fn, inputs, *, forbid_names: tuple = (), what: str = "") -> np.ndarray | None:
-    """``fn`` applied to each row of ``inputs``, stacked; None if it fails or takes a shortcut."""
-    try:
-        with forbid(*forbid_names, what=what or "this"):
-            return np.array([np.asarray(fn(x), dtype=float) for x in inputs])
-    except Exception:
-        return None
-
-
-def passes(check, *args, **kwargs) -> float:
-    """1.0 if ``check(*args, **kwargs)`` returns, 0.0 if it raises: a hidden check's verdict to hand in."""
-    try:
-        check(*args, **kwargs)
-    except Exception:
-        return 0.0
-    return 1.0
-
-
-def rows(fn, inputs, *, forbid_names: tuple = (), what: str = "") -> np.ndarray | None:
-    """``fn``'s rows for each input, each row led by the input's index, stacked into one array.
-
-    For results with a different number of rows per input (a trajectory's samples, a list of
-    violations), which :func:`outputs` cannot stack. None if ``fn`` fails or takes a shortcut.
-    """
-    try:
-        with forbid(*forbid_names, what=what or "this"):
-            parts = []
-            for k, x in enumerate(inputs):
-                r = np.asarray(fn(x), dtype=float)
-                r = r.reshape(len(r), -1) if r.ndim else r.reshape(1, 1)
-                parts.append(np.column_stack([np.full(len(r), float(k)), r]))
-            return np.vstack(parts)
-    except Exception:
-        return None
-
-
-def hand_in(grade_id: str, **values) -> Path | None:
-    """Save ``values`` as arrays for the grader, if ``SNAKEKIT_HANDIN_DIR`` is set.
-
-    Writes ``<SNAKEKIT_HANDIN_DIR>/<grade_id>.npz`` (``np.savez``, no pickles; an existing
-    file is replaced). Values that are None are left out (the student's code failed).
-    Without the variable this does nothing and returns None.
-    """
-    folder = os.environ.get("SNAKEKIT_HANDIN_DIR")
-    if not folder:
-        return None
-    arrays = {}
-    for k, v in values.items():
-        if v is None:
-            continue
-        a = np.asarray(v)
-        if a.dtype == object:
-            continue  # ragged or not numbers: nothing the grader could score
-        arrays[k] = a
-    path = Path(folder) / f"{grade_id}.npz"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **arrays)
-    return path
+# --- the shortcut guard ---------------------------------------------------------------------
 
 
 def _resolve(name: str):
@@ -478,6 +418,9 @@ _install_name_error_note()
 class waiting_for(contextlib.AbstractContextManager):
     """A demonstration that needs an exercise: until it is written, say so and skip the rest.
 
+    When the block stops with another error (the answer returned None, say), the cell says
+    which exercise it uses and points to that exercise's check, instead of a bare traceback.
+
     >>> def task2_sweep():
     ...     raise NotImplementedError("exercise 6.3: task2_sweep")
     >>> with waiting_for("6.3"):
@@ -494,4 +437,11 @@ class waiting_for(contextlib.AbstractContextManager):
             print(f"This cell waits for exercise {self.exercise}{what}: write it, run it, then run this "
                   "cell again.")
             return True
+        if kind is not None and issubclass(kind, Exception) and not issubclass(kind, CheckFailed):
+            # most often the exercise's answer is not right yet (it returned None, a list...): its
+            # check cell says what is wrong, in more words than this cell's error can
+            raise _shorten(CheckFailed(
+                f"this cell uses your answer to exercise {self.exercise}, and it stopped with {kind.__name__}: "
+                f"{value}. Run exercise {self.exercise}'s check cell first: it says what is wrong.",
+                _student_frames(tb))) from None
         return False

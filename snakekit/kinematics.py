@@ -107,6 +107,29 @@ def planar_jacobian(q, *, spec: SnakeSpec = SPEC) -> np.ndarray:
     return jacobian(q, spec=spec)[_PLANAR_ROWS]
 
 
+def dls_step(q, target_xy, damping: float = 1e-3, *, spec: SnakeSpec = SPEC) -> np.ndarray:
+    """One damped least-squares step of the tool point toward ``target_xy`` (lesson 3's step).
+
+    Args:
+        q: joint angles [rad].
+        target_xy: the tool target (x, y) [m].
+        damping: lambda [m]: the step is q + J^T (J J^T + lambda^2 I)^-1 e, with e the tool
+            error (x, y) [m] and J the first two rows of :func:`planar_jacobian`.
+
+    Returns:
+        The new joint angles [rad], not clamped to the limits.
+
+    >>> np.round(dls_step(np.zeros(5), (0.25, 0.1)), 4).tolist()
+    [0.1442, 0.1133, 0.0824, 0.0515, 0.0207]
+    """
+    target = real_array(target_xy, "target_xy", "(2,)")
+    if target.shape != (2,):
+        raise ShapeError("target_xy", "(2,): the tool point (x, y) [m]", target.shape)
+    e = target - tool_pose_2d(q, spec=spec)[:2]
+    J = planar_jacobian(q, spec=spec)[:2]
+    return np.asarray(q, dtype=float) + J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)
+
+
 def _wrap(a: float) -> float:
     return (a + np.pi) % (2 * np.pi) - np.pi
 

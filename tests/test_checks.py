@@ -67,8 +67,8 @@ def test_a_shortcut_inside_a_checked_call_is_reported_as_the_shortcut():
     with checks.forbid("snakekit.tool_pose_2d", what="planar FK"):
         with pytest.raises(ShortcutError) as e:
             ex(lambda q: snakekit.tool_pose_2d(q), np.zeros(5))
-    assert str(e.value).startswith("this exercise asks you to write planar FK yourself; `snakekit.tool_pose_2d` "
-                                   "was called")
+    assert str(e.value).startswith("exercise 9.4 fk: this exercise asks you to write planar FK yourself; "
+                                   "`snakekit.tool_pose_2d` was called")
 
 
 def test_a_check_cell_after_a_broken_answer_cell_says_the_answer_did_not_run(tmp_path, monkeypatch):
@@ -89,3 +89,14 @@ def test_a_check_cell_after_a_broken_answer_cell_says_the_answer_did_not_run(tmp
         "stopped with an error (a SyntaxError in your answer, say), so nothing was defined. Run that cell, fix the "
         "error it shows, then run this cell again.")
     assert "has not run yet" in nb.cells[3].outputs[0].evalue
+
+
+def test_a_demonstration_that_stops_on_a_wrong_answer_points_to_its_check():
+    def distance_mm(q, target):
+        pass     # the answer's slip: no return
+
+    with pytest.raises(CheckFailed) as e:
+        with checks.waiting_for("0.1"):
+            print(f"{distance_mm(0, (0, 0)):.2f} mm")
+    assert str(e.value).startswith("this cell uses your answer to exercise 0.1, and it stopped with TypeError: ")
+    assert str(e.value).endswith("Run exercise 0.1's check cell first: it says what is wrong.")

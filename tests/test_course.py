@@ -22,11 +22,10 @@ COURSE = ROOT / "course"
 ASSIGNMENTS = ["00_meet_the_arm", "01_forward_kinematics", "02_jacobian", "03_inverse_kinematics",
                "04_trajectories", "05_simulation", "06_coded_sweep", "07_real_robot"]
 SOURCES = [a for a in ASSIGNMENTS if (COURSE / "source" / a / f"{a}.ipynb").exists()]
-# lessons whose hidden cases the grader draws (course/cases/<lesson>.py), and the others (seeded
-# inputs in the notebook, scored against grader/references/)
+# the lessons whose hidden cases the grader draws from course/cases/<lesson>.py (all of them)
 DRAWN = [a for a in SOURCES if (COURSE / "cases" / f"{a}.py").exists()]
-SEEDED = [a for a in SOURCES if a not in DRAWN]
-# how many hidden cases of an exercise are out of reach, where the solution raises a ValueError
+# lessons 00-03: how many hidden cases of an exercise are out of reach, where the solution raises
+# a ValueError (none elsewhere)
 RAISES = {"ex03_1_two_link_ik_test": 2, "ex03_3_ik_loop_test": 1, "ex03_4_task1_test": 1}
 ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
@@ -76,6 +75,10 @@ def test_exercises_follow_the_contract(name):
     assert total_text in text, f"{name} should state {total_text!r}"
     assert "Objectives" in text and "What it assumes" in text and "Predict, then run" in text
     assert "<!-- BEGIN ANSWER -->" in text, f"{name}: the instructor version holds the predicted answers"
+
+
+def test_every_lesson_has_its_hidden_cases():
+    assert DRAWN == SOURCES, f"no course/cases/<lesson>.py for {sorted(set(SOURCES) - set(DRAWN))}"
 
 
 def test_course_size():
@@ -163,8 +166,8 @@ def test_instructor_version_earns_full_marks(autograded, name):
 @pytest.mark.parametrize("name", DRAWN)
 def test_every_exercise_hands_in_its_results_at_the_drawn_cases(autograded, name):
     """Graded with the grader's cases served, each test cell asks for its grade id's cases and
-    writes <grade_id>.npz: one result per case, numbers wherever the solution has an answer and
-    a ValueError only at the cases out of reach."""
+    writes <grade_id>.npz: one result per case, numbers wherever the solution has an answer (in
+    lessons 00-03, a ValueError only at the cases out of reach)."""
     from snakekit.handin import decode_results
 
     nb = read(COURSE / "source" / name / f"{name}.ipynb")
@@ -176,7 +179,10 @@ def test_every_exercise_hands_in_its_results_at_the_drawn_cases(autograded, name
         results = decode_results(path.read_bytes())
         assert len(results) == len(cases), (gid, len(results), len(cases))
         errors = [r for r in results if isinstance(r, str)]
-        assert len(errors) == RAISES.get(gid, 0) and all(e.startswith("ValueError: ") for e in errors), (gid, errors)
+        assert not any(e.startswith("returned ") for e in errors), (gid, errors)      # an answer everywhere
+        if name[:2] in ("00", "01", "02", "03"):
+            assert len(errors) == RAISES.get(gid, 0) and all(e.startswith("ValueError: ") for e in errors), \
+                (gid, errors)
         for r in results:
             if isinstance(r, dict):
                 assert r and all(a.dtype.kind in "biuf" for a in r.values()), (gid, r)
@@ -191,38 +197,10 @@ def test_the_cases_change_with_the_batch_and_stay_small():
     for name in DRAWN:
         a, b, again = draw(COURSE, name, 1), draw(COURSE, name, 2), draw(COURSE, name, 1)
         for gid in a.cases:
-            assert 2 <= len(a.cases[gid]) <= 12, (gid, len(a.cases[gid]))
+            assert 2 <= len(a.cases[gid]) <= 20, (gid, len(a.cases[gid]))
             flat = lambda cases: [np.asarray(x).tolist() for case in cases for x in case]
             assert flat(a.cases[gid]) == flat(again.cases[gid]), gid
             assert flat(a.cases[gid]) != flat(b.cases[gid]), gid
-
-
-@pytest.mark.parametrize("name", SEEDED)
-def test_every_exercise_hands_in_for_the_grader(autograded, name):
-    """With SNAKEKIT_HANDIN_DIR set, each test cell writes <grade_id>.npz (no pickles)."""
-    np = need("numpy")
-    nb = read(COURSE / "source" / name / f"{name}.ipynb")
-    for gid in graded_cells(nb):
-        path = autograded["handin"] / f"{gid}.npz"
-        assert path.exists(), f"{gid} handed nothing in"
-        with np.load(path, allow_pickle=False) as z:
-            assert z.files, f"{gid} handed in an empty file"
-
-
-@pytest.mark.parametrize("name", SEEDED)
-def test_every_exercise_scores_full_marks_out_of_the_kernel(autograded, name):
-    """The grader's own process scores each hand-in against grader/references/: full marks."""
-    need("numpy")
-    from grader.references import REFERENCES, Reference
-    from grader.score import read_handin, score_exercise
-
-    reference = Reference.load(REFERENCES / f"{name}.npz")
-    reference.check_current()
-    graded = graded_cells(read(COURSE / "source" / name / f"{name}.ipynb"))
-    assert sorted(reference.exercises) == sorted(graded), "every test cell is scored from its hand-in"
-    for gid, cell in graded.items():
-        sc = score_exercise(gid, read_handin(autograded["handin"] / f"{gid}.npz"), reference, cell["points"])
-        assert (sc.score, sc.status) == (cell["points"], "scored"), (gid, sc.message)
 
 
 # --- the README's lesson table is the course's ------------------------------------------------

@@ -175,3 +175,18 @@ def test_ik_rejects_a_malformed_target():
         snakekit.inverse_kinematics([0.1, 0.1, 0.0])
     with pytest.raises(snakekit.NotFiniteError):
         snakekit.inverse_kinematics([np.inf, 0.1])
+
+
+def test_dls_step_is_the_damped_least_squares_step_of_lesson_3():
+    """q + J^T (J J^T + lambda^2 I)^-1 e, with J and e from the closed form."""
+    from snakekit.errors import ShapeError
+    from snakekit.kinematics import dls_step
+
+    rng = np.random.default_rng(3)
+    for q, target, lam in [(np.zeros(5), np.array([0.25, 0.1]), 1e-3)] + [
+            (rng.uniform(-1.2, 1.2, 5), rng.uniform(-0.2, 0.25, 2), 10 ** rng.uniform(-3, -1)) for _ in range(5)]:
+        J = planar_jacobian_closed_form(q)[:2]
+        expected = q + J.T @ np.linalg.solve(J @ J.T + lam ** 2 * np.eye(2), target - planar_fk(q)[:2])
+        assert np.allclose(dls_step(q, target, lam), expected, rtol=1e-9, atol=1e-9)
+    with pytest.raises(ShapeError, match=r"target_xy must have shape \(2,\)"):
+        dls_step(np.zeros(5), (0.1, 0.2, 0.3))

@@ -220,8 +220,17 @@ MISTAKES = {
          "not a numpy array", True),
         ("ex01_2_joint_positions_test", "def joint_positions(q):\n    return snakekit.joint_frames(q)[:, :2, 3]",
          "`snakekit.joint_frames` was called", True),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n" + _FK +
+         "    steps = 1000 * L[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])\n"
+         "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])", "look like millimetres"),
         ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n"
          "    return n_joints * link_length + tool_offset", "counts one link too many"),
+        ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n"
+         "    return (n_joints - 1) * link_length", "the tool offset is missing"),
+        ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n"
+         "    return 1000 * ((n_joints - 1) * link_length + tool_offset)", "this looks like millimetres"),
+        ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n    return 4 * 0.071 + 0.0475",
+         "not the arguments"),
         ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n    return spec.reach",
          "`snakekit.SnakeSpec.reach` was called", True)],
     "02_jacobian": [
@@ -229,14 +238,30 @@ MISTAKES = {
          "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
          "    return np.vstack([down(L * np.sin(phi)), down(-L * np.cos(phi)), np.ones(len(q))])",
          "the signs are flipped"),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
+         "    return np.vstack([np.cumsum(-L * np.sin(phi)), np.cumsum(L * np.cos(phi)), np.ones(len(q))])",
+         "not from the base to i"),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
+         "    return np.vstack([down(-L * np.sin(q)), down(L * np.cos(q)), np.ones(len(q))])",
+         "a joint angle is not accumulated"),
         ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    return snakekit.planar_jacobian(q)",
          "`snakekit.planar_jacobian` was called", True),
         ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n"
          "    q = np.asarray(q, dtype=float)\n"
          "    return np.column_stack([(np.asarray(f(q + h * e)) - np.asarray(f(q))) / h for e in np.eye(len(q))])",
          "one-sided difference"),
+        ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n"
+         "    q = np.asarray(q, dtype=float)\n"
+         "    return np.column_stack([(np.asarray(f(q + h * e)) - np.asarray(f(q - h * e))) / h for e in np.eye(len(q))])",
+         "this is twice the answer"),
+        ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n"
+         "    q = np.asarray(q, dtype=float)\n"
+         "    return np.vstack([(np.asarray(f(q + h * e)) - np.asarray(f(q - h * e))) / (2 * h) for e in np.eye(len(q))])",
+         "the transpose of the expected shape"),
         ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[:2]\n"
-         "    return float(np.linalg.det(J @ J.T))", "without the square root")],
+         "    return float(np.linalg.det(J @ J.T))", "without the square root"),
+        ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)\n"
+         "    return float(np.sqrt(np.linalg.det(J @ J.T)))", "this uses all three rows")],
     "03_inverse_kinematics": [
         ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n"
          "    c2 = np.clip((x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1, 1)\n"
@@ -257,7 +282,14 @@ MISTAKES = {
          "    return J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "this is only the step"),
         ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
          "    return q + J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(2), e)", "use the `damping` argument"),
+        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
+         "    return q + J.T @ np.linalg.solve(J @ J.T + damping * np.eye(2), e)", "lambda, squared"),
+        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
+         "    return q - J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "e = target - tool"),
         ("ex03_3_ik_loop_test", _SOLVE, "raise a ValueError there", True),
+        ("ex03_3_ik_loop_test", _SOLVE.replace("np.clip(dls_step(q, target), spec.lower, spec.upper)",
+                                               "dls_step(q, target)").replace("    return q", "    return q\n"
+         "    raise ValueError('no solution')"), "clamp q after every step"),
         ("ex03_3_ik_loop_test", "def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n"
          "    return snakekit.inverse_kinematics(target)", "`snakekit.inverse_kinematics` was called", True),
         ("ex03_4_task1_test", _TASK1.format("run.measured.positions[-1]"), "are joint angles"),
