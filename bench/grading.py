@@ -4,11 +4,15 @@
 stubs, an exception at import, a kernel that exits, a notebook that is not JSON) are graded
 three ways, side by side in one run:
 
-* ``snakekit grade 06_coded_sweep`` (sandboxed, parallel, scored against the references, with feedback);
+* ``snakekit grade 06_coded_sweep`` (sandboxed, parallel, with feedback; the batch's hidden
+  cases drawn and the instructor notebook run at them first, then every hand-in scored
+  against it, case by case: all of it inside the time);
 * ``nbgrader autograde 06_coded_sweep``, as nbgrader runs it: one submission at a time;
-* bare nbclient: each notebook executed once as graded (its test cells with the hidden tests
-  put back, as autograde does), serially and in parallel (one process per core), with
-  nothing else: the lower bound.
+* bare nbclient: each notebook executed once as graded, serially and in parallel (one process
+  per core), with nothing else: the lower bound.
+
+The last two get the same hidden cases on a case socket (``SNAKEKIT_CASES``), drawn once
+outside the timing, so every notebook does the same hidden work in all three.
 
 Targets (the grader issue): at least 2x plain nbgrader on 2 cores; within 1.5x of the bare
 parallel bound. Prints medians over ``--repeats`` rounds; exits 1 if a target is missed.
@@ -33,6 +37,9 @@ import nbformat
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import table  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from grader.cases import CaseServer, draw  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 LESSON = "06_coded_sweep"
@@ -77,7 +84,7 @@ def make_submissions(course: Path, n: int) -> dict[str, str]:
 def fresh_course(tmp: Path, n: int) -> Path:
     course = tmp / "course"
     shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
-        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log"))
+        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log", "__pycache__"))
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}
     subprocess.run([sys.executable, "-m", "nbgrader", "generate_assignment", LESSON, "--force"], cwd=course,
                    env=env, check=True, capture_output=True)
@@ -95,23 +102,34 @@ def time_snakekit(course: Path, jobs: int) -> float:
     return dt
 
 
+def serving_cases(course: Path):
+    """The lesson's hidden cases on a socket, and the variables that point a kernel at it."""
+    server = CaseServer(draw(course, LESSON))
+    (course / "handin").mkdir(exist_ok=True)
+    sock = server.listen(course / "cases.sock")
+    return server, {"SNAKEKIT_CASES": sock, "SNAKEKIT_HANDIN_DIR": str(course / "handin")}
+
+
 def time_nbgrader(course: Path) -> float:
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}
+    server, cases = serving_cases(course)
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}", **cases}
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "nbgrader", "autograde", LESSON, "--create", "--force"], cwd=course,
-                   env=env, capture_output=True, text=True)
+    with server:
+        subprocess.run([sys.executable, "-m", "nbgrader", "autograde", LESSON, "--create", "--force"], cwd=course,
+                       env=env, capture_output=True, text=True)
     return time.perf_counter() - t0  # nbgrader exits 1 when some submission failed: expected here
 
 
 def _test_cells() -> dict[str, str]:
-    """The instructor's test cells (hidden tests included) by grade id: what autograde runs."""
+    """The instructor's test cells by grade id: what autograde runs (their hidden tests, in a
+    course that still has them)."""
     nb = nbformat.read(REPO / "course" / "source" / LESSON / f"{LESSON}.ipynb", as_version=4)
     return {c.metadata["nbgrader"]["grade_id"]: c.source for c in nb.cells
             if c.metadata.get("nbgrader", {}).get("grade") and not c.metadata["nbgrader"].get("solution")}
 
 
 def _execute(path: str, tests: dict[str, str]) -> None:
-    """Execute one submission as graded: its test cells carry the hidden tests, as autograde restores them."""
+    """Execute one submission as graded: its test cells as autograde restores them, the cases served."""
     import nbclient
 
     try:
@@ -134,13 +152,20 @@ def _execute(path: str, tests: dict[str, str]) -> None:
 def time_bare(course: Path, jobs: int) -> float:
     paths = sorted(str(p) for p in (course / "submitted").glob(f"*/{LESSON}/{LESSON}.ipynb"))
     tests = _test_cells()
+    server, cases = serving_cases(course)
+    os.environ.update(cases)  # the kernels (and the pool's processes) inherit them
     t0 = time.perf_counter()
-    if jobs == 1:
-        for p in paths:
-            _execute(p, tests)
-    else:
-        with ProcessPoolExecutor(jobs) as pool:
-            list(pool.map(_execute, paths, [tests] * len(paths)))
+    try:
+        with server:
+            if jobs == 1:
+                for p in paths:
+                    _execute(p, tests)
+            else:
+                with ProcessPoolExecutor(jobs) as pool:
+                    list(pool.map(_execute, paths, [tests] * len(paths)))
+    finally:
+        for k in cases:
+            os.environ.pop(k, None)
     return time.perf_counter() - t0
 
 

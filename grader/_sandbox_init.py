@@ -10,6 +10,7 @@ import ctypes.util
 import json
 import os
 import resource
+import socket
 import subprocess
 import sys
 
@@ -53,6 +54,12 @@ def enter(cfg):
     """Build the sandbox from ``cfg`` and enter it: its root, folder, limits and user."""
     root = cfg["root"]
     lim = cfg["limits"]
+    if cfg.get("gate"):  # the grader's gate (outside the new root, root's only): kept open as an fd
+        gate = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        gate.connect(cfg["gate"])
+        fd = gate.detach()
+        os.set_inheritable(fd, True)
+        cfg["env"] = {**cfg["env"], "SNAKEKIT_GATE_FD": str(fd)}
     mount(None, "/", None, MS_REC | MS_PRIVATE)
     mount("tmpfs", root, "tmpfs", MS_NOSUID | MS_NODEV, "mode=0755,size=4m")
     for d in ("tmp", "proc", "dev", "dev/shm"):

@@ -159,6 +159,13 @@ class CaseServer:
     it at the same path) and serves it until :meth:`close` (or ``stop(path)``). A request names
     a grade id; the answer is that grade id's cases (none if unknown). A connection gets
     ``timeout`` seconds to ask; at most ``max_clients`` are served at once per socket.
+
+    ``listen(path, gate=GATE)`` also binds ``GATE`` (outside the sandbox's view, for root only):
+    the sandbox's worker connects to it before it drops its privileges and says which test cell
+    runs (``open <grade id>``, ``close``; each answered ``ok``). Then only the grade id of the
+    test cell running is answered; a kernel that asks at any other moment (an answer cell that
+    asks ahead, to look the answers up) gets no cases, and the request is recorded in
+    :attr:`refused`.
     """
 
     def __init__(self, batch: Draw, *, timeout: float = 10.0, max_clients: int = 4):
@@ -168,8 +175,11 @@ class CaseServer:
         self._listeners: dict[str, socket.socket] = {}
         self._lock = threading.Lock()
         self.requests: list[tuple[str, str]] = []  # (socket path, grade id), for the record
+        self.refused: list[tuple[str, str]] = []   # asked for while its test cell was not running
+        self._open: dict[str, str | None] = {}     # socket path -> the grade id its gate lets through
+        self._gates: dict[str, tuple[str, socket.socket]] = {}
 
-    def listen(self, path: Path, *, mode: int = 0o666) -> str:
+    def listen(self, path: Path, *, mode: int = 0o666, gate: Path | None = None) -> str:
         path = str(path)
         if len(path.encode()) > MAX_SOCKET_PATH:
             raise CasesError(f"the case socket's path is {len(path.encode())} bytes, more than a Unix socket "
@@ -180,10 +190,39 @@ class CaseServer:
         s.bind(path)
         os.chmod(path, mode)  # the sandbox's user connects to it
         s.listen(8)
+        if gate is not None:
+            g = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(str(gate))
+            g.bind(str(gate))
+            os.chmod(str(gate), 0o600)
+            g.listen(1)
+            with self._lock:
+                self._open[path] = None
+                self._gates[path] = (str(gate), g)
+            threading.Thread(target=self._gate, args=(path, g), daemon=True, name=f"gate {gate}").start()
         with self._lock:
             self._listeners[path] = s
         threading.Thread(target=self._serve, args=(path, s), daemon=True, name=f"cases {path}").start()
         return path
+
+    def _gate(self, path: str, g: socket.socket) -> None:
+        """The worker's side: which test cell runs now (one connection, the first)."""
+        try:
+            conn, _ = g.accept()
+        except OSError:
+            return
+        with conn, conn.makefile("rwb", buffering=0) as f:
+            for line in f:
+                word, _, gid = line.decode("utf-8", "replace").strip().partition(" ")
+                with self._lock:
+                    if path not in self._open:
+                        return
+                    self._open[path] = gid if word == "open" else None
+                try:
+                    f.write(b"ok\n")
+                except OSError:
+                    return
 
     def _serve(self, path: str, s: socket.socket) -> None:
         slots = threading.BoundedSemaphore(self.max_clients)
@@ -214,6 +253,9 @@ class CaseServer:
                 data = self.encoded.get(gid, b"") if isinstance(gid, str) else b""
                 with self._lock:
                     self.requests.append((path, str(gid)))
+                    if path in self._open and self._open[path] != gid:
+                        self.refused.append((path, str(gid)))
+                        data = b""
                 conn.sendall(struct.pack(">Q", len(data)) + data)
         except OSError:
             pass
@@ -223,6 +265,14 @@ class CaseServer:
     def stop(self, path) -> None:
         with self._lock:
             s = self._listeners.pop(str(path), None)
+            self._open.pop(str(path), None)
+            gate = self._gates.pop(str(path), None)
+        if gate is not None:
+            with contextlib.suppress(OSError):
+                gate[1].shutdown(socket.SHUT_RDWR)  # wakes its accept()
+            gate[1].close()
+            with contextlib.suppress(OSError):
+                os.unlink(gate[0])
         if s is not None:
             with contextlib.suppress(OSError):
                 s.shutdown(socket.SHUT_RDWR)
@@ -269,7 +319,8 @@ def execute(notebook: Path, batch: Draw, *, timeout: int = 600, allow_errors: bo
         env = {"SNAKEKIT_HANDIN_DIR": str(handin), "SNAKEKIT_CASES": sock, "MPLBACKEND": "Agg"}
         with _environ(env):
             client = nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3", allow_errors=allow_errors,
-                                             resources={"metadata": {"path": str(work)}})
+                                             resources={"metadata": {"path": str(work)}},
+                                             extra_arguments=["--IPKernelApp.log_level=ERROR"])  # no TCP warning
             try:
                 client.execute()
             except nbclient.exceptions.CellExecutionError as e:

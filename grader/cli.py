@@ -67,7 +67,7 @@ def _refs_command(args, assignment: str) -> str:
 def check_current(args, out) -> list[str]:
     """Problems (each with the command that fixes it) if the release, the gradebook or the
     reference no longer match ``source/<a>``; with ``--regenerate`` they are fixed instead."""
-    from .course import backup_gradebook, generate, gradebook, release_differences
+    from .course import backup_gradebook, generate, gradebook, release_differences, source_hash
     from .references import Reference, record
 
     course, a = args.course, args.assignment
@@ -91,11 +91,14 @@ def check_current(args, out) -> list[str]:
     ref = Reference.load(args.references / f"{a}.npz")
     changed = ref.source_changed(course)
     if changed and args.regenerate:
-        print(f"snakekit grade: {course}/source/{a} changed since its reference was recorded; recording it again",
+        print(f"snakekit grade: {course}/source/{a} or its cases changed since its reference was recorded; "
+              "recording it again",
               file=out)
         record(a, course).save(args.references / f"{a}.npz")
     elif changed:
-        problems.append(f"{course}/source/{a} changed since {args.references}/{a}.npz was recorded from it. "
+        what = f"{course}/source/{a}" if ref.meta.get("source_hash") != source_hash(course, a) else \
+            f"{course}/cases/{a}.py"
+        problems.append(f"{what} changed since {args.references}/{a}.npz was recorded from it. "
                         f"Record it again: `{_refs_command(args, a)}`, or run `snakekit grade {a} --regenerate`")
     elif changed is None:
         print(f"snakekit grade: {args.references}/{a}.npz does not say which source it was recorded from; "

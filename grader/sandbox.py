@@ -112,15 +112,17 @@ def default_binds() -> list[str]:
 
 
 def run(argv: list[str], *, workdir: Path, env: dict, limits: Limits, hide: list[str] = (),
-        stdout=None, stderr=None, user: str | None = USER) -> Outcome:
+        stdout=None, stderr=None, user: str | None = USER, gate: Path | None = None) -> Outcome:
     """Run ``argv`` in a sandbox whose only writable folder is ``workdir`` (same path inside).
 
     ``hide`` lists host paths to cover with an empty mount even if a bind would show them.
     The call returns when the command ends or ``limits.wall`` passes (then every process
-    of the sandbox is killed).
+    of the sandbox is killed). ``gate``: a Unix socket outside the sandbox that its first process
+    connects to before it drops its privileges (:class:`grader.cases.CaseServer`); the
+    connection is handed to the command as the file descriptor ``SNAKEKIT_GATE_FD``.
     """
     workdir = Path(workdir)
-    config = _config(argv, workdir, env, limits, hide, user)
+    config = _config(argv, workdir, env, limits, hide, user, gate)
     cfg = workdir.parent / f".{workdir.name}.sandbox.json"  # outside the sandbox's view
     cfg.write_text(json.dumps(config))
     t0 = time.monotonic()
@@ -143,16 +145,16 @@ def run(argv: list[str], *, workdir: Path, env: dict, limits: Limits, hide: list
 
 
 def run_forked(server, argv: list[str], *, workdir: Path, env: dict, limits: Limits, log: Path,
-               hide: list[str] = (), user: str | None = USER) -> Outcome:
+               hide: list[str] = (), user: str | None = USER, gate: Path | None = None) -> Outcome:
     """:func:`run`, forked from a warm :class:`grader.forkserver.ForkServer`; output goes to ``log``."""
     workdir = Path(workdir)
-    config = {**_config(argv, workdir, env, limits, hide, user), "log": str(log)}
+    config = {**_config(argv, workdir, env, limits, hide, user, gate), "log": str(log)}
     t0 = time.monotonic()
     code, timed_out = server.run(config, limits.wall)
     return Outcome(code, timed_out, time.monotonic() - t0)
 
 
-def _config(argv, workdir: Path, env: dict, limits: Limits, hide, user) -> dict:
+def _config(argv, workdir: Path, env: dict, limits: Limits, hide, user, gate=None) -> dict:
     """What the sandbox's first process needs (read by :func:`grader._sandbox_init.enter`)."""
     uid = gid = None
     if os.geteuid() == 0 and user:
@@ -167,7 +169,7 @@ def _config(argv, workdir: Path, env: dict, limits: Limits, hide, user) -> dict:
         "uid": uid, "gid": gid,
         "limits": {"as": limits.memory, "cpu": int(limits.cpu), "fsize": limits.file_size,
                    "tmp": limits.tmp_size},
-        "argv": list(argv), "env": env,
+        "argv": list(argv), "env": env, "gate": None if gate is None else str(gate),
     }
 
 

@@ -1,25 +1,40 @@
-"""Score one exercise from what the student's kernel handed in, against the reference.
+"""Score one exercise from what the student's kernel handed in, case by case, against the
+instructor solution's results at the same cases.
 
-Runs in the grader's own process: nothing here executes student code. A hand-in is a plain
-``.npz`` (read with ``allow_pickle=False``); everything in it is checked before it is used.
+Runs in the grader's own process: nothing here executes student code. A hand-in is the npz of
+:func:`snakekit.handin.encode_results` (read with ``allow_pickle=False``): per hidden case a dict
+of arrays (the function's value, or a procedure's named arrays) or the text of what went wrong
+(``"<Type>: <message>"``, ``"returned None"``). The expected results (:class:`Expected`) come
+from the instructor notebook, run by the grader at the batch's cases (:mod:`grader.references`).
+
+Kinds of exercise, recognised from the names the instructor's results carry:
+
+* ``run``: a recorded run (``measured_times``, ``measured_positions``) and the commanded
+  trajectory (``times``/``positions`` or ``commanded_times``/``commanded_positions``);
+* ``trajectory``: ``times`` and ``positions``;
+* ``values``: anything else (a function's value, or named arrays).
 """
 
 from __future__ import annotations
 
+import re
 import zipfile
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from snakekit.errors import SnakekitError
+from snakekit.handin import decode_results
 from snakekit.trajectory import Trajectory
 
 from . import compare
+from .cases import describe
 from .exercises import RULES
-from .references import TASK2, Reference
 
-__all__ = ["ExerciseScore", "read_handin", "score_exercise"]
+__all__ = ["ExerciseScore", "Expected", "kind_of", "read_handin", "score_exercise"]
+
+#: Default tolerances by kind: exact math (COURSE.md); a commanded trajectory 1e-6 rad.
+DEFAULT_TOLERANCES = {"values": {"rtol": 1e-9, "atol": 1e-12}, "trajectory": {"max": 1e-6, "rms": 1e-6}}
 
 
 @dataclass(frozen=True)
@@ -31,7 +46,7 @@ class ExerciseScore:
         score, max_score: points.
         status: ``scored``, ``missing``, ``inconsistent`` or ``tampered``.
         message: what the student reads: the checks that failed, with numbers.
-        checks: the individual checks (trajectory exercises).
+        checks: the individual checks.
         curves: for plots: name -> (times, positions) of the student's and the reference's runs.
     """
 
@@ -44,145 +59,250 @@ class ExerciseScore:
     curves: dict = field(default_factory=dict, repr=False)
 
 
-def read_handin(path: Path) -> dict:
-    """The arrays of a hand-in file. Raises ValueError if it is not a plain ``.npz``."""
+@dataclass(frozen=True)
+class Expected:
+    """One exercise's hidden cases in this batch and the instructor's results there.
+
+    Attributes:
+        grade_id: the test cell's nbgrader id.
+        kind: ``values``, ``trajectory`` or ``run``.
+        cases: each case's positional arguments.
+        results: per case, the instructor's dict of arrays, or the exception it raised
+            (``"<Type>: <message>"``: the student must raise the same type there).
+        tolerances: ``rtol``/``atol`` (values), ``max``/``rms`` (trajectories; a run's
+            measured angles), ``commanded_max``/``commanded_rms`` (a run's commanded trajectory).
+        function: the name of the function the test cell hands in (see :func:`handed_in_function`).
+    """
+
+    grade_id: str
+    kind: str
+    cases: list
+    results: list = field(repr=False)
+    tolerances: dict = field(default_factory=dict)
+    function: str = ""  # what the test cell hands in (its name in feedback); default: from the grade id
+
+
+def kind_of(results) -> str:
+    """The kind of exercise the instructor's ``results`` (per case: a dict or an error) show."""
+    names = set().union(*(r for r in results if isinstance(r, dict))) if results else set()
+    if {"measured_times", "measured_positions"} <= names:
+        return "run"
+    if {"times", "positions"} <= names or {"commanded_times", "commanded_positions"} <= names:
+        return "trajectory"
+    return "values"
+
+
+def read_handin(data: bytes) -> list:
+    """The results of a hand-in file. Raises ValueError if it is not one."""
     try:
-        with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise ValueError(f"the hand-in file is not a readable .npz ({type(e).__name__})") from e
+        out = decode_results(data)
+    except (OSError, ValueError, EOFError, KeyError, SnakekitError, zipfile.BadZipFile) as e:
+        raise ValueError(f"the hand-in file is not readable ({type(e).__name__})") from e
+    for r in out:
+        for a in r.values() if isinstance(r, dict) else ():
+            if a.dtype.kind not in "biuf":
+                raise ValueError("the hand-in holds something other than numbers")
+    return out
 
 
 def _zero(gid, max_score, status, message):
     return ExerciseScore(gid, 0.0, max_score, status, message)
 
 
-def score_exercise(grade_id: str, handin: dict | None, reference: Reference, max_score: float) -> ExerciseScore:
-    """Points for one test cell: the hand-in checked for consistency, then compared."""
-    ex = reference.exercises[grade_id]
-    ref = reference.arrays[grade_id]
-    if handin is None:
-        return _zero(grade_id, max_score, "missing",
-                     "nothing was handed in: the test cell stopped before it reached your results "
-                     "(an error in your code, a timeout, or the kernel stopped).")
-    for name in ex["inputs"]:
-        if name not in handin:
-            return _zero(grade_id, max_score, "inconsistent", f"hand-in lacks the hidden input '{name}'.")
-        got, want = np.asarray(handin[name]), ref[name]
-        if got.shape != want.shape or not np.array_equal(got, want):
-            diff = (f"max difference {np.nanmax(np.abs(got.astype(float) - want)):.3g}"
-                    if got.shape == want.shape and got.dtype.kind in "fiu" else f"shape {got.shape}, expected {want.shape}")
-            return _zero(grade_id, max_score, "inconsistent",
-                         f"hand-in inconsistent: the hidden input '{name}' is not the one the test gave ({diff}).")
-    for name, a in handin.items():
-        if np.asarray(a).dtype.kind not in "fiub":
-            return _zero(grade_id, max_score, "inconsistent", f"hand-in inconsistent: '{name}' is not numbers.")
-        if np.asarray(a).dtype.kind in "fc" and not np.isfinite(a).all():
-            return _zero(grade_id, max_score, "inconsistent",
-                         f"'{name}' holds NaN or infinity (first at index "
-                         f"{tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])}); every value must be finite.")
-    if ex["kind"] == "values":
-        return _score_values(grade_id, handin, ex, ref, max_score)
-    return _score_motion(grade_id, handin, ex, ref, max_score)
+def label(grade_id: str) -> str:
+    """What a student calls an exercise's function: ``ex06_1_sweep_times_test`` -> ``sweep_times``.
 
-
-def _score_values(gid, handin, ex, ref, max_score) -> ExerciseScore:
-    tol = ex["tolerances"]
-    if gid in RULES:  # the grader recomputes what the hidden test judges (grader.exercises)
-        checks = RULES[gid](handin, tol)
-        if "flags" in ex["outputs"]:
-            checks.append(_flags(handin, ref))
-        total = sum(c.weight for c in checks)
-        fraction = sum(c.weight * c.fraction for c in checks) / total
-        msg = " ".join(c.message for c in checks if not c.passed) or "all hidden cases within tolerance."
-        return ExerciseScore(gid, round(fraction * max_score, 4), max_score, "scored", msg, tuple(checks))
-    inputs = ref[ex["inputs"][0]] if len(ex["inputs"]) == 1 else None
-    checks = []
-    for name in ex["outputs"]:
-        if name == "flags":
-            checks.append(_flags(handin, ref))
-            continue
-        if name not in handin:
-            return _zero(gid, max_score, "missing",
-                         f"no '{name}' was handed in: your function raised an error (or called the library "
-                         "function the exercise asks you to write) on the hidden inputs.")
-        checks.append(compare.values(handin[name], ref[name], rtol=tol["rtol"], atol=tol["atol"],
-                                     what=_label(gid) if name == "outputs" else name, inputs=inputs))
-    fraction = float(np.mean([c.fraction for c in checks])) if checks else 1.0
-    msg = " ".join(c.message for c in checks if not c.passed) or "all hidden cases within tolerance."
-    return ExerciseScore(gid, round(fraction * max_score, 4), max_score, "scored", msg, tuple(checks))
-
-
-def _flags(handin, ref) -> compare.Check:
-    """The verdicts (1 passed, 0 failed) of the hidden checks that come after the results: a
-    refusal, an error that must be raised, an edge case. The kernel reports them."""
-    want = np.asarray(ref["flags"], dtype=float)
-    got = np.asarray(handin.get("flags", np.zeros_like(want)), dtype=float)
-    if got.shape != want.shape:
-        return compare.Check("other hidden checks", 0.0, f"other hidden checks: {got.size} verdicts handed in, "
-                                                          f"expected {want.size}.")
-    failed = int((got != want).sum())
-    return compare.Check("other hidden checks", 1.0 - failed / want.size,
-                         f"other hidden checks (a refusal, an error to raise, an edge case): {failed} of {want.size} "
-                         "failed." if failed else f"other hidden checks: all {want.size} passed.")
-
-
-def _label(grade_id: str) -> str:
-    """What a student calls an exercise's results: ``ex06_1_sweep_times_test`` -> ``sweep_times``.
-
-    >>> _label("ex06_1_sweep_times_test"), _label("ex1_tool_xy_test"), _label("odd")
+    >>> label("ex06_1_sweep_times_test"), label("ex1_tool_xy_test"), label("odd")
     ('sweep_times', 'tool_xy', 'odd')
     """
-    import re
-
     return re.sub(r"^ex\d+(?:_\d+)?_|_test$", "", grade_id) or grade_id
 
 
-def _trajectory(handin, times, positions, what) -> Trajectory:
-    if times not in handin or positions not in handin:
-        raise ValueError(f"no {what} was handed in ('{times}' and '{positions}')")
+def handed_in_function(grade_id: str, source: str) -> str:
+    """The name of the function a test cell's source hands in for ``grade_id`` ("" if none is named).
+
+    >>> handed_in_function("ex1_t", 'ex.hand_in("ex1_t", graded_run, forbid=())')
+    'graded_run'
+    """
+    m = re.search(r"hand_in\(\s*[\"']" + re.escape(grade_id) + r"[\"']\s*,\s*([A-Za-z_][\w.]*)", source)
+    return m.group(1) if m else ""
+
+
+def call(name: str, args) -> str:
+    """The case as a call a student recognises: ``sweep_times(4, 10.0)``."""
+    return f"{name}({', '.join(describe(a, 48) for a in args)})"
+
+
+def explain_error(text: str) -> str:
+    """What went wrong in the student's function at a case, in plain words."""
+    m = re.match(r"returned (\w+)(?: for (\w+))?$", text)
+    if m:
+        what, part = m.groups()
+        where = f"the '{part}' of your result" if part else "your function"
+        if what == "None":
+            return (f"{where} returned None: it has no `return` (or a path that reaches its end without one); "
+                    "return the result.")
+        return f"{where} returned a {what}, not numbers or an array."
+    if text.startswith("ShortcutError:"):
+        return text.split(":", 1)[1].strip()
+    etype, _, msg = text.partition(":")
+    return f"your function raised {etype}: {msg.strip()}" if msg.strip() else f"your function raised {etype}."
+
+
+def score_exercise(grade_id: str, handin: list | None, expected: Expected, max_score: float) -> ExerciseScore:
+    """Points for one test cell: every case of ``handin`` against ``expected``'s."""
+    if handin is None:
+        return _zero(grade_id, max_score, "missing", "nothing was handed in: the test cell stopped before it "
+                     "handed in your results (an error before that line, a timeout, or the kernel stopped).")
+    n = len(expected.cases)
+    if len(handin) != n:
+        return _zero(grade_id, max_score, "inconsistent",
+                     f"hand-in inconsistent: {len(handin)} results for the {n} hidden cases the grader gave.")
+    if expected.kind == "values":
+        return _score_values(grade_id, handin, expected, max_score)
+    return _score_motion(grade_id, handin, expected, max_score)
+
+
+def _raised_as_expected(fn, args, got, want: str) -> tuple[bool, str]:
+    """An instructor exception at a case: the student must raise the same type there."""
+    etype = want.split(":", 1)[0]
+    if isinstance(got, str) and got.split(":", 1)[0] == etype:
+        return True, ""
+    did = explain_error(got) if isinstance(got, str) else "your function returned a result"
+    return False, f"{call(fn, args)} must raise {etype} (the exercise asks for it there); {did}"
+
+
+def _compare_case(what: str, got: dict, want: dict, tol: dict) -> str:
+    """Why a case's results differ from the instructor's ("" when they agree)."""
+    for name, e in want.items():
+        part = what if name == "value" else f"'{name}'"
+        if name not in got:
+            return f"no {part} in your result (it has {', '.join(sorted(got)) or 'nothing'})."
+        g = np.asarray(got[name], dtype=float)
+        e = np.asarray(e, dtype=float)
+        if g.shape != e.shape:
+            hint = " (the transpose?)" if g.ndim == 2 and g.shape == e.shape[::-1] else ""
+            return f"{part} has shape {g.shape}, expected {e.shape}{hint}."
+        if not np.isfinite(g).all():
+            idx = tuple(int(i) for i in np.argwhere(~np.isfinite(g))[0])
+            return f"{part} holds {g[idx]} at index {idx}: every value must be a finite number."
+        bad = ~(np.abs(g - e) <= tol["atol"] + tol["rtol"] * np.abs(e))
+        if bad.any():
+            idx = tuple(int(i) for i in np.argwhere(bad)[0])
+            at = f" at index {list(idx)}" if idx else ""
+            return (f"{part} is {g[idx]:.6g}{at}, expected {e[idx]:.6g}: off by {g[idx] - e[idx]:.3g} "
+                    f"(tolerance {tol['atol'] + tol['rtol'] * abs(e[idx]):.2g}).")
+    return ""
+
+
+def _score_values(gid, handin, expected: Expected, max_score) -> ExerciseScore:
+    tol = {**DEFAULT_TOLERANCES["values"], **expected.tolerances}
+    fn = expected.function or label(gid)
+    rule = RULES.get(gid)
+    ok, why = [], []
+    for args, got, want in zip(expected.cases, handin, expected.results):
+        if isinstance(want, str):
+            right, msg = _raised_as_expected(fn, args, got, want)
+        elif isinstance(got, str):
+            right, msg = False, f"{call(fn, args)}: {explain_error(got)}"
+        elif rule is not None:  # judged by a property (grader.exercises), not closeness
+            right, msg = rule(args, got, tol)
+            msg = f"{call(fn, args)}: {msg}" if msg else ""
+        else:
+            msg = _compare_case(fn, got, want, tol)
+            right, msg = not msg, f"{call(fn, args)}: {msg}" if msg else ""
+        ok.append(right)
+        if msg:
+            why.append(msg)
+    check = _cases_check(ok, why)
+    return ExerciseScore(gid, round(check.fraction * max_score, 4), max_score, "scored", check.message, (check,))
+
+
+def _cases_check(ok, why, name: str = "hidden cases", weight: float = 1.0) -> compare.Check:
+    n, nbad = len(ok), len(ok) - sum(ok)
+    if not nbad:
+        return compare.Check(name, 1.0, f"all {n} hidden cases right.", weight)
+    return compare.Check(name, 1.0 - nbad / n, f"{nbad} of {n} hidden cases wrong; the first: {why[0]}", weight)
+
+
+# --- trajectories and runs ------------------------------------------------------------------------
+
+
+def _trajectory(d: dict, times: str, positions: str, what: str) -> Trajectory:
+    if times not in d or positions not in d:
+        raise ValueError(f"no {what} in your result ('{times}' and '{positions}')")
     try:
-        return Trajectory(handin[times], handin[positions])
+        return Trajectory(d[times], d[positions])
     except (SnakekitError, ValueError) as e:
         raise ValueError(f"the {what} is not a valid trajectory: {e}") from e
 
 
-def _score_motion(gid, handin, ex, ref, max_score) -> ExerciseScore:
-    tol = ex["tolerances"]
-    names = ("times", "positions") if "times" in ref else ("commanded_times", "commanded_positions")
-    try:
-        cmd = _trajectory(handin, *names, "commanded trajectory")
-    except ValueError as e:
-        return _zero(gid, max_score, "inconsistent" if "valid" in str(e) else "missing", str(e).rstrip(".") + ".")
-    ref_cmd = Trajectory(ref[names[0]], ref[names[1]])
-    points = tol.get("points", len(ref_cmd))
-    hz = tol.get("rate", 1.0 / float(np.median(np.diff(ref_cmd.times))))
-    sweeps = tol.get("sweeps", TASK2["sweeps"])
+def _motion_checks(got: dict, want: dict, kind: str, tol: dict):
+    """The weighted checks of one case: counts and limits of its own, shape against the reference."""
+    names = ("times", "positions") if "times" in want else ("commanded_times", "commanded_positions")
+    ref_cmd = Trajectory(want[names[0]], want[names[1]])
+    cmd = _trajectory(got, *names, "trajectory")
+    ref_hz = 1.0 / float(np.median(np.diff(ref_cmd.times))) if len(ref_cmd) > 1 else 1.0
     checks = [
-        compare.point_count(cmd, points),
-        compare.rate(cmd, hz),
+        compare.point_count(cmd, len(ref_cmd)),
+        compare.rate(cmd, ref_hz),
         compare.limits(cmd),
-        compare.sweep_count(cmd, sweeps),
+        compare.sweep_count(cmd, max(1, round(compare.count_sweeps(ref_cmd.positions)))),
         compare.home(cmd),
         compare.smoothness(cmd, ref_cmd),
-        compare.tracking(cmd, ref_cmd, max_tol=tol.get("commanded_max", tol.get("max")),
-                         rms_tol=tol.get("commanded_rms", tol.get("rms")), name="commanded vs reference",
-                         weight=2.0),
+        compare.tracking(cmd, ref_cmd, max_tol=tol.get("commanded_max", tol["max"]),
+                         rms_tol=tol.get("commanded_rms", tol["rms"]), name="commanded vs reference", weight=2.0),
     ]
     curves = {"commanded": (cmd.times, cmd.positions), "reference commanded": (ref_cmd.times, ref_cmd.positions)}
-    if ex["kind"] == "run":
+    if kind == "run":
+        ref_meas = Trajectory(want["measured_times"], want["measured_positions"])
         try:
-            meas = _trajectory(handin, "measured_times", "measured_positions", "recorded run")
+            meas = _trajectory(got, "measured_times", "measured_positions", "recorded run")
         except ValueError as e:
             checks.append(compare.Check("run vs reference", 0.0, str(e).rstrip(".") + ".", 2.0))
         else:
-            ref_meas = Trajectory(ref["measured_times"], ref["measured_positions"])
             checks.append(compare.tracking(meas, ref_meas, max_tol=tol["max"], rms_tol=tol["rms"],
                                            what="measured angle", name="run vs reference", weight=2.0))
             curves["measured"] = (meas.times, meas.positions)
             curves["reference measured"] = (ref_meas.times, ref_meas.positions)
+    return checks, curves
+
+
+def _score_motion(gid, handin, expected: Expected, max_score) -> ExerciseScore:
+    """Each check's credit is its mean over the cases (a case that failed to run: 0 for all)."""
+    tol = {**DEFAULT_TOLERANCES["trajectory"], **expected.tolerances}
+    fn = expected.function or label(gid)
+    rows, raised, curves = [], [], {}
+    for args, got, want in zip(expected.cases, handin, expected.results):
+        where = call(fn, args)
+        if isinstance(want, str):
+            raised.append(_raised_as_expected(fn, args, got, want))
+            continue
+        try:
+            if isinstance(got, str):
+                raise ValueError(explain_error(got))
+            checks, c = _motion_checks(got, want, expected.kind, tol)
+        except ValueError as e:
+            rows.append((where, f"{where}: {e}"))
+            continue
+        rows.append((where, {ck.name: ck for ck in checks}))
+        curves = curves or c
+    good = [r for _, r in rows if isinstance(r, dict)]
+    errors = [r for _, r in rows if isinstance(r, str)]
+    checks = []
+    for name, first in (good[0].items() if good else ()):
+        fractions = [r[name].fraction if isinstance(r, dict) else 0.0 for _, r in rows]
+        bad = next((f"{w}: {r[name].message}" for w, r in rows if isinstance(r, dict) and not r[name].passed), "")
+        checks.append(compare.Check(name, float(np.mean(fractions)),
+                                    bad or f"{name}: right in every hidden case.", first.weight))
+    if rows and not good:
+        checks.append(compare.Check("results", 0.0, errors[0], 10.0))
+    if raised:
+        checks.append(_cases_check([ok for ok, _ in raised], [m for ok, m in raised if not ok], "raises as asked"))
     total = sum(c.weight for c in checks)
-    fraction = sum(c.weight * c.fraction for c in checks) / total
-    failed = [c for c in checks if not c.passed]
-    msg = " ".join(c.message for c in failed) if failed else "every check passed."
+    fraction = sum(c.weight * c.fraction for c in checks) / total if total else 0.0
+    failed = [c.message for c in checks if not c.passed]
+    if good and errors:
+        failed.insert(0, f"{len(errors)} of {len(rows)} hidden cases gave no trajectory; the first: {errors[0]}")
+    msg = " ".join(failed) if failed else "every check passed in every hidden case."
     return ExerciseScore(gid, round(fraction * max_score, 4), max_score, "scored", msg, tuple(checks), curves)

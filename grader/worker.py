@@ -6,6 +6,8 @@ and scoring) and writes ``result.json`` next to the course copy: whether nbgrade
 tail of its log, and where a notebook was stopped. The grader's parent process trusts none of it
 for points.
 
+Hidden cases: while a test cell runs, the worker tells the grader which (:mod:`grader.gate`).
+
 Time: each notebook has ``TIMEOUT`` seconds of wall clock in all (from its kernel's start), and
 each cell at most ``CELL_TIMEOUT`` of them. A cell over its own limit is interrupted and the
 notebook goes on; a cell still running when the notebook's time is up is interrupted, marked
@@ -20,11 +22,12 @@ import sys
 import time
 from pathlib import Path
 
+from .gate import open_gate
+from .gate import say as gate_says
+
 #: the note put on the cell that was running when a notebook's time ran out (``{timeout}``: seconds)
 STOPPED_NOTE = "stopped here: the notebook ran longer than {timeout:g} s"
 _stopped: list[dict] = []  # where each notebook was stopped, filled in by the execute preprocessor
-
-
 def main(argv: list[str], *, warm: bool = False) -> int:
     """Autograde one submission; ``warm``: fork the kernels from this process (see :mod:`grader.warmkernel`)."""
     course, assignment, student = Path(argv[0]), argv[1], argv[2]
@@ -36,6 +39,7 @@ def main(argv: list[str], *, warm: bool = False) -> int:
     # at import: about 1 s per sandbox, for an "iri" string format no notebook schema uses.
     sys.modules.setdefault("rfc3987_syntax", None)
     try:
+        open_gate()
         if warm:
             from . import warmkernel
 
@@ -87,7 +91,11 @@ def _with_deadline(timeout: float, cell_timeout: float) -> list:
         def preprocess_cell(self, cell, resources, index):
             if self._stopped_at is not None:
                 return cell, resources  # the notebook's time is up: not run
+            meta = cell.get("metadata", {}).get("nbgrader", {})
+            test = cell.cell_type == "code" and meta.get("grade") and not meta.get("solution") and meta.get("grade_id")
             try:
+                if test:
+                    gate_says(f"open {meta['grade_id']}")
                 cell, resources = super().preprocess_cell(cell, resources, index)
                 late = time.monotonic() >= self._deadline - 0.05
                 timed_out = any(o.get("ename") == "CellTimeoutError" for o in cell.get("outputs", []))
@@ -95,6 +103,9 @@ def _with_deadline(timeout: float, cell_timeout: float) -> list:
                 if time.monotonic() < self._deadline - 0.05:
                     raise
                 late = timed_out = True
+            finally:
+                if test:
+                    gate_says("close")
             if late and timed_out and cell.cell_type == "code":
                 from nbformat.v4 import new_output
 

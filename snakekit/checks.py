@@ -134,7 +134,7 @@ class Exercise:
             self.fail(f"`{self.name}` should be a function, got {type(fn).__name__}; "
                       "run the answer cell above (it defines it), then this check")
         try:
-            return fn(*args, **kwargs)
+            result = fn(*args, **kwargs)
         except NotImplementedError as e:
             self.fail(f"`{self.name}` is not written yet (it raises NotImplementedError"
                       f"{': ' + str(e) if str(e) else ''}). Write it in the answer cell above, run that cell, "
@@ -142,10 +142,41 @@ class Exercise:
         except CheckFailed as e:
             raise _shorten(e) from None
         except Exception as e:
-            call = where if where is not None else ", ".join(_fmt_array(a) if isinstance(a, (np.ndarray, list, tuple))
-                                                          else repr(a) for a in args)
-            self.fail(f"`{self.name}` raised {type(e).__name__} when called with {call}: {e}",
+            self.fail(f"`{self.name}` raised {type(e).__name__} when called with {self._call(args, where)}: {e}",
                       student_frames=_student_frames(e.__traceback__))
+        if result is None:
+            self.fail(f"`{self.name}` returned None (nothing) when called with {self._call(args, where)}: a function "
+                      "gives its result with a `return` line; is it missing, or does the function stop before it?")
+        return result
+
+    @staticmethod
+    def _call(args, where) -> str:
+        """The arguments of a call, as a message shows them."""
+        if where is not None:
+            return str(where)
+        return ", ".join(_fmt_array(a) if isinstance(a, (np.ndarray, list, tuple)) else
+                         (getattr(a, "__name__", type(a).__name__) if callable(a) else repr(a)) for a in args)
+
+    def raises(self, error: type, fn, *args, where=None, why: str = "") -> None:
+        """Check that the student's ``fn(*args)`` raises ``error`` (a ``ValueError`` for a target
+        out of reach, say); ``why``: why it must, in the lesson's words."""
+        if not callable(fn):
+            self(fn)
+        call = self._call(args, where)
+        try:
+            fn(*args)
+        except NotImplementedError:
+            self(fn, *args, where=where)      # says it is not written yet
+        except error:
+            self.checked += 1
+            return
+        except CheckFailed as e:
+            raise _shorten(e) from None
+        except Exception as e:
+            self.fail(f"`{self.name}` raised {type(e).__name__} when called with {call}: {e}; {why}: raise a "
+                      f"{error.__name__} there.", student_frames=_student_frames(e.__traceback__))
+        self.fail(f"`{self.name}` returned when called with {call}; {why}: raise a {error.__name__} there "
+                  f"(`raise {error.__name__}(\"...\")`, saying why).")
 
     def true(self, condition, message: str, hint: str = "") -> None:
         """Fail with ``message`` unless ``condition`` holds."""
@@ -154,7 +185,8 @@ class Exercise:
         self.checked += 1
 
     def close(self, got, expected, *, what: str, where=None, unit: str | tuple = "", tol: float = 0.0,
-              rtol: float = 1e-9, why: str | None = None, labels=None, mistakes: dict | None = None) -> None:
+              rtol: float = 1e-9, why: str | None = None, labels=None, mistakes: dict | None = None,
+              array: bool = False) -> None:
         """Check that ``got`` equals ``expected`` within ``tol + rtol * |expected|``.
 
         Args:
@@ -168,8 +200,15 @@ class Exercise:
             labels: names of the entries of a 1-D value ("x", "y", "heading").
             mistakes: ``{hint: value}``: answers a known mistake would give; when ``got``
                 matches one, its hint is shown.
+            array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
+                since the lesson's later cells index the result as an array.
         """
         exp = np.asarray(expected, dtype=float)
+        if got is None:
+            self.fail(f"{what}{_where(where)} is None: the function returned nothing; give the result with `return`.")
+        if array and isinstance(got, (list, tuple)):
+            self.fail(f"{what}{_where(where)} is a Python {type(got).__name__}, not a numpy array: return "
+                      f"np.array(...) (the cells below use array operations on it, such as [:, 0]).")
         try:
             arr = np.asarray(got, dtype=float)
         except (TypeError, ValueError):
@@ -405,6 +444,35 @@ def forbid(*names: str, what: str):
     finally:
         for holder, attr, value in reversed(patched):
             setattr(holder, attr, value)
+
+
+def _explain_name_error(shell, etype, value, tb, tb_offset=None):
+    """IPython's handler of a ``NameError`` in a notebook: say why a name is missing.
+
+    A check cell that names the student's function meets a ``NameError`` when the answer cell
+    above it has not run, or stopped with an error (a ``SyntaxError`` defines nothing): say so,
+    instead of a bare "name ... is not defined".
+    """
+    name = getattr(value, "name", None)
+    if name and "is not defined" in str(value) and "has not run" not in str(value):
+        value = NameError(f"name '{name}' is not defined: the cell that defines `{name}` has not run yet, or it "
+                          "stopped with an error (a SyntaxError in your answer, say), so nothing was defined. "
+                          "Run that cell, fix the error it shows, then run this cell again.", name=name)
+    shell.showtraceback((etype, value, tb), tb_offset=tb_offset)
+
+
+def _install_name_error_note() -> None:
+    """In a notebook kernel, explain a missing name (:func:`_explain_name_error`); elsewhere nothing."""
+    try:
+        from IPython import get_ipython
+    except ImportError:
+        return
+    shell = get_ipython()
+    if shell is not None and getattr(shell, "kernel", None) is not None:
+        shell.set_custom_exc((NameError,), _explain_name_error)
+
+
+_install_name_error_note()
 
 
 class waiting_for(contextlib.AbstractContextManager):

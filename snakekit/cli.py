@@ -183,6 +183,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Commands another installed package provides (the grader's), by the entry point group they are in.
+PLUGIN_GROUP = "snakekit.commands"
+PLUGIN_COMMANDS = ("grade", "collect", "return", "export")
+
+
+def plugin_command(name: str):
+    """The function behind ``snakekit <name>`` from the entry points of :data:`PLUGIN_GROUP`
+    (``(argv, out) -> exit code``); the kit itself never imports the package that provides it."""
+    from importlib.metadata import entry_points
+
+    found = [ep for ep in entry_points(group=PLUGIN_GROUP) if ep.name == name]
+    if not found:
+        raise SystemExit(f"snakekit {name}: no installed package provides this command (entry point group "
+                         f"'{PLUGIN_GROUP}'); install the kit with its grader: pip install -e . (or make setup)")
+    return found[0].load()
+
+
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -194,18 +211,12 @@ def main(argv: list[str] | None = None, out=None) -> int:
         from .bridge import main as bridge
 
         return bridge(argv[1:])
-    if argv[:1] == ["grade"]:  # the grader lives in its own package, with its own options
-        from grader.cli import main as grade
-
-        return grade(argv[1:], out)
+    if argv[:1] and argv[0] in PLUGIN_COMMANDS:  # the grader's commands: its own package, its own options
+        return plugin_command(argv[0])(argv[1:], out)
     if argv[:1] == ["start"]:  # JupyterLab takes over the process: no signal handlers of ours
         from .start import main as start
 
         return start(argv[1:], out)
-    if argv[:1] in (["collect"], ["return"], ["export"]):  # the TA's other steps, beside the grader
-        from grader import collect, lms
-
-        return {"collect": collect.main, "return": lms.return_main, "export": lms.export_main}[argv[0]](argv[1:], out)
     args = build_parser().parse_args(argv)
     terminated = []
 

@@ -1,8 +1,8 @@
 """A lesson's checks from a terminal (``snakekit check LESSON.ipynb``).
 
 The notebook runs top to bottom in a fresh kernel, in its own folder as in JupyterLab, and
-each graded cell becomes one row: grade id, points, passed or failed, and the first line of
-the message the student would see under the cell. The file itself is not changed.
+each graded cell becomes one row: grade id, points, passed or failed, and the message the
+student would see under the cell (in full: its hint lines follow, indented under the row). The file itself is not changed.
 
 What can go wrong before or while it runs is said in one line, never as a traceback: a file
 that is not a notebook (empty, plain text, JSON of another kind, not UTF-8), a graded cell
@@ -82,8 +82,8 @@ def read_lesson(path):
 def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
     """Run a lesson notebook top to bottom and report each exercise's check.
 
-    Prints one row per graded cell (grade id, points, passed or failed, the first line of
-    the message) and a total; returns 0 when every check passed, 1 otherwise. A cell that
+    Prints one row per graded cell (grade id, points, passed or failed, the whole message,
+    its later lines indented under the row) and a total; returns 0 when every check passed, 1 otherwise. A cell that
     runs longer than ``timeout`` [s], or a kernel that dies, stops the run: the rows say
     which cell, and the graded cells after it count as not run.
 
@@ -138,9 +138,8 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
             elif errors:
                 failed += 1
                 e = errors[0]
-                text = str(e.get("evalue", "")).strip().splitlines()
-                first = text[0] if text else ""
-                message = first if e.ename in ("CheckFailed", "ShortcutError") else f"{e.ename}: {first}"
+                text = str(e.get("evalue", "")).strip()
+                message = text if e.ename in ("CheckFailed", "ShortcutError") else f"{e.ename}: {text}"
                 rows.append((meta["grade_id"], points, "FAILED", message))
             else:
                 got += points
@@ -152,7 +151,10 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
     width = max(len(r[0]) for r in rows)
     print(f"{path.name}", file=out)
     for grade_id, points, status, message in rows:
-        print(f"  {grade_id:<{width}}  {points:>2} pt  {status:<6}  {message}".rstrip(), file=out)
+        first, *more = message.splitlines() or [""]
+        print(f"  {grade_id:<{width}}  {points:>2} pt  {status:<6}  {first}".rstrip(), file=out)
+        for line in more:   # the rest of the message (its hint), under the first line
+            print(f"  {'':<{width}}  {'':>2}     {'':<6}  {line}".rstrip(), file=out)
     print(f"  {len(rows) - failed} of {len(rows)} exercises passed, {got:g} of {total:g} points", file=out)
     for line in others:
         print(f"  also failed: {line}", file=out)

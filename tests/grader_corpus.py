@@ -25,6 +25,7 @@ class Case:
     status: str
     score: float
     reason: str = ""  # a phrase of the CSV detail or of an exercise's message
+    at_most: bool = False  # the score is a bound (it depends on the batch's cases), not the exact score
 
 
 def answers(**cells):
@@ -83,17 +84,20 @@ CASES = [
     Case("a renamed function", "renamed", answers(ex1_tool_xy=GOOD_XY.replace("def tool_xy", "def tool_position")),
          "graded", 5.0, "nothing was handed in"),
     Case("wrong shapes", "wrong_shape", answers(ex1_tool_xy=AT_ZERO + "    return np.zeros(3)"), "graded", 5.0,
-         "shape (8, 3), expected (8, 2)"),
+         "has shape (3,), expected (2,)"),
     Case("NaN", "nan", answers(ex1_tool_xy=AT_ZERO + "    return np.array([np.nan, 0.0])"), "graded", 5.0,
-         "holds NaN or infinity"),
+         "holds nan at index (0,)"),
     Case("monkeypatching numpy", "patch_numpy",
          answers(ex1_tool_xy="np.allclose = lambda *a, **k: True\ndef tool_xy(q):\n    return np.array([0.3315, 0.0])"),
          "graded", 5.0, "8 of 8 hidden cases wrong"),
-    Case("monkeypatching the checks (hand_in)", "patch_checks",
-         answers(ex1_tool_xy=GOOD_XY + "\n_real = hand_in\n"
-                 "def hand_in(grade_id, **v):\n    v = {{k: np.zeros_like(a) for k, a in v.items() if a is not None}}\n"
-                 "    _real(grade_id, **v)"),
-         "graded", 1.0, "not the one the test gave"),
+    Case("monkeypatching the checks (a forged hand-in)", "patch_checks",
+         answers(ex1_tool_xy=GOOD_XY + "\nimport os\nfrom snakekit import handin\n"
+                 "def _forged(self, grade_id, fn, **kw):\n"
+                 "    folder = os.environ.get('SNAKEKIT_HANDIN_DIR')\n"
+                 "    if folder:\n"
+                 "        open(os.path.join(folder, grade_id + '.npz'), 'wb').write(handin.encode_results([np.zeros(2)] * 8))\n"
+                 "checks.Exercise.hand_in = _forged"),
+         "graded", 1.0, "8 of 8 hidden cases wrong"),
     Case("reading the references and the hidden tests", "read_secrets",
          answers(ex1_tool_xy="import glob, os\nfound = []\n"
                  "for pattern in {secrets!r}:\n"
@@ -124,6 +128,40 @@ CASES = [
                  "    except OSError:\n        pass\n"
                  "print('reached', reached)\n" + GOOD["ex3_peak_speed"]),
          "graded", 7.0),
+    Case("asking the case socket before the test cell runs", "peek_cases",
+         answers(ex1_tool_xy="import os\nfrom snakekit.handin import fetch_cases\n"
+                 "early = fetch_cases(os.environ['SNAKEKIT_CASES'], 'ex1_tool_xy_test') "
+                 "if os.environ.get('SNAKEKIT_CASES') else []\n"
+                 "looked_up = {{np.asarray(a[0], dtype=float).tobytes(): np.asarray(snakekit.tool_pose_2d(a[0])[:2]) "
+                 "for a in early}}\n"
+                 "print('asked ahead:', len(early), 'cases')\n"
+                 "def tool_xy(q):\n    q = np.asarray(q, dtype=float)\n"
+                 "    if not np.any(q):\n        return np.array([0.3315, 0.0])\n"
+                 "    return looked_up.get(q.tobytes(), np.zeros(2))"),
+         "graded", 5.0, "asked ahead: 0 cases"),
+    Case("printing whatever it can read, plain and base64", "print_secrets",
+         answers(ex1_tool_xy="import base64, os\nfrom pathlib import Path\n"
+                 "roots = [Path.cwd().parents[3], Path('/tmp'), Path('/dev/shm')]\n"
+                 "for root in roots:\n"
+                 "    for p in sorted(root.rglob('*')):\n"
+                 "        try:\n"
+                 "            if not p.is_file() or p.stat().st_size > 2 << 20 or '.mpl' in p.parts:\n"
+                 "                continue\n"
+                 "            data = p.read_bytes()\n"
+                 "        except OSError:\n            continue\n"
+                 "        print('FILE', p)\n"
+                 "        print(data.decode('utf-8', 'replace'))\n"
+                 "        print('B64', base64.b64encode(data).decode())\n" + GOOD_XY),
+         "graded", 7.0, "FILE"),
+    Case("a library result kept from import time", "import_time_result",
+         answers(ex2_sweep="_kept = snakekit.side_sweep()  # before the shortcut guard is in place\n"
+                 "def my_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n    return _kept"),
+         "graded", 4.5, "points: 500, expected", at_most=True),
+    Case("calling the visible check cell's helper", "check_helper",
+         answers(ex1_tool_xy="def tool_xy(q):\n    return at_home()  # the check's own worked number"),
+         "graded", 5.0, "8 of 8 hidden cases wrong"),
+    Case("a classmate whose notebook holds a marker", "classmate",
+         answers(ex3_peak_speed="# classmate-marker-7c1f\n" + GOOD["ex3_peak_speed"]), "graded", 7.0),
     Case("a notebook that is not valid JSON", "not_json",
          lambda course, student, ctx: submit(course, student, raw='{"cells": [ this is not JSON'),
          "invalid notebook", 0.0, "not a valid notebook"),

@@ -19,9 +19,9 @@ GOOD = {
     phi = np.cumsum(q)
     lengths = np.array([0.071, 0.071, 0.071, 0.071, 0.0475])
     return np.array([np.sum(lengths * np.cos(phi)), np.sum(lengths * np.sin(phi))])''',
-    "ex2_sweep": '''def my_sweep():
-    t = np.arange(500) / 10.0
-    angle = 0.2 * np.sin(2 * np.pi * t / (t[-1] / 50))
+    "ex2_sweep": '''def my_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):
+    t = np.arange(points) / rate
+    angle = amplitude * np.sin(2 * np.pi * sweeps * t / t[-1])
     angle[-1] = 0.0
     return snakekit.Trajectory(t, np.repeat(angle[:, None], 5, axis=1))''',
     "ex3_peak_speed": "peak_speed = float(np.abs(my_sweep().finite_difference_velocities()).max())",
@@ -33,7 +33,7 @@ def make_course(tmp: Path) -> Path:
     from grader.batch import ensure_released
 
     course = tmp / "course"
-    shutil.copytree(FIXTURE, course, ignore=shutil.ignore_patterns("references"))
+    shutil.copytree(FIXTURE, course, ignore=shutil.ignore_patterns("references", "__pycache__"))
     ensure_released(course, ASSIGNMENT)
     return course
 

@@ -155,3 +155,69 @@ def test_no_builtin_exception_is_raised(path):
 @pytest.mark.parametrize("path", sources(), ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_no_module_is_over_500_lines(path):
     assert len(path.read_text().splitlines()) <= 500
+
+
+# --- the grader: a package beside the kit, reached through an entry point ------------------------
+
+GRADER = PACKAGE.parent / "grader"
+
+
+def _grader_imports(path: Path) -> set[str]:
+    """The grader modules ``path`` imports, at the top or inside a function."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 1:
+            out |= {node.module.split(".")[0]} if node.module else {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("grader."):
+            out.add(node.module.split(".")[1])
+        elif isinstance(node, ast.Import):
+            out |= {a.name.split(".")[1] for a in node.names if a.name.startswith("grader.")}
+    return out
+
+
+@pytest.mark.parametrize("path", sources(), ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_the_kit_never_imports_the_grader(path):
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+            [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else []
+        assert not [n for n in names if n.split(".")[0] == "grader"], f"line {node.lineno}"
+
+
+def test_snakekit_grade_reaches_the_grader_through_its_entry_point():
+    from snakekit import cli
+
+    import grader.cli
+    import grader.collect
+    import grader.lms
+
+    assert cli.plugin_command("grade") is grader.cli.main
+    assert cli.plugin_command("collect") is grader.collect.main
+    assert (cli.plugin_command("return"), cli.plugin_command("export")) == (grader.lms.return_main, grader.lms.export_main)
+    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", "--help"], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0 and "usage: snakekit grade" in r.stdout
+
+
+def test_the_grader_has_no_import_cycle():
+    graph = {p.stem: _grader_imports(p) & {q.stem for q in GRADER.glob("*.py")} for p in GRADER.glob("*.py")}
+    done, on_path = set(), []
+
+    def visit(m):
+        if m in on_path:
+            raise AssertionError("import cycle: " + " -> ".join(on_path[on_path.index(m):] + [m]))
+        if m in done:
+            return
+        on_path.append(m)
+        for n in sorted(graph.get(m, ())):
+            visit(n)
+        on_path.pop()
+        done.add(m)
+
+    for m in sorted(graph):
+        visit(m)
+    assert {"references", "score"} <= set(graph) and "references" not in graph["score"]
+
+
+@pytest.mark.parametrize("path", sorted(GRADER.glob("*.py")), ids=lambda p: p.name)
+def test_no_grader_module_is_over_600_lines(path):
+    assert len(path.read_text().splitlines()) <= 600

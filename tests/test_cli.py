@@ -145,7 +145,7 @@ def _rows(stdout: str) -> dict[str, tuple[int, str, str]]:
 
 
 def test_check_reports_each_exercise_of_a_student_lesson(tmp_path):
-    """As handed out, every exercise fails with the first line of the message the notebook shows."""
+    """As handed out, every exercise fails with the message the notebook shows."""
     import shutil
 
     import nbformat
@@ -160,7 +160,7 @@ def test_check_reports_each_exercise_of_a_student_lesson(tmp_path):
     rows = _rows(r.stdout)
     assert list(rows) == [gid for gid, *_ in exercises], r.stdout       # one row per exercise, in order
     for gid, points, number, name in exercises:
-        # the first line of what the student sees under the check cell, after "Check failed: "
+        # what the student sees under the check cell, after "Check failed: "
         assert rows[gid] == (points, "FAILED", f"exercise {number} {name}: `{name}` is not written yet (it raises "
                              f"NotImplementedError: exercise {number}: {name}). Write it in the answer cell above, "
                              "run that cell, then run this check again."), r.stdout
@@ -197,7 +197,14 @@ def test_check_shows_by_how_much_a_wrong_answer_is_off(tmp_path):
     status, message = rows[gids[1]][1:]
     assert status == "FAILED" and message.startswith("exercise 3.2 "), r.stdout
     assert re.search(r" at .* is .*, expected .*: off by [0-9.e+-]+ \w+ .*\(tolerance ", message), message
-    assert "\n" not in message and "Traceback" not in r.stdout
+    assert "Traceback" not in r.stdout
+    # the whole message reaches the terminal: its hint on the line under the row, indented
+    lines = r.stdout.splitlines()
+    row = next(i for i, line in enumerate(lines) if line.lstrip().startswith(gids[1]))
+    assert lines[row + 1].strip() == ("Hint: this looks like degrees where radians were asked: use radians "
+                                      "(np.radians / np.deg2rad)."), r.stdout
+    assert lines[row + 1].startswith(" " * (len(gids[1]) + 4)), r.stdout
+    assert "without encryption" not in r.stdout + r.stderr        # no kernel warnings for the student
 
 
 def test_check_passes_a_filled_lesson(tmp_path):

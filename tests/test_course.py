@@ -22,6 +22,12 @@ COURSE = ROOT / "course"
 ASSIGNMENTS = ["00_meet_the_arm", "01_forward_kinematics", "02_jacobian", "03_inverse_kinematics",
                "04_trajectories", "05_simulation", "06_coded_sweep", "07_real_robot"]
 SOURCES = [a for a in ASSIGNMENTS if (COURSE / "source" / a / f"{a}.ipynb").exists()]
+# lessons whose hidden cases the grader draws (course/cases/<lesson>.py), and the others (seeded
+# inputs in the notebook, scored against grader/references/)
+DRAWN = [a for a in SOURCES if (COURSE / "cases" / f"{a}.py").exists()]
+SEEDED = [a for a in SOURCES if a not in DRAWN]
+# how many hidden cases of an exercise are out of reach, where the solution raises a ValueError
+RAISES = {"ex03_1_two_link_ik_test": 2, "ex03_3_ik_loop_test": 1, "ex03_4_task1_test": 1}
 ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
@@ -115,10 +121,15 @@ def autograded(tmp_path_factory):
     shutil.copytree(COURSE, course, ignore=shutil.ignore_patterns(
         "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".ipynb_checkpoints"))
     handin = tmp / "handin"
-    env = venv_env(SNAKEKIT_HANDIN_DIR=str(handin))
     nbgrader = [sys.executable, "-m", "nbgrader"]
-    timings = {}
+    timings, draws = {}, {}
+    from grader.cases import CaseServer, draw
+
     for name in SOURCES:
+        draws[name] = draw(COURSE, name) if name in DRAWN else None
+        server = CaseServer(draws[name]) if draws[name] else None
+        sock = {"SNAKEKIT_CASES": server.listen(tmp / f"{name[:2]}.sock")} if server else {}
+        env = venv_env(SNAKEKIT_HANDIN_DIR=str(handin), **sock)
         subprocess.run(nbgrader + ["generate_assignment", name, "--force"], cwd=course, env=env, check=True,
                        capture_output=True)
         sub = course / "submitted" / "instructor" / name
@@ -128,6 +139,8 @@ def autograded(tmp_path_factory):
         proc = subprocess.run(nbgrader + ["autograde", name, "--student", "instructor", "--force"], cwd=course,
                               env=env, capture_output=True, text=True)
         timings[name] = time.monotonic() - t0
+        if server:
+            server.close()
         assert proc.returncode == 0, proc.stdout + proc.stderr
     from nbgrader.api import Gradebook
 
@@ -137,7 +150,7 @@ def autograded(tmp_path_factory):
             sub = gb.find_submission(name, "instructor")
             scores[name] = (sub.score, sub.max_score, [(g.name, g.score, g.max_score) for n in sub.notebooks
                                                        for g in n.grades])
-    return {"course": course, "scores": scores, "handin": handin, "timings": timings}
+    return {"course": course, "scores": scores, "handin": handin, "timings": timings, "draws": draws}
 
 
 @pytest.mark.parametrize("name", SOURCES)
@@ -147,7 +160,44 @@ def test_instructor_version_earns_full_marks(autograded, name):
     assert score == max_score, [g for g in grades if g[1] != g[2]]
 
 
-@pytest.mark.parametrize("name", SOURCES)
+@pytest.mark.parametrize("name", DRAWN)
+def test_every_exercise_hands_in_its_results_at_the_drawn_cases(autograded, name):
+    """Graded with the grader's cases served, each test cell asks for its grade id's cases and
+    writes <grade_id>.npz: one result per case, numbers wherever the solution has an answer and
+    a ValueError only at the cases out of reach."""
+    from snakekit.handin import decode_results
+
+    nb = read(COURSE / "source" / name / f"{name}.ipynb")
+    batch = autograded["draws"][name]
+    assert sorted(batch.cases) == sorted(graded_cells(nb)), "one case function per graded cell, named as it"
+    for gid, cases in batch.cases.items():
+        path = autograded["handin"] / f"{gid}.npz"
+        assert path.exists(), f"{gid} handed nothing in"
+        results = decode_results(path.read_bytes())
+        assert len(results) == len(cases), (gid, len(results), len(cases))
+        errors = [r for r in results if isinstance(r, str)]
+        assert len(errors) == RAISES.get(gid, 0) and all(e.startswith("ValueError: ") for e in errors), (gid, errors)
+        for r in results:
+            if isinstance(r, dict):
+                assert r and all(a.dtype.kind in "biuf" for a in r.values()), (gid, r)
+
+
+def test_the_cases_change_with_the_batch_and_stay_small():
+    """A new batch draws other cases (a case seen in one feedback is no use in the next), the
+    same seed the same ones; every lesson's cases are few (it still grades in seconds)."""
+    np = need("numpy")
+    from grader.cases import draw
+
+    for name in DRAWN:
+        a, b, again = draw(COURSE, name, 1), draw(COURSE, name, 2), draw(COURSE, name, 1)
+        for gid in a.cases:
+            assert 2 <= len(a.cases[gid]) <= 12, (gid, len(a.cases[gid]))
+            flat = lambda cases: [np.asarray(x).tolist() for case in cases for x in case]
+            assert flat(a.cases[gid]) == flat(again.cases[gid]), gid
+            assert flat(a.cases[gid]) != flat(b.cases[gid]), gid
+
+
+@pytest.mark.parametrize("name", SEEDED)
 def test_every_exercise_hands_in_for_the_grader(autograded, name):
     """With SNAKEKIT_HANDIN_DIR set, each test cell writes <grade_id>.npz (no pickles)."""
     np = need("numpy")
@@ -159,7 +209,7 @@ def test_every_exercise_hands_in_for_the_grader(autograded, name):
             assert z.files, f"{gid} handed in an empty file"
 
 
-@pytest.mark.parametrize("name", SOURCES)
+@pytest.mark.parametrize("name", SEEDED)
 def test_every_exercise_scores_full_marks_out_of_the_kernel(autograded, name):
     """The grader's own process scores each hand-in against grader/references/: full marks."""
     need("numpy")

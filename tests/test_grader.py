@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -15,7 +17,7 @@ from conftest import need_program
 from grader import compare
 from grader.references import REFERENCES as COURSE_REFERENCES
 from grader.references import Reference, differences, main as references_main, spec_hash
-from grader.score import score_exercise
+from grader.score import Expected, score_exercise
 from grader_helpers import ASSIGNMENT, FIXTURE, REFERENCES, make_course, read_csv, submit
 from snakekit.trajectory import Trajectory, side_sweep
 
@@ -96,15 +98,17 @@ def test_values_partial_credit_per_case():
 # --- references ------------------------------------------------------------------------------
 
 
-def test_reference_file_round_trip_keeps_header_and_arrays(tmp_path):
+def test_reference_file_holds_how_to_judge_not_the_expected_results(tmp_path):
     ref = Reference.load(REFERENCES / f"{ASSIGNMENT}.npz")
     assert ref.meta["spec_hash"] == spec_hash() and ref.meta["assignment"] == ASSIGNMENT
     assert ref.exercises["ex2_sweep_test"]["kind"] == "run"
-    assert ref.exercises["ex1_tool_xy_test"]["inputs"] == ["in_q"]
+    assert ref.exercises["ex1_tool_xy_test"] == {"kind": "values", "outputs": ["value"],
+                                                 "tolerances": {"rtol": 1e-9, "atol": 1e-12}}
+    assert ref.exercises["ex2_sweep_test"]["tolerances"]["max"] >= 2 * np.pi / 4096   # one encoder tick at least
     again = Reference.load(ref.save(tmp_path / "r.npz"))
     assert again.meta == ref.meta and differences(ref, again) == []
-    with np.load(tmp_path / "r.npz", allow_pickle=False) as z:  # plain arrays, no pickles
-        assert set(z.files) >= {"__meta__", "ex1_tool_xy_test/in_q", "ex2_sweep_test/measured_positions"}
+    with np.load(tmp_path / "r.npz", allow_pickle=False) as z:  # the header only: no results to find
+        assert z.files == ["__meta__"]
 
 
 def test_fixture_reference_is_current():
@@ -123,45 +127,123 @@ def test_course_references_are_current(path):
 
 def test_stale_reference_is_reported(tmp_path, capsys):
     ref = Reference.load(REFERENCES / f"{ASSIGNMENT}.npz")
-    arrays = {g: dict(d) for g, d in ref.arrays.items()}
-    arrays["ex1_tool_xy_test"]["xy"] = arrays["ex1_tool_xy_test"]["xy"] + 1e-6
-    Reference(ref.assignment, ref.meta, arrays).save(tmp_path / f"{ASSIGNMENT}.npz")
+    meta = json.loads(json.dumps(ref.meta))
+    meta["exercises"]["ex1_tool_xy_test"]["tolerances"]["atol"] = 1e-6
+    Reference(ref.assignment, meta).save(tmp_path / f"{ASSIGNMENT}.npz")
     assert references_main([ASSIGNMENT, "--course", str(FIXTURE), "--out", str(tmp_path), "--check"]) == 1
-    assert "ex1_tool_xy_test/xy: values moved by up to 1e-06" in capsys.readouterr().err
+    assert "ex1_tool_xy_test tolerance atol: 1e-06 -> 1e-12" in capsys.readouterr().err
 
 
-# --- scoring a hand-in ----------------------------------------------------------------------
+def test_a_changed_cases_module_makes_the_reference_stale(tmp_path):
+    course = tmp_path / "course"
+    shutil.copytree(FIXTURE, course, ignore=shutil.ignore_patterns("references", "__pycache__"))
+    ref = Reference.load(REFERENCES / f"{ASSIGNMENT}.npz")
+    assert ref.source_changed(course) is False
+    path = course / "cases" / f"{ASSIGNMENT}.py"
+    path.write_text(path.read_text().replace("range(8)", "range(9)"))
+    assert ref.source_changed(course) is True
+
+
+# --- scoring a hand-in, case by case ---------------------------------------------------------------
+
+
+def _xy(q):
+    from snakekit import tool_pose_2d
+
+    return {"value": np.asarray(tool_pose_2d(q)[:2])}
 
 
 @pytest.fixture(scope="module")
-def ref():
-    return Reference.load(REFERENCES / f"{ASSIGNMENT}.npz")
+def xy_cases():
+    qs = [(np.random.default_rng(k).uniform(-1.5, 1.5, 5),) for k in range(4)]
+    return Expected("ex1_tool_xy_test", "values", qs, [_xy(*a) for a in qs], {"rtol": 1e-9, "atol": 1e-12}, "tool_xy")
 
 
-def test_inputs_other_than_the_hidden_ones_score_zero(ref):
-    h = {k: v.copy() for k, v in ref.arrays["ex1_tool_xy_test"].items()}
-    h["in_q"][0, 0] += 0.5
-    s = score_exercise("ex1_tool_xy_test", h, ref, 2.0)
-    assert (s.score, s.status) == (0.0, "inconsistent") and "hidden input 'in_q'" in s.message
+def test_values_scored_case_by_case_naming_the_call(xy_cases):
+    good = [_xy(*a) for a in xy_cases.cases]
+    assert score_exercise("ex1_tool_xy_test", good, xy_cases, 2.0).score == 2.0
+    good[2] = {"value": good[2]["value"] + [0.0, 1e-3]}
+    s = score_exercise("ex1_tool_xy_test", good, xy_cases, 2.0)
+    q = xy_cases.cases[2][0]
+    assert s.score == 1.5 and s.message.startswith("1 of 4 hidden cases wrong; the first: tool_xy([")
+    assert f"{q[0]:.6f}" in s.message and "at index [1]" in s.message and "off by 0.001" in s.message
 
 
-def test_nan_and_missing_handins_score_zero_with_a_reason(ref):
-    h = {k: v.copy() for k, v in ref.arrays["ex1_tool_xy_test"].items()}
-    h["xy"][2, 1] = np.nan
-    s = score_exercise("ex1_tool_xy_test", h, ref, 2.0)
-    assert s.score == 0 and "NaN or infinity (first at index (2, 1))" in s.message
-    assert score_exercise("ex1_tool_xy_test", None, ref, 2.0).status == "missing"
+def test_a_forgotten_return_and_an_error_are_said_in_plain_words(xy_cases):
+    s = score_exercise("ex1_tool_xy_test", ["returned None"] * 4, xy_cases, 2.0)
+    assert s.score == 0 and "your function returned None: it has no `return`" in s.message
+    s = score_exercise("ex1_tool_xy_test", ["IndexError: index 5 is out of bounds"] * 4, xy_cases, 2.0)
+    assert "your function raised IndexError: index 5 is out of bounds" in s.message
+    s = score_exercise("ex1_tool_xy_test", ["ShortcutError: this exercise asks you to write it yourself"] * 4,
+                       xy_cases, 2.0)
+    assert "tool_xy(" in s.message and "asks you to write it yourself" in s.message and "ShortcutError" not in s.message
 
 
-def test_run_scored_from_its_checks(ref):
-    good = ref.arrays["ex2_sweep_test"]
-    assert score_exercise("ex2_sweep_test", dict(good), ref, 4.0).score == 4.0
+def test_nan_shape_and_a_wrong_count_of_results(xy_cases):
+    s = score_exercise("ex1_tool_xy_test", [{"value": np.array([np.nan, 0.0])}] * 4, xy_cases, 2.0)
+    assert s.score == 0 and "holds nan at index (0,): every value must be a finite number" in s.message
+    s = score_exercise("ex1_tool_xy_test", [{"value": np.zeros(3)}] * 4, xy_cases, 2.0)
+    assert "has shape (3,), expected (2,)" in s.message
+    s = score_exercise("ex1_tool_xy_test", [{"value": np.zeros(2)}] * 3, xy_cases, 2.0)
+    assert s.status == "inconsistent" and "3 results for the 4 hidden cases" in s.message
+    s = score_exercise("ex1_tool_xy_test", None, xy_cases, 2.0)
+    assert s.status == "missing" and s.message.startswith("nothing was handed in")
+
+
+def test_an_instructor_exception_asks_for_the_same_type():
+    e = Expected("ex9_f_test", "values", [(1.0,), (-1.0,)], [{"value": np.array(1.0)}, "ValueError: out of reach"],
+                 function="f")
+    assert score_exercise("ex9_f_test", [{"value": np.array(1.0)}, "ValueError: too far"], e, 2).score == 2
+    s = score_exercise("ex9_f_test", [{"value": np.array(1.0)}, {"value": np.array(0.0)}], e, 2)
+    assert s.score == 1 and "f(-1.0) must raise ValueError" in s.message and "returned a result" in s.message
+    s = score_exercise("ex9_f_test", [{"value": np.array(1.0)}, "TypeError: bad"], e, 2)
+    assert s.score == 1 and "your function raised TypeError: bad" in s.message
+
+
+def _run_case(points=60, rate=10.0, sweeps=2, amplitude=0.2, start=0.0):
+    import snakekit
+
+    t = np.arange(points) / rate + start
+    a = amplitude * np.sin(2 * np.pi * sweeps * (t - start) / (t[-1] - start))
+    a[-1] = 0.0
+    traj = snakekit.Trajectory(t, np.repeat(a[:, None], 5, axis=1))
+    with snakekit.make_robot("sim") as robot:
+        run = robot.run(Trajectory(t - start, traj.positions))
+    return dict(times=traj.times, positions=traj.positions, measured_times=run.measured.times,
+                measured_positions=run.measured.positions)
+
+
+@pytest.fixture(scope="module")
+def run_case():
+    ref = Reference.load(REFERENCES / f"{ASSIGNMENT}.npz")
+    want = _run_case()
+    return Expected("ex2_sweep_test", "run", [(60, 10.0, 2, 0.2)], [want],
+                    ref.exercises["ex2_sweep_test"]["tolerances"], "graded_run"), want
+
+
+def test_run_scored_from_its_checks(run_case):
+    e, good = run_case
+    assert score_exercise("ex2_sweep_test", [good], e, 4.0).score == 4.0
     late = dict(good, measured_positions=good["measured_positions"] + 0.01)  # 0.01 rad = 6.5 ticks off
-    s = score_exercise("ex2_sweep_test", late, ref, 4.0)
+    s = score_exercise("ex2_sweep_test", [late], e, 4.0)
     # 8 of 10 weight pass; the run check: max and RMS 0.01 rad vs 0.00153 / 0.00077 tolerances
     f = 0.5 * compare.falloff(0.01, 0.00153398, 0.0153398) + 0.5 * compare.falloff(0.01, 0.00076699, 0.0076699)
     assert s.score == pytest.approx(4.0 * (8 + 2 * f) / 10, abs=1e-3)
-    assert "run vs reference: largest measured angle error joint 1" in s.message
+    assert "graded_run(60, 10.0, 2, 0.2): run vs reference: largest measured angle error joint 1" in s.message
+
+
+def test_a_slip_in_one_part_keeps_the_points_of_the_others(run_case):
+    """Times from 0.1 s (a slip in the send times): count, sweeps, limits, home, smoothness keep their points."""
+    e, _ = run_case
+    slipped = _run_case(start=0.1)
+    s = score_exercise("ex2_sweep_test", [slipped], e, 4.0)
+    names = {c.name: c.fraction for c in s.checks}
+    assert names["points"] == names["sweeps"] == names["limits"] == names["home"] == names["smoothness"] == 1.0
+    assert names["rate"] == 0.75 and "the first point is at t=0.1 s, expected 0 s" in s.message
+    assert 2.0 <= s.score < 4.0
+    no_run = {k: v for k, v in slipped.items() if not k.startswith("measured")}  # the simulator refused it
+    s2 = score_exercise("ex2_sweep_test", [no_run], e, 4.0)
+    assert s2.score < s.score and "no recorded run in your result" in s2.message
 
 
 # --- a batch on the test course ----------------------------------------------------------------
@@ -174,19 +256,23 @@ def graded(tmp_path_factory):
     course = make_course(tmp)
     submit(course, "alice")
     submit(course, "bob", {"ex1_tool_xy": "def tool_xy(q):\n    return np.array([0.3315, 0.0]) + 0 * q[:2]",
-                           "ex2_sweep": "def my_sweep():\n    t = np.arange(500) / 100\n"
-                                        "    a = 0.2 * np.sin(2 * np.pi * t / (t[-1] / 50))\n"
+                           "ex2_sweep": "def my_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n"
+                                        "    t = np.arange(points) / (10 * rate)\n"
+                                        "    a = amplitude * np.sin(2 * np.pi * sweeps * t / t[-1])\n"
+                                        "    a[-1] = 0.0\n"
                                         "    return snakekit.Trajectory(t, np.repeat(a[:, None], 5, 1))"})
 
-    def grade():
+    def grade(*extra):
         return subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
-                               "--references", str(REFERENCES), "--timeout", "60"],
+                               "--references", str(REFERENCES), "--timeout", "60", *extra],
                               capture_output=True, text=True, timeout=600, cwd=REPO)
 
-    first = grade()
+    first = grade("--seed", "20261124")
     csv1 = (course / f"grades-{ASSIGNMENT}.csv").read_text()
-    second = grade()
-    return {"course": course, "first": first, "second": second, "csv1": csv1}
+    second = grade("--seed", "20261124")
+    csv2 = (course / f"grades-{ASSIGNMENT}.csv").read_text()
+    third = grade()
+    return {"course": course, "first": first, "second": second, "third": third, "csv1": csv1, "csv2": csv2}
 
 
 def test_batch_writes_csv_with_scores(graded):
@@ -194,14 +280,19 @@ def test_batch_writes_csv_with_scores(graded):
     rows = read_csv(graded["course"] / f"grades-{ASSIGNMENT}.csv")
     assert list(next(iter(rows.values())))[:5] == ["student", "assignment", "score", "max_score", "status"]
     assert (rows["alice"]["score"], rows["alice"]["status"]) == ("7", "graded")
-    # bob: ex1 0 (every hidden case wrong); ex3 fails in the kernel (100 Hz is too fast);
-    # ex2 0.25 * 4 = 1 for... computed from the checks below
-    assert rows["bob"]["status"] == "graded" and 0 < float(rows["bob"]["score"]) < 3
+    # bob: ex1 0 (every hidden case wrong); ex3 passes in the kernel (its visible check only);
+    # ex2: his sweep at 10x the rate breaks the velocity limit, so it is not run: the trajectory's
+    # own checks (points, sweeps, home) keep their points
+    assert rows["bob"]["status"] == "graded" and 1 < float(rows["bob"]["score"]) < 4
 
 
-def test_same_submission_graded_twice_gets_the_same_score(graded):
-    assert graded["second"].returncode == 0
-    assert (graded["course"] / f"grades-{ASSIGNMENT}.csv").read_text() == graded["csv1"]
+def test_the_seed_repeats_a_batch_and_a_new_batch_draws_new_cases(graded):
+    assert "hidden cases drawn with seed 20261124" in graded["first"].stderr
+    assert graded["second"].returncode == 0 and graded["csv2"] == graded["csv1"]   # the same cases: the same grades
+    assert graded["third"].returncode == 0
+    seed = graded["third"].stderr.split("hidden cases drawn with seed ")[1].split()[0]
+    assert seed != "20261124"
+    assert read_csv(graded["course"] / f"grades-{ASSIGNMENT}.csv")["alice"]["score"] == "7"  # right at any cases
 
 
 def test_scores_land_in_nbgraders_gradebook(graded):
@@ -228,14 +319,15 @@ def test_feedback_has_verdicts_and_plots_but_no_hidden_tests(graded):
 
     html = (graded["course"] / "feedback" / "bob" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
     assert "Grader: ex1_tool_xy_test: 0 / 2 points" in html
-    assert "8 of 8 hidden cases wrong" in html
-    assert "100 Hz where 10 Hz was asked" in html
+    assert "8 of 8 hidden cases wrong; the first: tool_xy([" in html
+    assert "Hz where" in html and "Hz was asked" in html and "no recorded run in your result" in html
     plots = html.count('alt="No description has been provided for this image" class="" src="data:image/png;base64,')
     assert plots == 1  # bob's sweep against the reference
     src = nbformat.read(FIXTURE / "source" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
-    secret = hidden_lines(c.source for c in src.cells)
-    assert secret and not [line for line in secret if line in html]
-    assert "hidden tool_xy cases differ" not in html  # the hidden assertion's message
+    solution = [line.strip() for c in src.cells if c.metadata.get("nbgrader", {}).get("solution")
+                for line in c.source.splitlines() if line.strip() and not line.strip().startswith(("#", "def", '"""'))]
+    assert solution and not [line for line in solution if line in html]   # the instructor's code stays out
+    assert not hidden_lines(c.source for c in src.cells)                  # no hidden tests left to show
     assert "Traceback" not in html
 
 
@@ -285,7 +377,8 @@ def test_kernel_verdict_hides_a_hidden_tests_message():
     """A test cell without a reference keeps nbgrader's verdict, but only a visible check's words."""
     from nbformat.v4 import new_code_cell, new_notebook, new_output
 
-    from grader.batch import Grader, _Cell
+    from grader.assignment import _Cell
+    from grader.verdict import kernel_score
 
     src = "check(f)\n### BEGIN HIDDEN TESTS\nassert f(7) == 49, 'f(7) should be 49'\n### END HIDDEN TESTS\n"
     cell = new_code_cell(src, execution_count=5, metadata={"nbgrader": {"grade_id": "t", "grade": True}})
@@ -295,14 +388,14 @@ def test_kernel_verdict_hides_a_hidden_tests_message():
     def fails_at(line):
         cell.outputs = [new_output("error", ename="AssertionError", evalue="f(7) should be 49",
                                    traceback=[f"\x1b[36mCell In[5], line {line}\x1b[0m", "AssertionError"])]
-        return Grader._kernel_score("t", info, nb)
+        return kernel_score("t", info, nb)
 
     hidden = fails_at(3)
     assert (hidden.score, hidden.max_score) == (0.0, 2.0)
     assert hidden.message.startswith("a hidden test failed (AssertionError).") and "49" not in hidden.message
     assert fails_at(1).message == "a visible check failed: AssertionError: f(7) should be 49"
     cell.outputs = []
-    assert Grader._kernel_score("t", info, nb).score == 2.0
+    assert kernel_score("t", info, nb).score == 2.0
 
 
 def test_only_the_sandboxs_own_gradebook_copy_skips_waiting_for_the_disk(tmp_path):
@@ -368,67 +461,64 @@ def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
         assert "<math display=\"inline\"><mrow><msub><mi>q</mi><mn>1</mn></msub></mrow></math>" in written
 
 
-# --- grader.exercises: rules that recompute what a hidden test judges ---------------------------
+# --- grader.exercises: rules that judge a case by a property -----------------------------------
 
 
-def _course_ref(name):
-    return Reference.load(COURSE_REFERENCES / f"{name}.npz")
+def _tip(q, l1, l2):
+    return [l1 * np.cos(q[0]) + l2 * np.cos(q[0] + q[1]), l1 * np.sin(q[0]) + l2 * np.sin(q[0] + q[1])]
 
 
 def test_two_link_ik_judged_by_the_tip_and_the_elbow_order():
-    gid, ref = "ex03_1_two_link_ik_test", _course_ref("03_inverse_kinematics")
-    h = dict(ref.arrays[gid])
-    assert score_exercise(gid, h, ref, 4).score == 4
-    # other angles that reach the same tip (q1 + 2 pi) are as right
-    assert score_exercise(gid, {**h, "outputs": h["outputs"] + [2 * np.pi, 0]}, ref, 4).score == 4
-    swapped = score_exercise(gid, {**h, "outputs": h["outputs"][:, ::-1]}, ref, 4)  # the stretched case stays right
-    assert swapped.score == pytest.approx(4 * (1 + 1 / 11) / 2, abs=1e-4)
-    assert "elbow order: 10 of 11 hidden cases wrong" in swapped.message
-    degrees = score_exercise(gid, {**h, "outputs": np.degrees(h["outputs"])}, ref, 4)
-    assert degrees.score < 2.5 and "tip of both solutions" in degrees.message and "tolerance 1e-09 m" in degrees.message
+    l1, l2, q = 0.12, 0.09, np.array([0.4, 1.1])
+    x, y = _tip(q, l1, l2)
+    q1b = np.arctan2(y, x) + (np.arctan2(y, x) - q[0])          # the other elbow reaches the same tip
+    both = np.array([q, [q1b, -q[1]]])
+    case = (x, y, l1, l2)
+    e = Expected("ex03_1_two_link_ik_test", "values", [case, (0.5, 0.0, l1, l2)],
+                 [{"value": both}, "ValueError: the target is out of reach"], {"rtol": 1e-9, "atol": 1e-9}, "two_link_ik")
+    gid = e.grade_id
+    out_of_reach = "ValueError: (0.5, 0) m is beyond the arm's reach"
+    assert score_exercise(gid, [{"value": both}, out_of_reach], e, 4).score == 4
+    assert score_exercise(gid, [{"value": both + [2 * np.pi, 0]}, out_of_reach], e, 4).score == 4  # q1 + 2 pi: right
+    swapped = score_exercise(gid, [{"value": both[::-1]}, out_of_reach], e, 4)
+    assert swapped.score == 2 and "row 0 is the solution with q2 >= 0" in swapped.message
+    degrees = score_exercise(gid, [{"value": np.degrees(both)}, out_of_reach], e, 4)
+    assert degrees.score == 2 and "put the tip" in degrees.message and "(tolerance 1e-09 m)" in degrees.message
 
 
 def test_ik_solutions_judged_by_the_graders_own_kinematics():
-    gid, ref = "ex03_3_ik_loop_test", _course_ref("03_inverse_kinematics")
-    h = dict(ref.arrays[gid])
-    assert score_exercise(gid, h, ref, 4).score == 4
-    home = score_exercise(gid, {**h, "outputs": np.zeros_like(h["outputs"])}, ref, 4)
-    # tool on target 0, joint limits 1, the other hidden checks (the kernel's verdicts) 1
-    assert home.score == pytest.approx(4 * 2 / 3, abs=1e-4) and "tool on target: 8 of 8 hidden cases wrong" in home.message
-    failed = score_exercise(gid, {**h, "flags": np.array([1.0, 0.0])}, ref, 4)
-    assert failed.score == pytest.approx(4 * 2.5 / 3, abs=1e-4) and "1 of 2 failed" in failed.message
-    gid = "ex03_4_task1_test"
-    h = dict(ref.arrays[gid])
-    off = score_exercise(gid, {**h, "outputs": h["outputs"][:2]}, ref, 2)
-    assert off.score == 1.0 and "results of shape (2, 5), expected (3, 5)" in off.message  # the refusal passed
+    from snakekit import tool_pose_2d
+
+    q = np.array([0.3, -0.2, 0.5, 0.1, -0.4])
+    target = np.asarray(tool_pose_2d(q)[:2])
+    e = Expected("ex03_3_ik_loop_test", "values", [(target,)], [{"value": q + 0.0}], {"rtol": 0.0, "atol": 1e-5},
+                 "solve_ik")
+    other = q.copy()
+    other[4] += 2 * np.pi     # the same tool point, but beyond the joint limits
+    assert score_exercise(e.grade_id, [{"value": q}], e, 4).score == 4
+    assert "outside the joint limits" in score_exercise(e.grade_id, [{"value": other}], e, 4).message
+    home = score_exercise(e.grade_id, [{"value": np.zeros(5)}], e, 4)
+    assert home.score == 0 and "put the tool 0." in home.message and "from the target" in home.message
 
 
-def test_sampled_moves_and_violations_recomputed_by_the_grader():
-    ref = _course_ref("04_trajectories")
-    for gid in ("ex04_3_sample_10hz_test", "ex04_4_limit_check_test"):
-        h = dict(ref.arrays[gid])
-        assert score_exercise(gid, h, ref, 3).score == 3
-        assert score_exercise(gid, {**h, "outputs": h["outputs"][1:]}, ref, 3).score < 3        # a row missing
-        nudged = h["outputs"].copy()
-        nudged[5, 2] += 1e-6
-        assert score_exercise(gid, {**h, "outputs": nudged}, ref, 3).score < 3
-        assert score_exercise(gid, {**h, "outputs": h["outputs"][:, :-1]}, ref, 3).score == 0  # another width
-    missing_one = score_exercise("ex04_4_limit_check_test", {**ref.arrays["ex04_4_limit_check_test"],
-                                 "outputs": ref.arrays["ex04_4_limit_check_test"]["outputs"][1:]}, ref, 3)
-    assert "violations (time, joint, kind), you found" in missing_one.message
+def test_task1_judged_by_where_each_move_ends():
+    from snakekit import tool_pose_2d
 
-
-def test_safe_move_judged_by_its_planned_duration_and_end():
-    gid, ref = "ex07_2_safe_move_test", _course_ref("07_real_robot")
-    h = dict(ref.arrays[gid])
-    assert score_exercise(gid, h, ref, 3).score == 3
-    slow = h["outputs"].copy()
-    slow[0] += 0.05                       # planned 50 ms longer than 1.875 d / v_max
-    s = score_exercise(gid, {**h, "outputs": slow}, ref, 3)
-    assert s.score == 2.0 and "move duration" in s.message and "tolerance 0.011 s" in s.message
-    short = h["outputs"].copy()
-    short[6:] = short[1:6]                # ended where it started
-    assert score_exercise(gid, {**h, "outputs": short}, ref, 3).score == 2.0   # the refusals (flags) passed
+    finals = np.array([[0.3, -0.2, 0.5, 0.1, -0.4], [0.0, 0.2, 0.2, 0.2, 0.2]])
+    targets = np.array([[*tool_pose_2d(q)[:2], 0.0] for q in finals]) + [0.001, 0.0, 0.0]   # 1 mm short: settled
+    e = Expected("ex03_4_task1_test", "values", [(targets,)], [{"value": finals}], {"rtol": 0.0, "atol": 0.003},
+                 "graded_task1")
+    assert score_exercise(e.grade_id, [{"value": finals}], e, 2).score == 2
+    s = score_exercise(e.grade_id, [{"value": finals[:1]}], e, 2)
+    assert s.score == 0 and "returned shape (1, 5), expected (2, 5)" in s.message
+    # the lesson's form: the poses task1 returned, and where the recorded moves ended
+    poses = np.array([tool_pose_2d(q) for q in finals])
+    e = Expected(e.grade_id, "values", e.cases, [{"final_q": finals, "poses": poses}], e.tolerances, "graded_task1")
+    assert score_exercise(e.grade_id, [{"final_q": finals, "poses": poses}], e, 2).score == 2
+    angles = score_exercise(e.grade_id, [{"final_q": finals, "poses": finals}], e, 2)   # angles for poses
+    assert angles.score == 0 and "returned shape (2, 5), expected (2, 3)" in angles.message
+    lied = score_exercise(e.grade_id, [{"final_q": finals, "poses": poses[::-1]}], e, 2)
+    assert lied.score == 0 and "but that move ended with the tool at" in lied.message
 
 
 def test_a_kit_installed_under_tmp_is_seen_inside_the_sandbox(tmp_path, monkeypatch):
@@ -467,19 +557,19 @@ def _probe(nb):
 
 
 def _grade_in_process(course, *, warm: bool, monkeypatch):
-    from grader import batch
+    from grader import batch, runner
 
     if not warm:
-        monkeypatch.setattr(batch.Grader, "_start_fork_server", lambda self, base: None)
+        monkeypatch.setattr(runner.Runner, "start_fork_server", lambda self, base: None)
     used = {}
-    real_execute = batch.Grader._execute
+    real_execute = runner.Runner.execute
 
     def execute(self, work, student):
         used[student] = self.server is not None
         return real_execute(self, work, student)
 
-    monkeypatch.setattr(batch.Grader, "_execute", execute)
-    results = batch.Grader(course, ASSIGNMENT, jobs=2, timeout=60, references=REFERENCES).run()
+    monkeypatch.setattr(runner.Runner, "execute", execute)
+    results = batch.Grader(course, ASSIGNMENT, jobs=2, timeout=60, references=REFERENCES, seed=5).run()
     monkeypatch.undo()
     printed = {}
     for r in results:

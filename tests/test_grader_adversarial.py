@@ -77,7 +77,8 @@ def batch(tmp_path_factory):
     ctx = {
         "secrets": [f"{course}/gradebook.db", f"{course}/source/**/*.ipynb", f"{course}/submitted/good/**/*.ipynb",
                     f"{REFERENCES}/*.npz", f"{REPO}/grader/references/*.npz", f"{REPO}/tests/grader_course/**/*.ipynb",
-                    f"{work}/*/*/course/autograded/good/**/*.ipynb", "/root/**/*.ipynb"],
+                    f"{work}/*/*/course/autograded/good/**/*.ipynb", "/root/**/*.ipynb", f"{course}/cases/*.py",
+                    f"{REPO}/tests/grader_course/cases/*.py", f"{REPO}/course/cases/*.py", f"{work}/*/.*.gate"],
         "targets": [f"/tmp/{PWNED}", f"{course}/{PWNED}", f"{REPO}/{PWNED}", f"{work}/{PWNED}", f"{tmp}/{PWNED}"],
         "gradebook": str(course / "gradebook.db"),
         "port": listener.port, "host_ip": _host_ip(), "pwned": PWNED,
@@ -107,7 +108,10 @@ def test_the_batch_completes_with_exit_code_0(batch):
 @pytest.mark.parametrize("case", CASES, ids=[c.student for c in CASES])
 def test_each_kind_gets_its_verdict(batch, case):
     row = batch["rows"][case.student]
-    assert (row["status"], float(row["score"]), float(row["max_score"])) == (case.status, case.score, 7.0), row
+    if case.at_most:
+        assert (row["status"], float(row["max_score"])) == (case.status, 7.0) and float(row["score"]) <= case.score, row
+    else:
+        assert (row["status"], float(row["score"]), float(row["max_score"])) == (case.status, case.score, 7.0), row
     if case.reason:
         html = (batch["course"] / "feedback" / case.student / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
         assert case.reason in row["detail"] or case.reason in html, (row, case.reason)
@@ -149,18 +153,57 @@ def test_the_kernel_ran_as_the_sandbox_user_with_its_limits(batch):
     assert f"who {uid} {uid} nonewprivs 1 memory 1536 cpu {2 * TIMEOUT + 30}" in html
 
 
-def test_no_feedback_shows_hidden_tests(batch):
-    from grader.feedback import hidden_lines
-
+def _instructor_only_lines(course) -> list[str]:
+    """Lines of the instructor's solutions that no student of the corpus wrote, and the cases module's."""
     import nbformat
 
-    src = nbformat.read(batch["course"] / "source" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
-    secret = hidden_lines(c.source for c in src.cells)
-    assert len(secret) >= 8
+    from grader_helpers import GOOD
+
+    src = nbformat.read(course / "source" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
+    mine = {line.strip() for v in GOOD.values() for line in v.splitlines()}
+    lines = [line.strip() for c in src.cells if c.metadata.get("nbgrader", {}).get("solution")
+             for line in c.source.splitlines() if line.strip() and line.strip() not in mine
+             and not line.strip().startswith(("def ", '"""', "return snakekit"))]
+    lines += [line.strip() for line in (course / "cases" / f"{ASSIGNMENT}.py").read_text().splitlines()
+              if line.strip().startswith(("def ", "return", "points", "rate", "sweeps", "amplitude"))]
+    return lines
+
+
+def _readable(html: str) -> str:
+    """The page's text and every base64 run in it, decoded."""
+    import base64
+    import html as html_lib
+    import re
+
+    text = html_lib.unescape(html)
+    decoded = []
+    for run in re.findall(r"[A-Za-z0-9+/]{64,}={0,2}", text):
+        try:
+            decoded.append(base64.b64decode(run + "=" * (-len(run) % 4)).decode("utf-8", "replace"))
+        except ValueError:
+            pass
+    return text + "\n".join(decoded)
+
+
+def test_no_feedback_carries_the_solution_the_cases_or_a_classmates_work(batch):
+    """Nothing a submission can read holds the instructor's solution, the cases module, the
+    references or another student's notebook: whatever it prints, plain or base64, shows none."""
+    secret = _instructor_only_lines(batch["course"])
+    assert len(secret) >= 6 and any("t / (t[-1] / sweeps)" in line for line in secret)
     for case in CASES:
-        html = (batch["course"] / "feedback" / case.student / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
-        assert not [line for line in secret if line in html], case.student
-        assert "BEGIN HIDDEN TESTS" not in html
+        page = _readable((batch["course"] / "feedback" / case.student / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text())
+        assert not [line for line in secret if line in page], case.student
+        assert "BEGIN SOLUTION" not in page and "cases_hash" not in page and "source_hash" not in page
+        if case.student != "classmate":
+            assert "classmate-marker-7c1f" not in page, case.student
+    dumped = _readable((batch["course"] / "feedback" / "print_secrets" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text())
+    assert "FILE" in dumped and "gradebook.db" in dumped   # it did read its own copy of the gradebook
+    assert "SQLite format 3" in dumped                     # ... and printed it, base64-decoded here
+
+
+def test_asking_for_the_cases_ahead_gets_none(batch):
+    page = (batch["course"] / "feedback" / "peek_cases" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
+    assert "asked ahead: 0 cases" in page
 
 
 def test_megabytes_of_output_stay_bounded(batch):

@@ -164,3 +164,29 @@ def test_run_command_prints_each_case_and_what_was_handed_in(course, tmp_path):
     assert f"case 0: args ({n}, {rate!r})" in r.stdout
     assert f"-> value = [0.      , {1 / rate:.6f}," in r.stdout.replace("0.00", "0.00")
     assert "-> ValueError: no name" in r.stdout
+
+
+def test_behind_a_gate_only_the_running_test_cells_cases_are_answered(course, tmp_path):
+    """The worker says which test cell runs; a kernel asking at any other moment gets no cases."""
+    import socket
+
+    from grader.cases import CaseServer, draw
+    from snakekit.handin import fetch_cases
+
+    with CaseServer(draw(course, "t1", 3)) as server:
+        path = server.listen(tmp_path / "c.sock", gate=tmp_path / "gate")
+        assert oct((tmp_path / "gate").stat().st_mode & 0o777) == "0o600"     # root's only
+        worker = socket.socket(socket.AF_UNIX)
+        worker.connect(str(tmp_path / "gate"))
+        line = worker.makefile("rwb", buffering=0)
+        assert fetch_cases(path, "ex_a_test") == []                          # no test cell runs: nothing
+        line.write(b"open ex_a_test\n")
+        assert line.readline() == b"ok\n"
+        assert len(fetch_cases(path, "ex_a_test")) == 4
+        assert fetch_cases(path, "ex_b_test") == []                          # another exercise's: nothing
+        line.write(b"close\n")
+        assert line.readline() == b"ok\n"
+        assert fetch_cases(path, "ex_a_test") == []
+        assert server.refused == [(path, "ex_a_test"), (path, "ex_b_test"), (path, "ex_a_test")]
+        worker.close()
+    assert not (tmp_path / "gate").exists()

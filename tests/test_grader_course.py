@@ -40,7 +40,7 @@ def graded(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("course06")
     course = tmp / "course"
     shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
-        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log"))
+        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log", "__pycache__"))
     sol = _solutions()
     _hand_in(course, "ana", sol)
     # right for the visible cases (10 Hz), wrong for the hidden rates
@@ -55,42 +55,37 @@ def graded(tmp_path_factory):
 def test_a_ta_gets_grades_csv_and_feedback(graded):
     course, r = graded
     assert r.returncode == 0, r.stderr[-3000:]
+    assert "hidden cases drawn with seed" in r.stderr
     rows = read_csv(course / f"grades-{LESSON}.csv")
-    assert {s: (rows[s]["score"], rows[s]["max_score"], rows[s]["status"]) for s in rows} == {
-        "ana": ("18", "18", "graded"), "dan": ("16", "18", "graded"), "eve": ("0", "18", "graded")}
+    assert {s: (rows[s]["max_score"], rows[s]["status"]) for s in rows} == {
+        "ana": ("18", "graded"), "dan": ("18", "graded"), "eve": ("18", "graded")}
+    assert (rows["ana"]["score"], rows["eve"]["score"]) == ("18", "0")
+    # one slip in 6.1: it loses 6.1's points and a share of what builds on it, never all of it
+    assert 10 <= float(rows["dan"]["score"]) < 18
     for s in rows:
         assert (course / "feedback" / s / LESSON / f"{LESSON}.html").exists()
         ran = nbformat.read(course / "autograded" / s / LESSON / f"{LESSON}.ipynb", as_version=4)
-        assert any("BEGIN HIDDEN TESTS" in c.source for c in ran.cells)  # for the TA: as it ran
+        assert not any("BEGIN HIDDEN TESTS" in c.source for c in ran.cells)  # no notebook has hidden tests
 
 
-def test_failed_hidden_test_feedback_says_what_and_where_without_the_test(graded):
+def test_a_wrong_case_is_named_with_its_call_and_numbers(graded):
     course, _ = graded
     html = (course / "feedback" / "dan" / LESSON / f"{LESSON}.html").read_text()
-    assert "Grader: ex06_1_sweep_times_test: 0 / 2 points" in html
-    assert "sweep_times: 6 of 6 hidden cases wrong; first at input (485, 60.8922): entry 1 is 0.1, expected 0.0164225" in html
-    src = nbformat.read(course / "source" / LESSON / f"{LESSON}.ipynb", as_version=4)
-    from grader.feedback import hidden_lines
-
-    secret = hidden_lines(c.source for c in src.cells)
-    assert secret and not [line for line in secret if line in html]
-    # the hidden test's own failure message (printed in the kernel) does not reach the student
-    ran = (course / "autograded" / "dan" / LESSON / f"{LESSON}.ipynb").read_text()
-    assert "send times[484] at points=485" in ran and "send times[484]" not in html
+    assert "Grader: ex06_1_sweep_times_test: 0 / 2 points" in html or "Grader: ex06_1_sweep_times_test: 0." in html
+    assert "hidden cases wrong; the first: sweep_times(" in html and "expected" in html and "tolerance" in html
 
 
-def test_stopped_at_a_visible_check_feedback_repeats_that_check(graded):
+def test_an_untouched_notebook_is_told_what_is_missing(graded):
     course, _ = graded
     html = (course / "feedback" / "eve" / LESSON / f"{LESSON}.html").read_text()
-    assert ("Grader: ex06_1_sweep_times_test: 0 / 2 points</b><br/>nothing was handed in: the test cell stopped at a "
-            "visible check, before the hidden tests ran. It said: CheckFailed: exercise 6.1 sweep_times: `sweep_times` "
-            "is not written yet") in html
+    assert "Grader: ex06_1_sweep_times_test: 0 / 2 points" in html
+    assert "hidden cases wrong; the first: sweep_times(" in html and "your function raised" in html
 
 
 def test_task2_feedback_plots_the_run_against_the_reference(graded):
     course, _ = graded
     html = (course / "feedback" / "ana" / LESSON / f"{LESSON}.html").read_text()
-    assert "Grader: ex06_3_task2_test: 10 / 10 points" in html
+    assert "Grader: ex06_3_task2_test:" in html and "every check passed in every hidden case" in html
     assert 'alt="No description has been provided for this image" class="" src="data:image/png;base64,' in html
 
 
@@ -110,7 +105,7 @@ def graded01(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("course01")
     course = tmp / "course"
     shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
-        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log"))
+        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log", "__pycache__"))
     sol = _solutions(LESSON01)
     _hand_in(course, "ana", sol, LESSON01)
     _hand_in(course, "mal", {**sol, "ex01_1_planar_fk": CHEAT}, LESSON01)
@@ -132,4 +127,4 @@ def test_lesson01_patching_numpy_and_the_checks_scores_0_for_that_exercise(grade
     assert not [o for o in test.outputs if o.output_type == "error"]
     html = (course / "feedback" / "mal" / LESSON01 / f"{LESSON01}.html").read_text()
     assert "Grader: ex01_1_planar_fk_test: 0 / 4 points" in html
-    assert "planar_fk: 23 of 23 hidden cases wrong" in html
+    assert "hidden cases wrong; the first: planar_fk(" in html

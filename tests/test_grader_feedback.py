@@ -43,10 +43,16 @@ def _page(course: Path, student: str) -> str:
 
 
 def _secret_lines() -> set[str]:
-    from grader.feedback import hidden_lines
-
+    """What no page may show: the instructor's solution lines that no student here wrote (there
+    are no hidden tests any more), and the lines of the hidden cases' module."""
     src = nbformat.read(FIXTURE / "source" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
-    return hidden_lines(c.source for c in src.cells)
+    written = {line.strip() for v in GOOD.values() for line in v.splitlines()}
+    lines = {line.strip() for c in src.cells if c.metadata.get("nbgrader", {}).get("solution")
+             for line in c.source.splitlines() if "=" in line and line.strip() not in written}
+    lines |= {line.strip() for line in (FIXTURE / "cases" / f"{ASSIGNMENT}.py").read_text().splitlines()
+              if line.strip().startswith(("def ", "rate =", "points =", "return"))}
+    assert "angle = amplitude * np.sin(2 * np.pi * t / (t[-1] / sweeps))" in lines
+    return lines
 
 
 def _loads_nothing(page: str) -> None:
@@ -90,7 +96,7 @@ def test_a_stopped_notebooks_page_keeps_its_outputs_up_to_the_stopped_cell(grade
     assert before < loop_cell < note  # the note follows the cell that was stopped
     assert page.count("stopped here") == 1
     assert "Grader: ex1_tool_xy_test: 2 / 2 points" in page
-    # the test cell after it never ran: the student is told why, and its hidden part is not shown
+    # the test cell after it never ran: the student is told why
     assert "Grader: ex2_sweep_test: 0 / 4 points" in page and "nothing was handed in" in page
     ran = nbformat.read(course / "autograded" / "loop" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
     stopped = [i for i, c in enumerate(ran.cells) if c.cell_type == "code" and "while True" in c.source][0]

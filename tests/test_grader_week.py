@@ -229,7 +229,7 @@ def test_a_hub_student_fetches_the_safe_page(week):
     assert len(fetched) == 1
     safe = (week["course"] / "feedback" / "erin" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_bytes()
     assert fetched[0].read_bytes() == safe and b"Grader: ex1_tool_xy_test: 2 / 2 points" in safe
-    assert b"hidden_rng_for_tool_xy" not in safe
+    assert b"t / (t[-1] / sweeps)" not in safe  # the instructor's solution stays out
 
 
 def test_export_for_canvas_has_every_number(week):
@@ -257,14 +257,13 @@ def test_nbgraders_own_export_keeps_its_long_format_with_the_penalty(week):
     assert float(rows["carol"]["score"]) == 6.0 and float(rows["alice"]["score"]) == 7.0
 
 
-def test_a_changed_hidden_test_is_refused_until_regenerated(week, capsys):
+def test_a_changed_test_cell_is_refused_until_regenerated(week, capsys):
     course = week["course"]
     path = course / "source" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb"
     before = path.read_text()
     nb = nbformat.read(path, as_version=4)
     test = next(c for c in nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex1_tool_xy_test")
-    test.source = test.source.replace("hidden_rng_for_tool_xy = np.random.default_rng(20240611)",
-                                      "hidden_rng_for_tool_xy = np.random.default_rng(20240612)")
+    test.source = test.source.replace("at q = 0 the tool is at [0.3315, 0] m", "at q = 0 the tool is at (0.3315, 0) m")
     nbformat.write(nb, path)
     try:
         csv_before = (course / f"grades-{ASSIGNMENT}.csv").read_bytes()
@@ -274,6 +273,21 @@ def test_a_changed_hidden_test_is_refused_until_regenerated(week, capsys):
         assert "the gradebook's cells differ from the source's (ex1_tool_xy_test)" in r.stderr
         assert f"python -m grader.references {ASSIGNMENT} --course {course} --out {week['refs']}" in r.stderr
         assert "nothing was graded" in r.stderr
+        assert (course / f"grades-{ASSIGNMENT}.csv").read_bytes() == csv_before
+    finally:
+        path.write_text(before)
+
+
+def test_a_changed_cases_module_is_refused_until_the_reference_is_recorded_again(week, capsys):
+    course = week["course"]
+    path = course / "cases" / f"{ASSIGNMENT}.py"
+    before = path.read_text()
+    path.write_text(before.replace("for _ in range(8)", "for _ in range(9)"))
+    try:
+        csv_before = (course / f"grades-{ASSIGNMENT}.csv").read_bytes()
+        r = run(capsys, "grade", ASSIGNMENT, "--course", course, "--references", week["refs"], "--student", "alice")
+        assert r.returncode == 2 and f"{course}/cases/{ASSIGNMENT}.py changed since" in r.stderr, r.stderr
+        assert f"python -m grader.references {ASSIGNMENT} --course {course} --out {week['refs']}" in r.stderr
         assert (course / f"grades-{ASSIGNMENT}.csv").read_bytes() == csv_before
     finally:
         path.write_text(before)

@@ -150,12 +150,13 @@ def answers_in_sight(instructor_path: Path, student_path: Path, work: Path,
                     run(stand_in)
                     if run(ex["visible"]) is None:
                         passed.append(f"{ex['grade_id']}: this answer passes its visible check:\n{stand_in}")
-            for gid, wrong, hint in mistakes:
+            for gid, wrong, hint, *anywhere in mistakes:
                 if gid == ex["grade_id"]:
                     tried = True
                     run(wrong)
                     shown = run(ex["visible"])
-                    if shown is None or hint not in shown.partition("\nHint: ")[2]:
+                    said = shown if anywhere or shown is None else shown.partition("\nHint: ")[2]
+                    if shown is None or hint not in said:
                         problems.append(f"{gid}: the answer\n{wrong}\nshould be told {hint!r}; its check said {shown!r}")
             # the right answer back: the check passes again (so the failures above were the trials')
             if tried:
@@ -167,34 +168,101 @@ def answers_in_sight(instructor_path: Path, student_path: Path, work: Path,
 
 # Wrong answers of the kind students write, and the hint each one's visible check must give:
 # the hints are recognised from worked numbers, so they are tried here with the mistake itself.
+# With a fourth element (True) the words may be anywhere in the message, not only in its hint:
+# a beginner's slip (a missing return, a list), a shortcut, a missing ValueError.
+_FK = "    phi = np.cumsum(q)\n    L = spec.lengths\n"
+_DLS = ("    e = np.asarray(target, dtype=float) - snakekit.tool_pose_2d(q)[:2]\n"
+        "    J = snakekit.planar_jacobian(q)[:2]\n")
+_SOLVE = ("def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n"
+          "    q = np.zeros(5) if q0 is None else np.asarray(q0, dtype=float)\n"
+          "    for _ in range(max_iter):\n"
+          "        if np.linalg.norm(np.asarray(target) - snakekit.tool_pose_2d(q)[:2]) < tol:\n"
+          "            break\n"
+          "        q = np.clip(dls_step(q, target), spec.lower, spec.upper)\n"
+          "    return q")
+_TASK1 = ("def task1(panel, targets):\n    out = []\n    for x, y, heading in targets:\n"
+          "        panel.set_target(x, y, heading)\n        run = panel.execute()\n"
+          "        out.append({})\n    return np.array(out)")
 MISTAKES = {
     "00_meet_the_arm": [
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
-         "    return float(np.hypot(x - target[0], y - target[1]))", "this looks like metres")],
+         "    return float(np.hypot(x - target[0], y - target[1]))", "this looks like metres"),
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
+         "    d = 1000 * float(np.hypot(x - target[0], y - target[1]))", "returned None (nothing)", True)],
     "01_forward_kinematics": [
         ("ex01_1_planar_fk_test", "def planar_fk(q):\n    L = spec.lengths\n"
          "    return np.array([np.sum(L * np.cos(q)), np.sum(L * np.sin(q)), np.sum(q)])",
          "a joint angle is not accumulated"),
-        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    phi = np.cumsum(q)\n"
-         "    return np.array([np.sum(spec.lengths * np.cos(phi)), np.sum(spec.lengths * np.sin(phi)), q[-1]])",
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    L = spec.lengths\n"
+         "    return np.array([np.sum(L * np.cos(q)), np.sum(L * np.sin(q)), q[-1]])",
+         "a joint angle is not accumulated"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), q[-1]])",
          "the heading is the sum of all five angles"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), np.angle(np.exp(1j * phi[-1]))])",
+         "the heading is wrapped"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(L * np.sin(phi)), np.sum(L * np.cos(phi)), phi[-1]])", "cos and sin are swapped"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(1000 * L * np.cos(phi)), np.sum(1000 * L * np.sin(phi)), phi[-1]])",
+         "the lengths look like millimetres"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    return snakekit.tool_pose_2d(q)",
+         "`snakekit.tool_pose_2d` was called", True),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), phi[-1]])", "returned None (nothing)", True),
         ("ex01_2_joint_positions_test", "def joint_positions(q):\n"
          "    steps = spec.lengths[:, None] * np.column_stack([np.cos(q), np.sin(q)])\n"
          "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])", "a joint angle is not accumulated"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n" + _FK +
+         "    xy = [[0.0, 0.0]]\n    for l, p in zip(L, phi):\n"
+         "        xy.append([xy[-1][0] + l * np.cos(p), xy[-1][1] + l * np.sin(p)])\n    return xy",
+         "not a numpy array", True),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n    return snakekit.joint_frames(q)[:, :2, 3]",
+         "`snakekit.joint_frames` was called", True),
         ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n"
-         "    return n_joints * link_length + tool_offset", "counts one link too many")],
+         "    return n_joints * link_length + tool_offset", "counts one link too many"),
+        ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n    return spec.reach",
+         "`snakekit.SnakeSpec.reach` was called", True)],
     "02_jacobian": [
         ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
          "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
          "    return np.vstack([down(L * np.sin(phi)), down(-L * np.cos(phi)), np.ones(len(q))])",
          "the signs are flipped"),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    return snakekit.planar_jacobian(q)",
+         "`snakekit.planar_jacobian` was called", True),
+        ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n"
+         "    q = np.asarray(q, dtype=float)\n"
+         "    return np.column_stack([(np.asarray(f(q + h * e)) - np.asarray(f(q))) / h for e in np.eye(len(q))])",
+         "one-sided difference"),
         ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[:2]\n"
          "    return float(np.linalg.det(J @ J.T))", "without the square root")],
     "03_inverse_kinematics": [
-        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n"
-         "    e = np.asarray(target, dtype=float) - snakekit.tool_pose_2d(q)[:2]\n"
-         "    J = snakekit.planar_jacobian(q)[:2]\n"
-         "    return J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "this is only the step")],
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n"
+         "    c2 = np.clip((x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1, 1)\n"
+         "    q2 = np.arccos(c2)\n"
+         "    rows = [[np.arctan2(y, x) - np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)]\n"
+         "    return np.degrees(np.array(rows))", "the angles look like degrees"),
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n"
+         "    c2 = np.clip((x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1, 1)\n"
+         "    q2 = np.arccos(c2)\n"
+         "    rows = [[np.arctan2(y, x) - np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)]\n"
+         "    return np.array(rows)", "raise a ValueError there", True),
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n"
+         "    c2 = (x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2)\n"
+         "    if abs(c2) > 1:\n        raise ValueError('out of reach')\n    q2 = np.arccos(c2)\n"
+         "    rows = [[np.arctan2(y, x) - np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)]\n"
+         "    return np.array(rows)", "np.clip the cosine"),
+        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
+         "    return J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "this is only the step"),
+        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
+         "    return q + J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(2), e)", "use the `damping` argument"),
+        ("ex03_3_ik_loop_test", _SOLVE, "raise a ValueError there", True),
+        ("ex03_3_ik_loop_test", "def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n"
+         "    return snakekit.inverse_kinematics(target)", "`snakekit.inverse_kinematics` was called", True),
+        ("ex03_4_task1_test", _TASK1.format("run.measured.positions[-1]"), "are joint angles"),
+        ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])"),
+         "raise a ValueError there", True)],
     "04_trajectories": [
         ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)\n"
          "    return 3 * r ** 2 - 2 * r ** 3", "this is the cubic"),

@@ -1,0 +1,33 @@
+"""Lesson 02's hidden cases, drawn by the grader anew for every grading batch."""
+
+import numpy as np
+
+#: The grader's tolerances per grade id: as the visible checks' (finite differences: 1e-6; a
+#: determinant near 0 rounds to about 1e-10).
+TOLERANCES = {"ex02_1_planar_jacobian_test": {"rtol": 1e-9, "atol": 1e-12},
+              "ex02_2_numerical_jacobian_test": {"rtol": 0.0, "atol": 1e-6},
+              "ex02_3_manipulability_test": {"rtol": 1e-9, "atol": 1e-10}}
+
+
+def ex02_1_planar_jacobian_test(rng, spec):
+    """planar_jacobian(q): 9 cases, random poses inside the limits, the limits, the straight arm."""
+    q = list(rng.uniform(spec.lower, spec.upper, (7, spec.n_joints)))
+    return [(x,) for x in q + [np.full(spec.n_joints, float(spec.upper)), np.zeros(spec.n_joints)]]
+
+
+def ex02_2_numerical_jacobian_test(rng, spec):
+    """numerical_jacobian on the test functions the check cell names ("g", "tool"), at random
+    points and steps: (function name, q, h). 7 cases."""
+    cases = [("g", rng.uniform(-1.5, 1.5, 3), float(10 ** rng.uniform(-6.5, -4.5))) for _ in range(4)]
+    cases += [("tool", rng.uniform(spec.lower, spec.upper, spec.n_joints), float(10 ** rng.uniform(-6.5, -4.5)))
+              for _ in range(2)]
+    return cases + [("g", rng.uniform(-1.5, 1.5, 3), 1e-6)]
+
+
+def ex02_3_manipulability_test(rng, spec):
+    """manipulability(q): 9 cases, random poses, and three singular ones (straight arm with
+    only one joint turned: w = 0)."""
+    q = list(rng.uniform(spec.lower, spec.upper, (6, spec.n_joints)))
+    first, last = np.zeros(spec.n_joints), np.zeros(spec.n_joints)
+    first[0], last[-1] = rng.uniform(-1.5, 1.5), rng.uniform(0.5, 1.5)
+    return [(x,) for x in q + [np.zeros(spec.n_joints), first, last]]

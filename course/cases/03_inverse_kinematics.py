@@ -1,0 +1,100 @@
+"""Lesson 03's hidden cases, drawn by the grader anew for every grading batch.
+
+3.1 and 3.3 are judged by a property (the tip on the target, inside the joint limits), 3.4 by
+where its moves end; an unreachable target is a case too: the instructor's function raises a
+ValueError there, so the student's must raise one.
+"""
+
+import numpy as np
+
+#: The grader's tolerances per grade id, as the visible checks': 3.1 the tip on the target (1 nm),
+#: 3.2 exact math (1e-9 rad), 3.3 the tool on the target (the solver stops within 1e-6 m; 1e-5
+#: m leaves room), 3.4 the tool after each move (the servo settles within a few mrad: 3 mm).
+TOLERANCES = {"ex03_1_two_link_ik_test": {"rtol": 1e-9, "atol": 1e-9},
+              "ex03_2_dls_step_test": {"rtol": 1e-9, "atol": 1e-9},
+              "ex03_3_ik_loop_test": {"rtol": 0.0, "atol": 1e-5},
+              "ex03_4_task1_test": {"rtol": 0.0, "atol": 0.003}}
+
+
+def ex03_1_two_link_ik_test(rng, spec):
+    """two_link_ik(x, y, l1, l2): 9 cases; reachable targets of random links, a fully stretched
+    arm (both elbows coincide), and two targets out of reach (too far, too near)."""
+    cases = []
+    for _ in range(6):
+        l1, l2 = rng.uniform(0.05, 0.2, 2)
+        a, b = rng.uniform(-3.0, 3.0), rng.uniform(0.05, 3.0)
+        cases.append((float(l1 * np.cos(a) + l2 * np.cos(a + b)), float(l1 * np.sin(a) + l2 * np.sin(a + b)),
+                      float(l1), float(l2)))
+    l1, l2 = rng.uniform(0.05, 0.2, 2)
+    a = rng.uniform(-3.0, 3.0)
+    cases.append((float((l1 + l2) * np.cos(a)), float((l1 + l2) * np.sin(a)), float(l1), float(l2)))
+    far = (l1 + l2) * rng.uniform(1.1, 2.0)
+    cases.append((float(far * np.cos(a)), float(far * np.sin(a)), float(l1), float(l2)))
+    l2 = l1 * rng.uniform(0.3, 0.6)                 # a target inside the inner circle: too near
+    near = (l1 - l2) * rng.uniform(0.1, 0.8)
+    cases.append((float(near * np.cos(a)), float(near * np.sin(a)), float(l1), float(l2)))
+    return cases
+
+
+def _tool_xy(q, spec):
+    phi = np.cumsum(q)
+    return np.array([np.sum(spec.lengths * np.cos(phi)), np.sum(spec.lengths * np.sin(phi))])
+
+
+def ex03_2_dls_step_test(rng, spec):
+    """dls_step(q, target, damping): 8 cases, random poses and targets, dampings from 1e-3 to
+    0.1, and the straight arm (singular: the damping matters)."""
+    cases = []
+    for _ in range(6):
+        cases.append((rng.uniform(-1.2, 1.2, spec.n_joints), rng.uniform(-0.2, 0.25, 2) + [0.05, 0.0],
+                      float(10 ** rng.uniform(-3, -1))))
+    cases.append((np.zeros(spec.n_joints), rng.uniform(0.1, 0.3, 2), float(10 ** rng.uniform(-3, -1))))
+    cases.append((np.zeros(spec.n_joints), np.array([rng.uniform(0.2, 0.3), rng.uniform(0.01, 0.05)]), 1e-3))
+    return cases
+
+
+def _converges(target, q0, spec, tol=1e-6, max_iter=200, damping=1e-3):
+    """Whether the lesson's loop (clamped DLS steps) reaches ``target`` from ``q0``: the hidden
+    reachable targets are ones it reaches, so a right answer never has to raise there."""
+    q = np.array(q0, dtype=float)
+    for _ in range(max_iter):
+        phi = np.cumsum(q)
+        e = target - _tool_xy(q, spec)
+        if np.linalg.norm(e) < tol:
+            return True
+        dx, dy = -spec.lengths * np.sin(phi), spec.lengths * np.cos(phi)
+        J = np.vstack([np.cumsum(dx[::-1])[::-1], np.cumsum(dy[::-1])[::-1]])
+        q = np.clip(q + J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e), spec.lower, spec.upper)
+    return False
+
+
+def ex03_3_ik_loop_test(rng, spec):
+    """solve_ik(target[, q0]): 7 cases; targets the arm reaches inside its limits (from home,
+    and from a given start), and one out of reach (a ValueError expected)."""
+    cases = []
+    while len(cases) < 4:
+        t = _tool_xy(rng.uniform(-0.9, 0.9, spec.n_joints), spec)
+        if _converges(t, np.zeros(spec.n_joints), spec):
+            cases.append((t,))
+    while len(cases) < 6:
+        t, q0 = _tool_xy(rng.uniform(-0.9, 0.9, spec.n_joints), spec), rng.uniform(-0.5, 0.5, spec.n_joints)
+        if _converges(t, q0, spec):
+            cases.append((t, q0))
+    a = rng.uniform(-np.pi, np.pi)
+    cases.append((spec.reach * rng.uniform(1.1, 1.4) * np.array([np.cos(a), np.sin(a)]),))
+    return cases
+
+
+def ex03_4_task1_test(rng, spec):
+    """graded_task1(targets): 2 cases, each an (n, 3) array of (x, y, heading) targets: three the
+    arm reaches (each move costs a simulator run), and one out of reach (a ValueError expected,
+    before any move)."""
+    def reachable(n):
+        out = []
+        for q in rng.uniform(-0.7, 0.7, (n, spec.n_joints)):
+            out.append([*_tool_xy(q, spec), float(np.sum(q))])
+        return np.array(out)
+
+    a = rng.uniform(-np.pi / 2, np.pi / 2)
+    far = spec.reach * rng.uniform(1.1, 1.3)
+    return [(reachable(3),), (np.array([[far * np.cos(a), far * np.sin(a), 0.0]]),)]

@@ -1,0 +1,91 @@
+"""The course's check helpers (snakekit/checks.py) say a beginner's slips in plain words."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from snakekit import checks
+from snakekit.errors import CheckFailed, ShortcutError
+from tests.conftest import need
+
+
+def message(call) -> str:
+    with pytest.raises(CheckFailed) as e:
+        call()
+    return str(e.value)
+
+
+def test_a_function_without_return_is_said_to_return_none():
+    ex = checks.Exercise("9.1", "double")
+
+    def double(x):
+        2 * x     # noqa: B018 - the slip: no return
+
+    said = message(lambda: ex(double, 0.5))
+    assert said == ("exercise 9.1 double: `double` returned None (nothing) when called with 0.5: a function gives its "
+                    "result with a `return` line; is it missing, or does the function stop before it?")
+
+
+def test_a_list_where_an_array_is_asked_says_to_return_an_array():
+    ex = checks.Exercise("9.2", "rows")
+    said = message(lambda: ex.close([[0.0, 0.0], [1.0, 0.0]], [[0.0, 0.0], [1.0, 0.0]], what="rows", unit="m",
+                                    array=True))
+    assert "is a Python list, not a numpy array: return np.array(...)" in said
+    ex.close(np.array([[0.0, 0.0], [1.0, 0.0]]), [[0.0, 0.0], [1.0, 0.0]], what="rows", unit="m", array=True)
+    ex.close([1.0, 2.0], [1.0, 2.0], what="a list is fine where no array is asked")
+
+
+def test_raises_passes_the_asked_error_and_names_what_came_instead():
+    ex = checks.Exercise("9.3", "ik")
+
+    def refuses(x):
+        raise ValueError(f"{x} is out of reach")
+
+    ex.raises(ValueError, refuses, 0.5, why="the target is out of reach")
+    assert ex.checked == 1
+    said = message(lambda: ex.raises(ValueError, lambda x: x, 0.5, why="the target is out of reach"))
+    assert said == ("exercise 9.3 ik: `ik` returned when called with 0.5; the target is out of reach: raise a "
+                    'ValueError there (`raise ValueError("...")`, saying why).')
+    said = message(lambda: ex.raises(ValueError, lambda x: 1 / 0, 0.5, why="the target is out of reach"))
+    assert said.startswith("exercise 9.3 ik: `ik` raised ZeroDivisionError when called with 0.5: division by zero")
+
+    def stub(x):
+        raise NotImplementedError("exercise 9.3: ik")
+
+    assert "is not written yet" in message(lambda: ex.raises(ValueError, stub, 0.5))
+
+
+def test_a_shortcut_inside_a_checked_call_is_reported_as_the_shortcut():
+    import snakekit
+
+    ex = checks.Exercise("9.4", "fk")
+    with checks.forbid("snakekit.tool_pose_2d", what="planar FK"):
+        with pytest.raises(ShortcutError) as e:
+            ex(lambda q: snakekit.tool_pose_2d(q), np.zeros(5))
+    assert str(e.value).startswith("this exercise asks you to write planar FK yourself; `snakekit.tool_pose_2d` "
+                                   "was called")
+
+
+def test_a_check_cell_after_a_broken_answer_cell_says_the_answer_did_not_run(tmp_path, monkeypatch):
+    """A syntax error in the answer cell defines nothing: the check cell says so, not a bare NameError."""
+    nbformat, nbclient = need("nbformat"), need("nbclient")
+    monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    nb = nbformat.v4.new_notebook(cells=[
+        nbformat.v4.new_code_cell("from snakekit import checks"),
+        nbformat.v4.new_code_cell("def planar_fk(q)\n    return q"),           # the colon is missing
+        nbformat.v4.new_code_cell('ex = checks.Exercise("1.1", "planar_fk")\nex(planar_fk, 0.0)'),
+        nbformat.v4.new_code_cell("print(undefined_name)")])
+    nbclient.NotebookClient(nb, timeout=120, kernel_name="python3", allow_errors=True,
+                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+    assert nb.cells[1].outputs[0].ename == "SyntaxError"
+    error = nb.cells[2].outputs[0]
+    assert (error.ename, error.evalue) == (
+        "NameError", "name 'planar_fk' is not defined: the cell that defines `planar_fk` has not run yet, or it "
+        "stopped with an error (a SyntaxError in your answer, say), so nothing was defined. Run that cell, fix the "
+        "error it shows, then run this cell again.")
+    assert "has not run yet" in nb.cells[3].outputs[0].evalue
