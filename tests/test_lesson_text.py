@@ -90,9 +90,66 @@ CLAIMS = {
         ("within about a millimetre of each target", "1000 * np.abs(poses[:, :2] - np.array(TASK1)[:, :2]).max()",
          (0.05, 2.0), None),
     ],
+    "04_trajectories": [
+        ("Worked number: `quintic(2.0, 1.0)` is `0.5`", "quintic(2.0, 1.0)", 0.5, 1e-12),
+        ("`trapezoid(1.0, 1.5, 3.0)` is `[1.1667, 1.5]`", "trapezoid(1.0, 1.5, 3.0)", [1.1667, 1.5], 5e-5),
+        ("`trapezoid(0.3, 1.5, 3.0)` is `[0.6325, 0.9487]`", "trapezoid(0.3, 1.5, 3.0)", [0.6325, 0.9487], 5e-5),
+        ("The quintic asks the highest peak speed, $1.875/T$", "peak(quintic_time_scaling)", 1.875, 0.01),
+        ("against $1.5/T$ for the cubic", "peak(cubic_time_scaling)", 1.5, 0.01),
+        ("and $1.333/T$ for this trapezoid", "peak(trapezoidal_time_scaling)", 1.333, 0.01),
+        ("a 1 s move at 10 Hz has 11 goals, the last at 1.0 s", "[len(sample_move(np.zeros(5), np.ones(5), 1.0)), "
+         "sample_move(np.zeros(5), np.ones(5), 1.0).times[-1]]", [11, 1.0], 1e-12),
+        ("Three steps are too fast for joint 1", "(steps(fast) > spec.velocity_limit).sum()", 3, 0),
+        ("faster still (up to 3.65 rad/s between goals)", "steps(fast).max()", 3.65, 0.005),
+        ("**margin of 5 mm**", "1000 * spec.collision_margin", 5, 1e-9),
+    ],
+    "05_simulation": [
+        ("The speed ramps up for about 0.13 s", "t[np.argmax(speed >= 0.95 * cruise)]", 0.13, 0.015),
+        ("peaks at 1.38 rad/s", "speed.max()", 1.38, 0.005),
+        ("settles to cruise at 1.32 rad/s", "cruise", 1.32, 0.005),
+        ("The firmware's own profile ramps up in 35 ms", "1000 * pv_rad_s(55) / pa_rad_s2(100)", 35, 0.5),
+        ("PV = 55 (1.32 rad/s) and PA = 100 (37.45 rad/s²)", "[pv_rad_s(55), pa_rad_s2(100)]", [1.32, 37.45], 0.005),
+        ("PV = 62 (1.487 rad/s)", "pv_rad_s(62)", 1.487, 0.0005),
+        ("`profile_move_time(1.0, 62, 100)` is about 0.712 s", "profile_move_time(1.0, 62, 100)", 0.712, 0.0005),
+        ("within about a quarter of a milliradian (0.01°)", "[1000 * abs(sse), np.degrees(abs(sse))]", [0.25, 0.01],
+         0.005),
+        ("0.71 s with Profile Velocity 62 and 1.37 s with 31",
+         "[profile_move_time(1.0, 62, 100), profile_move_time(1.0, 31, 100)]", [0.71, 1.37], 0.005),
+        ("the arm gets there in about 0.3 s", "0.01 * (1 + np.argmax(np.abs(np.array(samples) - 1.0) < 0.01))",
+         (0.2, 0.4), None),
+    ],
+    "06_coded_sweep": [
+        ("`sweep_times(4, 10.0)` is `[0.0, 0.1, 0.2, 0.3]`", "sweep_times(4, 10.0)", [0.0, 0.1, 0.2, 0.3], 1e-12),
+        ("**What it shows.** 49.9 s: 500 goals span 499 intervals of 0.1 s", "sweep_times(500, 10.0)[-1]", 49.9, 1e-9),
+        ("It comes out around **11 degrees**", "np.degrees(run.tracking_error()[0])", (10.5, 11.5), None),
+        ("amplitude is only 0.2 rad = **11.5 degrees**", "np.degrees(0.2)", 11.5, 0.05),
+        ("once the 0.16 s lag is taken out", "estimate_lag(run, 0)", 0.16, 0.005),
+        ("About 11 degrees of raw error shrink to about 1 degree", "[np.degrees(run.tracking_error()[0]), "
+         "np.degrees(np.abs(run.measured.positions[inside, 0] - run.commanded.sample(t[inside] - estimate_lag(run, 0))"
+         "[:, 0]).max())]", [11.0, 1.0], 0.5),
+    ],
+    "07_real_robot": [
+        ("0 rad is 2048, $\\pi/2$ is 3072, $-1$ rad is 1396", "to_ticks(np.array([0.0, np.pi / 2, -1.0]))",
+         [2048, 3072, 1396], 0),
+        ("**What it shows.** 3071: tick 3072 is 1.5708 rad", "[hardware.position_limit_ticks()[1], "
+         "float(hardware.ticks_to_radians(3072))]", [3071, 1.5708], 5e-5),
+        ("from home the largest joint distance is 0.4 rad, so T = 1.875 x 0.4 / 1.5 = 0.5 s", "1.875 * 0.4 / 1.5", 0.5,
+         1e-12),
+        # the bus runs in real time: on a loaded machine a goal may leave a cycle late, and the peak moves a little
+        ("it peaks at about 0.5 N m on every joint", "np.abs(home_run.efforts).max(axis=0)", [0.5] * 5, 0.1),
+        ("is almost 0 once the arm holds still at home", "np.abs(home_run.efforts[-10:]).max()", (0.0, 0.06), None),
+        ("Similar, and usually a little larger on the bus",
+         "(run.tracking_error() / sim_run.tracking_error()).mean()", (0.9, 2.0), None),
+    ],
 }
 # names the expressions use, defined in the kernel after the lesson has run
 PRELUDE = "Q5 = np.array([0.3, 0.5, -0.4, 0.6, 0.2])\nTASK1 = [(0.25, 0.10, 0.3), (0.12, 0.22, 1.6), (0.28, -0.08, -0.4)]\n"
+# for lessons 4 and 5: a scaling's peak speed x T (on the lesson's 2 s grid), a trajectory's step speeds on
+# joint 1, the Profile Velocity and Acceleration registers in SI units
+PRELUDE += ("peak = lambda f: np.gradient(f(2.0, np.linspace(0, 2.0, 400)), np.linspace(0, 2.0, 400)).max() * 2.0\n"
+            "steps = lambda tr: np.abs(np.diff(tr.positions[:, 0])) / np.diff(tr.times)\n"
+            "pv_rad_s = lambda pv: pv * 0.229 * 2 * np.pi / 60\n"
+            "pa_rad_s2 = lambda pa: pa * 214.577 * 2 * np.pi / 3600\n")
 
 
 def read(path: Path):

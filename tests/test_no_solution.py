@@ -371,9 +371,6 @@ MISTAKES = {
         ("ex06_3_task2_test", "def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n"
          "    times = sweep_times(points, rate)\n"
          "    return snakekit.Trajectory(times, sweep_positions(times, sweeps, amplitude))", "check_limits"),
-        ("ex06_3_task2_test", "def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n"
-         "    times = sweep_times(points, rate)\n    snakekit.Trajectory(times, sweep_positions(times, sweeps, amplitude))",
-         "and return it"),
         ("ex06_4_phase_lag_test", "def estimate_lag(run, joint=0):\n    t = run.measured.times\n"
          "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
          "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 501)\n"

@@ -18,10 +18,10 @@ def ex04_1_quintic_test(rng, spec):
 
 
 def ex04_2_trapezoid_test(rng, spec):
-    """trapezoid(distance, v_max, a_max): 10 moves of either sign (trapezoids and triangles), no move at
+    """trapezoid(distance, v_max, a_max): 9 moves of either sign (trapezoids and triangles), no move at
     all, a move backwards, and one exactly on the border between triangle and trapezoid."""
     cases = [(float(d), float(v), float(a)) for d, v, a in
-             zip(rng.uniform(-2.0, 2.0, 10), rng.uniform(0.2, 3.0, 10), rng.uniform(0.5, 40.0, 10))]
+             zip(rng.uniform(-2.0, 2.0, 9), rng.uniform(0.2, 3.0, 9), rng.uniform(0.5, 40.0, 9))]
     v, a = float(rng.uniform(0.5, 2.0)), float(rng.uniform(1.0, 10.0))
     cases += [(0.0, v, a), (-float(rng.uniform(1.0, 2.0)) * v * v / a, v, a), (v * v / a, v, a)]
     return cases
