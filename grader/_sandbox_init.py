@@ -76,6 +76,14 @@ def enter(cfg):
     for node in ("null", "zero", "full", "random", "urandom"):
         bind(root, f"/dev/{node}", readonly=False)
     os.makedirs(inside(root, "dev/shm"), exist_ok=True)
+    # A private instance of pseudo-terminals: lesson 07's bus emulator serves the arm on a pty
+    # (os.openpty), and the host's /dev/pts (other users' terminals) stays out of sight.
+    os.makedirs(inside(root, "dev/pts"), exist_ok=True)
+    try:
+        mount("devpts", inside(root, "dev/pts"), "devpts", MS_NOSUID | MS_NOEXEC, "newinstance,ptmxmode=0666,mode=0620")
+        os.symlink("pts/ptmx", inside(root, "dev/ptmx"))
+    except OSError as e:  # a kernel that refuses devpts here: the emulator then says it has no pty
+        print(f"sandbox: no private pseudo-terminals ({e})", file=sys.stderr)
     mount("tmpfs", inside(root, "dev/shm"), "tmpfs", MS_NOSUID | MS_NODEV, f"mode=1777,size={lim['tmp']}")
     for name, target in (("fd", "/proc/self/fd"), ("stdin", "/proc/self/fd/0"), ("stdout", "/proc/self/fd/1"),
                          ("stderr", "/proc/self/fd/2")):

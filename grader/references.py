@@ -171,6 +171,10 @@ def expected(ref: Reference, batch: Draw, handins: dict[str, list], *, where: st
         for k, r in enumerate(results):
             if isinstance(r, str) and r.startswith("returned"):
                 raise ReferenceError(f"{where}: {gid} {r} at hidden case {k} {_args(cases[k])} (seed {batch.seed})")
+        if results and all(isinstance(r, str) for r in results):
+            raise ReferenceError(f"{where}: {gid} raised at every one of its {len(results)} hidden cases (seed "
+                                 f"{batch.seed}), the first: {results[0]}; a solution that only raises grades "
+                                 "nothing (is something the notebook needs missing on this machine?)")
         kind = kind_of(results)
         names = sorted(set().union(*(r for r in results if isinstance(r, dict))))
         if kind != ex["kind"] or (names and names != ex["outputs"]):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 import textwrap
@@ -191,3 +192,40 @@ def test_behind_a_gate_only_the_running_test_cells_cases_are_answered(course, tm
         assert server.refused == [(path, "ex_a_test"), (path, "ex_b_test"), (path, "ex_a_test")]
         worker.close()
     assert not (tmp_path / "gate").exists()
+
+
+def test_a_sandbox_has_pseudo_terminals_of_its_own(tmp_path):
+    """Lesson 07's bus emulator serves the arm on a pty: a sandbox can open one (a private devpts
+    instance), and it does not see the host's terminals."""
+    need_program("unshare")
+    from grader import sandbox
+
+    work = tmp_path / "work"
+    work.mkdir()
+    script = textwrap.dedent("""
+        import os
+        master, slave = os.openpty()
+        os.write(master, b"ping\\n")
+        print("read:", os.read(slave, 5), "name:", os.ttyname(slave), "others:", sorted(os.listdir("/dev/pts")))
+    """)
+    with open(tmp_path / "out.txt", "w") as out:
+        outcome = sandbox.run([sys.executable, "-c", script], workdir=work, limits=sandbox.Limits(wall=60),
+                              env={"PATH": "/usr/bin:/bin"}, stdout=out, stderr=subprocess.STDOUT)
+    text = (tmp_path / "out.txt").read_text()
+    assert outcome.returncode == 0, text
+    assert "read: b'ping\\n' name: /dev/pts/0 others: ['0', 'ptmx']" in text, text
+
+
+def test_an_instructor_run_that_only_raises_stops_the_batch(course):
+    """A solution that raised at every case (a device missing on the grading machine, say) would make
+    every student who raises the same score full marks: the batch refuses it."""
+    from grader.cases import draw
+    from grader.references import ReferenceError, expected
+
+    batch = draw(course, "t1", 5)
+    gid = "ex_a_test"
+    ref = type("Ref", (), {"exercises": {gid: {"kind": "values", "outputs": ["value"], "tolerances": {}}}})()
+    batch = dataclasses.replace(batch, cases={gid: batch.cases[gid]})
+    errors = ["OSError: out of pty devices"] * len(batch.cases[gid])
+    with pytest.raises(ReferenceError, match=r"ex_a_test raised at every one of its 4 hidden cases .*OSError: out of pty"):
+        expected(ref, batch, {gid: errors})
