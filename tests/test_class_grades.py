@@ -130,8 +130,13 @@ def test_each_class_has_30_submissions_with_ranges_reasons_and_cells_of_the_rele
         assert set(s.answers) <= cells, f"{s.name}: {set(s.answers) - cells} is not an answer cell of the release"
         assert set(s.credit) <= set(pts), f"{s.name}: {set(s.credit) - set(pts)} is not an exercise of the lesson"
         assert all(0 <= lo <= hi <= 1 for lo, hi in s.credit.values()), s.name
+    by_name = {s.name: s for s in module.STUDENTS}
     for p in module.PAIRS:
         assert {p.better, p.worse} <= set(names) and p.better != p.worse, p
+        # a pair must not contradict the two ranges
+        high = score_range(by_name[p.better], pts, module.SLIP_FLOOR)[1]
+        low = score_range(by_name[p.worse], pts, module.SLIP_FLOOR)[0]
+        assert high > low or (high == low and not p.strict), f"{p}: {p.better} can reach {high}, {p.worse} {low}"
 
 
 @pytest.fixture(scope="module", params=sorted(CLASSES), ids=["lesson03", "lesson06"])

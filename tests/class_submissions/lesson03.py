@@ -237,7 +237,7 @@ def two_link_ik(x, y, l1, l2):
     return np.column_stack([q1, q2])
 '''),
     S("jan", "3.1 with l1 where l2 belongs in q1 (right only when the links are equal)",
-      "3.1 right for equal links only", {"3.1": (0.0, 0.5)}, True,
+      "q2 and the elbow order right, q1 (so every tip) wrong unless the links are equal", {"3.1": (0.0, 0.6)}, True,
       T1=IK2_A.replace("l1 + l2 * np.cos(q2)", "l1 + l1 * np.cos(q2)")),
     S("kai", "3.1 q1 = atan2(y, x) + atan2(...) for q2 >= 0 (the wrong sign)", "3.1 wrong at every case",
       {"3.1": (0.0, 0.25)}, True, T1=IK2_A.replace("np.arctan2(y, x) - np.arctan2", "np.arctan2(y, x) + np.arctan2")),
@@ -262,8 +262,8 @@ def dls_step(q, target, damping=1e-3):
       "3.3 right for reachable targets, the refusal missing", {"3.3": (0.5, 0.9)}, True,
       T3=LOOP_A.replace('    raise ValueError(f"IK did not converge: still {dist:.3g} m away after {max_iter} steps")',
                         "    return q")),
-    S("sue", "3.3 compares the squared distance with tol (stops up to 1 mm off)", "3.3's solutions miss by up to 1 mm",
-      {"3.3": (0.0, 0.5)}, True,
+    S("sue", "3.3 compares the squared distance with tol (stops up to 1 mm off)",
+      "the loop is right, its stopping test wrong: some solutions stop up to 1 mm off", {"3.3": (0.25, 0.75)}, True,
       T3=LOOP_A.replace("dist = np.linalg.norm(target - snakekit.tool_pose_2d(q)[:2])",
                         "dist = np.sum((target - snakekit.tool_pose_2d(q)[:2]) ** 2)")),
     S("ted", "3.4 never checks set_target (no ValueError; crashes on None)", "3.4 right for reachable targets",
@@ -276,8 +276,8 @@ def task1(panel, targets):
         poses.append(snakekit.tool_pose_2d(run.measured.positions[-1]))
     return np.array(poses)
 '''),
-    S("una", "3.4 returns the final joint angles, not the tool poses", "3.4 returns the wrong quantity",
-      {"3.4": (0.0, 0.5)}, True, T4=TASK1_A.replace("results.append(snakekit.tool_pose_2d(final_q))",
+    S("una", "3.4 returns the final joint angles, not the tool poses",
+      "the moves are right, the last step (angles to tool pose) missing", {"3.4": (0.25, 0.75)}, True, T4=TASK1_A.replace("results.append(snakekit.tool_pose_2d(final_q))",
                                                      "results.append(final_q)")),
     S("vi", "3.1 has a syntax error (a missing colon)", "3.1 does not run", {"3.1": (0.0, 0.0)}, True,
       T1=IK2_A.replace("def two_link_ik(x, y, l1, l2):", "def two_link_ik(x, y, l1, l2)")),
