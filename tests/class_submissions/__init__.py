@@ -42,6 +42,17 @@ class Pair:
     strict: bool = False          # better must score more, not only as much
 
 
+def wrote_all(good: dict, ids: dict, name, did, why, credit=None, single_slip=False, **cells) -> Student:
+    """A student who wrote every exercise: ``good`` but for ``cells`` (``T1=source``; ``ids`` maps
+    T1... to the answer cells' grade ids)."""
+    return Student(name, did, {**good, **{ids[k]: v for k, v in cells.items()}}, why, credit or {}, single_slip)
+
+
+def wrote_some(name, did, why, credit, answers) -> Student:
+    """A student who wrote only the answer cells in ``answers`` (the others: not written)."""
+    return Student(name, did, answers, why, credit)
+
+
 def exercise_of(grade_id: str) -> str:
     """'ex06_3_task2_test' -> '6.3'."""
     m = re.match(r"ex0*(\d+)_(\d+)_", grade_id)

@@ -1,6 +1,8 @@
 '''Lesson 03 (inverse kinematics, a values lesson): a class of 31 hand-written submissions.'''
 
-from class_submissions import Pair, Student
+from functools import partial
+
+from class_submissions import Pair, wrote_all, wrote_some
 
 LESSON = "03_inverse_kinematics"
 SLIP_FLOOR = 0.0   # the issue sets a floor for one slip in lesson 06 only; here the ranges say it
@@ -129,14 +131,8 @@ def task1(panel, targets):
 GOOD = {T1: IK2_A, T2: STEP_A, T3: LOOP_A, T4: TASK1_A}
 
 
-def S(name, did, why, credit=None, single_slip=False, **cells):
-    """A student who wrote all four: the right ones of ``GOOD`` but for ``cells`` (T1=... by exercise)."""
-    answers = {**GOOD, **{globals()[k]: v for k, v in cells.items()}}
-    return Student(name, did, answers, why, credit or {}, single_slip)
-
-
-def only(name, did, why, credit, answers):
-    return Student(name, did, answers, why, credit)
+S = partial(wrote_all, GOOD, {"T1": T1, "T2": T2, "T3": T3, "T4": T4})
+only = wrote_some
 
 
 RIGHT = "right, in another style: full marks"

@@ -6,7 +6,9 @@ but nothing else: one mistake (the signature the exercise asks for), so the floo
 single slip applies, and 6.3 keeps only part of its points.
 '''
 
-from class_submissions import Pair, Student
+from functools import partial
+
+from class_submissions import Pair, wrote_all, wrote_some
 
 LESSON = "06_coded_sweep"
 SLIP_FLOOR = 10 / 18   # issue 20: a single mistake in lesson 06 leaves at least 10 of 18
@@ -122,14 +124,8 @@ def estimate_lag(run, joint=0):
 GOOD = {T1: TIMES_A, T2: POS_A, T3: TASK_A, T4: LAG_A}
 
 
-def S(name, did, why, credit=None, single_slip=False, **cells):
-    """A student who wrote all four: the right ones of ``GOOD`` but for ``cells`` (T1=... by exercise)."""
-    answers = {**GOOD, **{globals()[k]: v for k, v in cells.items()}}
-    return Student(name, did, answers, why, credit or {}, single_slip)
-
-
-def only(name, did, why, credit, answers):
-    return Student(name, did, answers, why, credit)
+S = partial(wrote_all, GOOD, {"T1": T1, "T2": T2, "T3": T3, "T4": T4})
+only = wrote_some
 
 
 RIGHT = "right, in another style: full marks"
