@@ -219,7 +219,8 @@ def two_link_ik(x, y, l1, l2):
 '''),
 
     # -- exactly one slip -------------------------------------------------------------------
-    S("gab", "3.1 in degrees (np.degrees on the result)", "3.1 wrong at every case", {"3.1": (0.0, 0.25)}, True,
+    S("gab", "3.1 in degrees (np.degrees on the result)", "the method right, every tip wrong (degrees), the refusals right",
+      {"3.1": (0.1, 0.5)}, True,
       T1=IK2_A.replace("return np.column_stack([q1, q2])", "return np.degrees(np.column_stack([q1, q2]))")),
     S("hana", "3.1 rows swapped (the q2 <= 0 elbow first)", "every tip right, the order asked wrong",
       {"3.1": (0.25, 0.75)}, True, T1=IK2_A.replace("[elbow, -elbow]", "[-elbow, elbow]")),
@@ -235,8 +236,8 @@ def two_link_ik(x, y, l1, l2):
     S("jan", "3.1 with l1 where l2 belongs in q1 (right only when the links are equal)",
       "q2 and the elbow order right, q1 (so every tip) wrong unless the links are equal", {"3.1": (0.0, 0.6)}, True,
       T1=IK2_A.replace("l1 + l2 * np.cos(q2)", "l1 + l1 * np.cos(q2)")),
-    S("kai", "3.1 q1 = atan2(y, x) + atan2(...) for q2 >= 0 (the wrong sign)", "3.1 wrong at every case",
-      {"3.1": (0.0, 0.25)}, True, T1=IK2_A.replace("np.arctan2(y, x) - np.arctan2", "np.arctan2(y, x) + np.arctan2")),
+    S("kai", "3.1 q1 = atan2(y, x) + atan2(...) for q2 >= 0 (the wrong sign)",
+      "q2 right, q1's sign wrong, so every tip but the stretched arm's; the refusals right", {"3.1": (0.1, 0.5)}, True, T1=IK2_A.replace("np.arctan2(y, x) - np.arctan2", "np.arctan2(y, x) + np.arctan2")),
     S("liv", "3.2 returns only the step dq", LOST_32, {"3.2": (0.0, 0.34), "3.3": (0.5, 1.0)}, True,
       T2=STEP_A.replace("return q + dq", "return dq")),
     S("mo", "3.2 damping not squared (J J^T + lambda I)", "3.2 wrong at every case; 3.3 still converges",
