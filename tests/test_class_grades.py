@@ -166,17 +166,17 @@ def graded(request, tmp_path_factory):
 @needs_new_grader
 def test_every_submission_scores_in_the_range_a_fair_grader_gives(graded):
     module, result = graded
-    failures = range_failures(module, result)
-    assert not failures, (f"{len(failures)} of {len(module.STUDENTS)} out of range{_batch(result)}:\n"
-                          + "\n".join(failures))
+    _none(range_failures(module, result), f"of {len(module.STUDENTS)} out of range", result)
 
 
 @needs_new_grader
 def test_more_right_never_scores_less(graded):
     module, result = graded
-    failures = pair_failures(module, result)
-    assert not failures, (f"{len(failures)} of {len(module.PAIRS)} pairs broken{_batch(result)}:\n"
-                          + "\n".join(failures))
+    _none(pair_failures(module, result), f"of {len(module.PAIRS)} pairs broken", result)
+
+
+def _none(failures: list, what: str, result) -> None:
+    assert not failures, f"{len(failures)} {what}{_batch(result)}:\n" + "\n".join(failures)
 
 
 def table(module, result) -> str:
