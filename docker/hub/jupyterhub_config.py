@@ -74,8 +74,9 @@ c.DockerSpawner.notebook_dir = "/home/student/work"
 c.DockerSpawner.volumes = {"snakekit-{username}": "/home/student/work"}
 c.DockerSpawner.mem_limit = env("SNAKEKIT_MEM_LIMIT", "1G")
 c.DockerSpawner.cpu_limit = float(env("SNAKEKIT_CPU_LIMIT", "1"))
-c.DockerSpawner.start_timeout = 120
-c.DockerSpawner.http_timeout = 60
+# a class arriving at once on a small machine: JupyterLab starts slower when many start together
+c.DockerSpawner.start_timeout = int(env("SNAKEKIT_START_TIMEOUT", "300"))
+c.DockerSpawner.http_timeout = 180
 c.DockerSpawner.environment = {
     "SNAKEKIT_EXCHANGE_URL": f"http://{HUB_HOST}:{EXCHANGE_PORT}/services/exchange/",
 }

@@ -163,6 +163,10 @@ def main() -> int:
     p.add_argument("--password", default=os.environ.get("SNAKEKIT_DUMMY_PASSWORD", ""))
     p.add_argument("--submit-limit-mb", type=float, default=float(os.environ.get("SNAKEKIT_SUBMIT_LIMIT_MB", "20")))
     p.add_argument("--grade", default=str(REPO / "docker/hub/grade"))
+    p.add_argument("--browser", metavar="OUT_DIR", help="open lesson 00 in headless Chromium through the hub's "
+                   "proxy with docker/browser-check (the 3D view through the Jupyter port), screenshots to OUT_DIR")
+    p.add_argument("--bench", action="store_true", help="then the figures of bench/hub.py: warm spawns, "
+                   "the hub and proxy under 50 users' requests")
     args = p.parse_args()
     t0 = time.monotonic()
     teacher, ta = User(args.hub, "teacher", args.password), User(args.hub, "ta", args.password)
@@ -176,10 +180,10 @@ def main() -> int:
     spawn_teacher = teacher.spawn()
     print(f"figure: spawn to ready, first server (the engine's image cache warm): {spawn_teacher:.1f} s", flush=True)
     ta.spawn()
-    with ThreadPoolExecutor(len(students)) as pool:
+    with ThreadPoolExecutor(5) as pool:  # students arriving five at a time
         spawn_times = list(pool.map(User.spawn, students))
     say(f"{len(students)} students' servers ready in {time.monotonic() - t:.1f} s "
-        f"(each: median {statistics.median(spawn_times):.1f} s, max {max(spawn_times):.1f} s, started together)")
+        f"(each: median {statistics.median(spawn_times):.1f} s, max {max(spawn_times):.1f} s, five started at a time)")
 
     # --- the instructor releases lesson 06 ----------------------------------------------------------
     teacher.sh(f"cd ~/course && nbgrader generate_assignment {LESSON} --force >/dev/null 2>&1 "
@@ -346,8 +350,86 @@ def main() -> int:
     if r.status_code != 200:
         fail(f"lesson 00: {r.status_code}")
     say(f"lesson 00 and JupyterLab reached through the hub's proxy at {args.hub}/user/{a.name}/lab")
+    if args.browser:
+        # the student's JupyterLab in Chromium through the hub: lessons listed, lesson 00 run,
+        # the arm drawn in the 3D view and moved (pixels compared), every request to the hub's port
+        t = time.monotonic()
+        r = subprocess.run([sys.executable, str(REPO / "docker/browser-check"), f"{args.hub}/user/{a.name}", a.token,
+                            args.browser], capture_output=True, text=True)
+        for line in r.stdout.splitlines():
+            if line.startswith("browser:"):
+                say(line)
+        if r.returncode != 0:
+            fail(f"lesson 00 in Chromium through the hub: {r.stdout[-1500:]}\n{r.stderr[-1500:]}")
+        print(f"figure: lesson 00 in headless Chromium through the hub's proxy, the arm drawn and moved: "
+              f"{time.monotonic() - t:.0f} s", flush=True)
     print(f"figure: the whole loop on the hub ({len(students)} students): {time.monotonic() - t0:.0f} s", flush=True)
+    if args.bench:
+        bench(args.hub, students)
     return 0
+
+
+def hub_memory() -> float:
+    """The hub's container (hub, proxy, exchange, culler) memory in MiB, from docker stats."""
+    out = subprocess.run([DOCKER, "stats", "--no-stream", "--format", "{{.MemUsage}}", "snakekit-hub"],
+                         capture_output=True, text=True, check=True).stdout.split("/")[0].strip()
+    value, unit = float(out.rstrip("KMGiB")), out.lstrip("0123456789.")
+    return value * {"KiB": 1 / 1024, "MiB": 1, "GiB": 1024}[unit]
+
+
+def bench(hub: str, students: list[User], clients: int = 50, per_client: int = 40) -> None:
+    """Warm spawns, then 50 users' worth of requests through the hub and its proxy."""
+    s = students[1]
+    warm = []
+    for _ in range(3):
+        s.stop()
+        warm.append(s.spawn())
+    print(f"figure: spawn to ready, warm: median {statistics.median(warm):.1f} s of {', '.join(f'{w:.1f}' for w in warm)} "
+          f"(target <= 5 s)", flush=True)
+    # a bounded load: 50 clients on loopback, each with its own connection, one request at a time,
+    # alternating the hub's API (GET /hub/api/user) and a server through the proxy (GET .../api/status)
+    idle_mem = hub_memory()
+    lat: dict[str, list[float]] = {"hub": [], "proxy": []}
+
+    def client(i: int) -> None:
+        u = students[i % len(students)]
+        http = requests.Session()
+        http.headers["Authorization"] = f"token {u.token}"
+        for k in range(per_client):
+            kind, url = (("hub", f"{hub}/hub/api/user") if k % 2 == 0 else
+                         ("proxy", f"{hub}/user/{u.name}/api/status"))
+            t = time.monotonic()
+            r = http.get(url, timeout=60)
+            lat[kind].append(time.monotonic() - t)
+            if r.status_code != 200:
+                fail(f"under load: {url}: {r.status_code}")
+
+    peak = [idle_mem]
+    done = False
+
+    def sample() -> None:
+        while not done:
+            peak.append(hub_memory())
+            time.sleep(1)
+
+    sampler = ThreadPoolExecutor(1)
+    sampler.submit(sample)
+    t = time.monotonic()
+    with ThreadPoolExecutor(clients) as pool:
+        list(pool.map(client, range(clients)))
+    wall = time.monotonic() - t
+    done = True
+    sampler.shutdown()
+    n = clients * per_client
+
+    def pct(xs: list[float], q: float) -> float:
+        return sorted(xs)[min(len(xs) - 1, int(q * len(xs)))] * 1000
+
+    for kind, label in (("hub", "the hub's API (GET /hub/api/user)"), ("proxy", "a server through the proxy (GET /user/<name>/api/status)")):
+        print(f"figure: under load, {label}: p50 {pct(lat[kind], 0.5):.0f} ms, p95 {pct(lat[kind], 0.95):.0f} ms "
+              f"({len(lat[kind])} requests)", flush=True)
+    print(f"figure: under load: {n} requests from {clients} clients in {wall:.1f} s ({n / wall:.0f}/s); the hub's "
+          f"container (hub, proxy, exchange, culler) {idle_mem:.0f} MiB before, peak {max(peak):.0f} MiB", flush=True)
 
 
 if __name__ == "__main__":
