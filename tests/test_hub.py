@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import IN_CI, need_program
+from tests.conftest import IN_CI, need, need_program
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,6 +36,9 @@ def test_hub_week_of_a_class(capsys):
             pytest.fail(f"{why}; under CI=true it must run")
         pytest.skip(why)
     need_program("ip")
+    if "browser-check LAB_URL TOKEN OUT_DIR" in (ROOT / "docker/browser-check").read_text():
+        need_program("chromium")  # lesson 00 through the hub's proxy, the 3D view's pixels
+        need("playwright.sync_api")
     env = dict(os.environ, PATH=f"{ROOT / '.venv/bin'}:{os.environ['PATH']}")
     proc = subprocess.run(["bash", str(ROOT / "docker/hub/test.sh")], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=30 * 60)
