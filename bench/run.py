@@ -73,6 +73,8 @@ def steps(submissions: int) -> list[Step]:
              ["container.py"], 330),
         Step("memory", "memory per user: the single-user server idle, with a lesson kernel, with the 3D view; "
              "users per 24 GB node", ["memory.py", "--repeats", "3"], 150),
+        Step("hub", "the class's JupyterHub: spawns, the hub and proxy under 50 users, grading 20 "
+             "(the private Docker engine)", ["hub.py"], 600),
     ]
 
 
@@ -477,6 +479,29 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
         add("")
     elif mem.get("not_measured"):
         add(f"## Memory per user on a hub\n\n{mem['not_measured']}\n")
+    # --- the class's JupyterHub
+    h = results.get("hub")
+    if h:
+        add("## The class's JupyterHub (docker/hub/, 20 students on a single-node swarm)")
+        add("")
+        if h.get("not_measured"):
+            add(f"Not measured: {h['not_measured']}.")
+        else:
+            add("| what | figure | target |")
+            add("|---|---|---|")
+            add(f"| spawn to ready, warm (a student's server stopped and started again; median of 3) | "
+                f"{h['spawn_warm_median_s']} s | <= 5 s |")
+            add(f"| spawn to ready, the first server after the hub starts (a new volume) | {h['spawn_first_s']} s | |")
+            add(f"| 20 students' servers, five started at a time: each, median | {h['spawn_20_median_s']} s | |")
+            add(f"| the hub's API under 50 clients: p50 / p95 | {h['hub_p50_ms']} / {h['hub_p95_ms']} ms | |")
+            add(f"| a student's server through the proxy under 50 clients: p50 / p95 | "
+                f"{h['proxy_p50_ms']} / {h['proxy_p95_ms']} ms | |")
+            add(f"| requests served under that load | {h['requests_per_s']} /s | |")
+            add(f"| the hub's container (hub, proxy, exchange, culler): idle / peak under load | "
+                f"{h['hub_mem_idle_mib']} / {h['hub_mem_peak_mib']} MiB | |")
+            add(f"| grading the 20 collected submissions (`snakekit grade --jobs 2`, grader container) | "
+                f"{h['grade_20_s']} s | |")
+        add("")
 
     # --- methodology
     add("## Methodology")

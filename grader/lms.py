@@ -34,6 +34,7 @@ written by ``snakekit grade``):
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import re
 import shutil
@@ -144,15 +145,23 @@ def _pages(course: Path, assignment: str) -> dict[str, list[Path]]:
 
 def release_to_exchange(course: Path, assignment: str, student: str, exchange: Path | None) -> str:
     """nbgrader's own release_feedback for one student (after the files it needs are beside the page)."""
+    from jupyter_core.paths import jupyter_config_path
     from nbgrader.apps import NbGraderAPI
     from nbgrader.coursedir import CourseDirectory
     from traitlets.config import Config
+    from traitlets.config.loader import ConfigFileNotFound, PyFileConfigLoader
 
     src = course / "submitted" / student / assignment
     fb = course / "feedback" / student / assignment
     for name in ("timestamp.txt", "submission_secret.txt"):
         shutil.copyfile(src / name, fb / name)
-    cfg = config(course)
+    # as nbgrader's own release_feedback: the Jupyter config folders' nbgrader_config.py (on a
+    # hub's server, the hub's exchange: docker/hub/nbgrader_config.py), then the course's
+    cfg = Config()
+    for folder in reversed(jupyter_config_path()):
+        with contextlib.suppress(ConfigFileNotFound):
+            cfg.merge(PyFileConfigLoader("nbgrader_config.py", path=folder).load_config())
+    cfg.merge(config(course))
     cfg.merge(Config({"CourseDirectory": {"root": str(course), "course_id": course_id(course)}}))
     if exchange is not None:
         cfg.merge(Config({"Exchange": {"root": str(exchange)}}))

@@ -1,0 +1,85 @@
+#!/usr/bin/env bash
+# The hub test: the class's JupyterHub (docker/hub/up) on the private engine of
+# docker/engine.sh, and a week of the class through it (docker/hub/loop.py).
+#
+#   docker/hub/test.sh            (as root; tests/test_hub.py runs it within `make test`)
+#
+# Steps: the engine (its own data root, the same cache as docker/test.sh, so the image that
+# test built is reused); the base and snakekit's image (built only when missing or stale:
+# compose build is quick when nothing changed); the hub's configuration checked against
+# JupyterHub's, dockerspawner's and ltiauthenticator's classes, for the dummy log-in and for
+# LTI 1.3 (check-config); `docker/hub/up` (a single-node swarm, SwarmSpawner); then loop.py:
+# 20 students, the instructor, the TA, the refusals and limits. On exit the engine stops and
+# the host is checked and restored (engine_stop), as after docker/test.sh.
+# Figures are printed on lines starting with "figure:". SNAKEKIT_HUB_BENCH=1 (bench/hub.py)
+# adds the benchmark's: warm spawns, and the hub and proxy under 50 users' requests.
+set -uo pipefail
+ROOT=$(cd "$(dirname "$0")/../.." && pwd)
+cd "$ROOT"
+VENV_BIN="$ROOT/${SNAKEKIT_VENV:-.venv}/bin"
+STUDENTS=${SNAKEKIT_HUB_STUDENTS:-20}
+say() { echo "hub-test: $*"; }
+figure() { echo "figure: $*"; }
+die() { echo "hub-test: FAILED: $*" >&2; exit 1; }
+[ "$(id -u)" = 0 ] || die "needs root (it starts its own dockerd)"
+[ -x "$VENV_BIN/docker-compose" ] || die "docker-compose missing from $VENV_BIN; run 'make setup'"
+# shellcheck source=docker/engine.sh
+source "$ROOT/docker/engine.sh"
+engine_packages || die "could not install docker.io, debootstrap, curl"
+engine_lock 1800
+finish() {
+  local rc=$?
+  [ -z "${RUN:-}" ] || [ ! -d "$RUN" ] || $DOCKER logs snakekit-hub > "$RUN/hub.log" 2>&1
+  [ "$rc" = 0 ] || { say "the hub's log, last lines:"; grep -v ' 200 \| 30[12] ' "$RUN/hub.log" | tail -40 >&2; }
+  engine_stop || rc=1
+  [ -z "${RUN:-}" ] || rm -rf "$RUN"
+  exit $rc
+}
+trap finish EXIT
+engine_on_stop() {
+  $DOCKER rm -f snakekit-hub >/dev/null 2>&1
+  local s; s=$($DOCKER service ls -q 2>/dev/null); [ -z "$s" ] || $DOCKER service rm $s >/dev/null 2>&1
+  $DOCKER swarm leave --force >/dev/null 2>&1
+  $DOCKER volume rm -f $($DOCKER volume ls -q --filter name=snakekit-) >/dev/null 2>&1
+}
+t_all=$(now)
+engine_start
+# a swarm left by an interrupted run: start from none
+$DOCKER swarm leave --force >/dev/null 2>&1
+engine_base
+t=$(now)
+engine_build snakekit-lab:latest "$RUN/build.log" || { tail -30 "$RUN/build.log" >&2; die "docker compose build lab failed"; }
+say "snakekit's image ready in $(since "$t") s"
+figure "image: $(( $($DOCKER image inspect -f '{{.Size}}' snakekit-lab:latest) / 1000000 )) MB"
+t=$(now)
+if ! $DOCKER build --network host -f docker/hub/Dockerfile -t snakekit-hub:latest . >"$RUN/hub-build.log" 2>&1; then
+  tail -30 "$RUN/hub-build.log" >&2
+  die "the hub's image did not build"
+fi
+say "the hub's image ready in $(since "$t") s ($(( $($DOCKER image inspect -f '{{.Size}}' snakekit-hub:latest) / 1000000 )) MB)"
+
+# the LTI configuration, against the authenticator's own classes (the hub's start checks the other)
+SNAKEKIT_AUTH=lti SNAKEKIT_LTI_CLIENT_IDS=125900000000000001 \
+  $DOCKER run --rm -e SNAKEKIT_AUTH -e SNAKEKIT_LTI_CLIENT_IDS snakekit-hub:latest python3 /srv/hub/check-config \
+  | tee "$RUN/lti.txt" || die "the LTI configuration does not load"
+grep -q "ltiauthenticator.lti13.auth.LTI13Authenticator" "$RUN/lti.txt" || die "the LTI authenticator was not the one loaded"
+
+export SNAKEKIT_INSTRUCTORS=teacher,ta SNAKEKIT_DUMMY_PASSWORD=week-of-class-$$ SNAKEKIT_HUB_BIND=127.0.0.1:18000
+export SNAKEKIT_SUBMIT_LIMIT_MB=8 SNAKEKIT_EXCHANGE_QUOTA_MB=64 SNAKEKIT_MEM_LIMIT=768M SNAKEKIT_CPU_LIMIT=1
+t=$(now)
+docker/hub/up || die "docker/hub/up failed"
+figure "docker/hub/up to the hub answering: $(since "$t") s"
+# Lesson 00 in headless Chromium through the hub's proxy, the 3D view drawn and moved: with the
+# browser check of the view served through the Jupyter port (docker/browser-check LAB_URL TOKEN
+# OUT_DIR); the check of the view on its own published ports cannot pass through a hub.
+browser=()
+if grep -q "browser-check LAB_URL TOKEN OUT_DIR" docker/browser-check; then
+  browser=(--browser "$ROOT/artifacts/hub")
+else
+  say "lesson 00 in Chromium through the hub: not run (docker/browser-check needs the view on its own ports)"
+fi
+DOCKER=$DOCKER "$VENV_BIN/python" docker/hub/loop.py http://127.0.0.1:18000 --students "$STUDENTS" "${browser[@]}" \
+  --submit-limit-mb "$SNAKEKIT_SUBMIT_LIMIT_MB" ${SNAKEKIT_HUB_BENCH:+--bench} || die "the week on the hub failed"
+figure "hub memory after the week: $($DOCKER stats --no-stream --format '{{.MemUsage}}' snakekit-hub)"
+figure "the whole hub test: $(since "$t_all") s"
+say "passed"
