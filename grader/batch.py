@@ -272,23 +272,26 @@ class Grader:
     def _run_again(self, student, src, nbs, tampered, again: dict, finish):
         """The submission run once more with the instructor's answers in the cells ``again`` names
         (:mod:`grader.rerun`); only the dependent exercises' hand-ins are read from it."""
-        source = {name: nbformat.read(self.course / "source" / self.a.name / f"{name}.ipynb", as_version=4)
-                  for name in nbs}
         cells = {c for replaced in again.values() for c in replaced}
-        work = self.runner.stage(student, src, nbs, tampered)
-        for name, nb in rerun.with_answers(nbs, source, cells).items():
-            nbformat.write(nb, work / "course" / "submitted" / student / self.a.name / f"{name}.ipynb")
+        work, second = None, {}
         try:
+            source = {name: nbformat.read(self.course / "source" / self.a.name / f"{name}.ipynb", as_version=4)
+                      for name in nbs}
+            work = self.runner.stage(student, src, nbs, tampered)
+            for name, nb in rerun.with_answers(nbs, source, cells).items():
+                nbformat.write(nb, work / "course" / "submitted" / student / self.a.name / f"{name}.ipynb")
             self.runner.run(work, student)
-            second = {}
             for gid, replaced in again.items():
                 try:
                     raw = read_inside(work, f"handin/{gid}.npz")
                     second[gid] = (read_handin(raw) if raw is not None else None, replaced)
                 except ValueError:
                     continue
+        except Exception:  # noqa: BLE001 - the second run is a chance, never a loss: the first run's grade stands
+            second = {}
         finally:
-            shutil.rmtree(work, ignore_errors=True)
+            if work is not None:
+                shutil.rmtree(work, ignore_errors=True)
         return lambda: finish(second)
 
 
