@@ -32,7 +32,7 @@ from pathlib import Path
 
 import nbformat
 
-from . import sandbox
+from . import rerun, sandbox
 from .assignment import (MAX_FILE, GradingError, _Assignment, _Cell, ensure_released, load_assignment,  # noqa: F401
                          read_inside, tampered_cells, _template_gradebook)
 from .cases import CasesError, CaseServer, draw
@@ -163,6 +163,9 @@ class Grader:
                     except Exception as e:  # noqa: BLE001 - one submission never stops the batch
                         r = SubmissionResult(s, self.assignment, 0.0, self.a.max_score, "grader error",
                                              f"{type(e).__name__}: {e}")
+                    if isinstance(r, Again):  # a second run (grader.rerun): a sandbox like the first
+                        pending[pool.submit(r)] = s
+                        continue
                     if callable(r):  # ran: score it and write the feedback, while the next sandbox runs
                         if waiting is not None:
                             waiting.append((s, r))
@@ -241,12 +244,65 @@ class Grader:
         work = self.runner.stage(student, src, nbs, tampered)
         outcome = self.runner.run(work, student)
 
-        def finish() -> SubmissionResult:
+        def finish(second=None):
+            keep = False
             try:
-                return self.verdicts.collect(work, student, nbs, tampered, problems, outcome, t0)
+                again = {} if second is not None or self.draw is None or tampered else rerun.needed(
+                    self.draw.depends, self.verdicts.handin_scores(work, tampered), self._written(nbs))
+                if again:  # run once more with the lesson's own parts, in the pool; score both then
+                    keep = True
+                    return Again(lambda: self._run_again(student, src, nbs, tampered, again, finish))
+                return self.verdicts.collect(work, student, nbs, tampered, problems, outcome, t0, second)
             finally:
-                shutil.rmtree(work, ignore_errors=True)
+                if not keep:
+                    shutil.rmtree(work, ignore_errors=True)
         return finish
+
+    def _written(self, nbs: dict) -> dict[str, bool]:
+        """Answer cell grade id -> whether the submission changed it from the release."""
+        out = {}
+        for nb in nbs.values():
+            for c in nb.cells:
+                gid = c.get("metadata", {}).get("nbgrader", {}).get("grade_id")
+                facts = self.a.locked.get(gid)
+                if facts and facts.get("solution"):
+                    out[gid] = c.source.strip() != str(facts.get("source", "")).strip()
+        return out
+
+    def _run_again(self, student, src, nbs, tampered, again: dict, finish):
+        """The submission run once more with the instructor's answers in the cells ``again`` names
+        (:mod:`grader.rerun`); only the dependent exercises' hand-ins are read from it."""
+        cells = {c for replaced in again.values() for c in replaced}
+        work, second = None, {}
+        try:
+            source = {name: nbformat.read(self.course / "source" / self.a.name / f"{name}.ipynb", as_version=4)
+                      for name in nbs}
+            work = self.runner.stage(student, src, nbs, tampered)
+            for name, nb in rerun.with_answers(nbs, source, cells).items():
+                nbformat.write(nb, work / "course" / "submitted" / student / self.a.name / f"{name}.ipynb")
+            self.runner.run(work, student)
+            for gid, replaced in again.items():
+                try:
+                    raw = read_inside(work, f"handin/{gid}.npz")
+                    second[gid] = (read_handin(raw) if raw is not None else None, replaced)
+                except ValueError:
+                    continue
+        except Exception:  # noqa: BLE001 - the second run is a chance, never a loss: the first run's grade stands
+            second = {}
+        finally:
+            if work is not None:
+                shutil.rmtree(work, ignore_errors=True)
+        return lambda: finish(second)
+
+
+class Again:
+    """A second sandbox run a submission needs (:mod:`grader.rerun`): it goes to the pool."""
+
+    def __init__(self, call):
+        self.call = call
+
+    def __call__(self):
+        return self.call()
 
 
 class Progress:

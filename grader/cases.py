@@ -10,9 +10,11 @@ arguments (Python int/float/bool/str or numpy arrays)::
     def ex06_1_sweep_times_test(rng, spec):
         return [(int(rng.integers(2, 800)), float(rng.uniform(1.0, 200.0))) for _ in range(6)]
 
-An optional module-level setting, keyed by grade id (see grader/README.md, "Cases"):
+Optional module-level settings, keyed by grade id (see grader/README.md, "Cases"):
 ``TOLERANCES`` (``{"rtol": .., "atol": ..}`` for values, ``{"max": .., "rms": ..}`` for
-trajectories and runs, merged over the grader's defaults).
+trajectories and runs, merged over the grader's defaults) and ``DEPENDS`` (a test cell's grade
+id -> the answer cells its exercise builds on, e.g. ``{"ex06_3_task2_test": ["ex06_1_sweep_times"]}``:
+:mod:`grader.rerun`).
 
 A batch draws every grade id's cases once, from one seed (:func:`draw`: ``os.urandom``
 unless given), each grade id from its own stream (``[seed, crc32(grade_id)]``), so adding a
@@ -70,12 +72,15 @@ class Draw:
         seed: the batch's seed (``--seed`` repeats the draw).
         cases: grade id -> list of argument tuples.
         settings: grade id -> the module's optional settings for it (``tolerances``).
+        depends: test cell grade id -> the answer cells (grade ids) its exercise builds on
+            (the module's ``DEPENDS``; see :mod:`grader.rerun`).
     """
 
     assignment: str
     seed: int
     cases: dict
     settings: dict = field(default_factory=dict)
+    depends: dict = field(default_factory=dict)
 
     def encoded(self) -> dict[str, bytes]:
         """Each grade id's cases in the wire format of :mod:`snakekit.handin`."""
@@ -146,9 +151,14 @@ def draw(course: Path, assignment: str, seed: int | None = None, spec=None) -> D
             if gid in table:
                 own[key.lower()] = dict(table[gid])
         settings[gid] = own
+    depends = getattr(module, "DEPENDS", {})
+    if not isinstance(depends, dict) or not all(
+            k in cases and isinstance(v, (list, tuple)) and all(isinstance(c, str) for c in v) for k, v in depends.items()):
+        raise CasesError(f"{path}: DEPENDS must map a handed-in grade id to the answer cells it builds on, e.g. "
+                         f'{{"ex06_3_task2_test": ["ex06_1_sweep_times", "ex06_2_sweep_positions"]}}')
     if not cases:
         raise CasesError(f"{path} defines no case function (one per handed-in grade id, taking (rng, spec))")
-    return Draw(assignment, seed, cases, settings)
+    return Draw(assignment, seed, cases, settings, {k: list(v) for k, v in depends.items()})
 
 
 # --- the socket -----------------------------------------------------------------------------

@@ -10,7 +10,8 @@ instructor's solution raises is judged before any rule: the student must raise t
 
 Each rule takes ``(args, result, tol)`` -- the case's positional arguments, the student's result
 (name -> array; a plain return value is ``"value"``) and the tolerances -- and returns
-``(right, why)``: whether the case is right and, if not, what is wrong, with numbers.
+``(right, why)``: whether the case is right (or the share of it that is, a number in [0, 1])
+and, if not, what is wrong, with numbers.
 ``RULES`` maps grade ids to rules.
 """
 
@@ -47,20 +48,26 @@ def _tool_xy(q) -> np.ndarray:
 
 
 def two_link_ik(args, result, tol):
-    """``two_link_ik(x, y, l1, l2)``: both rows put the tip on the target; row 0 has q2 >= 0."""
+    """``two_link_ik(x, y, l1, l2)``: both rows put the tip on the target; row 0 has q2 >= 0.
+
+    Credit per case: each row whose tip is on the target a quarter (each elbow is judged on its
+    own), the order asked (row 0 the elbow with q2 >= 0) the other half, judged once both tips
+    are right (the order of wrong angles means nothing)."""
     x, y, l1, l2 = (float(a) for a in args[:4])
     q, why = _value(result, (2, 2), "two_link_ik")
     if q is None:
         return False, why
     tips = np.stack([l1 * np.cos(q[:, 0]) + l2 * np.cos(q[:, 0] + q[:, 1]),
                      l1 * np.sin(q[:, 0]) + l2 * np.sin(q[:, 0] + q[:, 1])], axis=-1)
-    off = float(np.abs(tips - [x, y]).max())
-    if off > tol["atol"] + tol["rtol"] * np.hypot(x, y):
-        return False, (f"the angles {np.round(q, 6).tolist()} put the tip {off:.3g} m from the target "
-                       f"({x:.6g}, {y:.6g}) m (tolerance {tol['atol']:.2g} m).")
+    off = np.abs(tips - [x, y]).max(axis=1)
+    on = off <= tol["atol"] + tol["rtol"] * np.hypot(x, y)
+    if not on.all():
+        k = int(np.argmax(~on))
+        return 0.25 * int(on.sum()), (f"the angles {np.round(q[k], 6).tolist()} (row {k}) put the tip {off[k]:.3g} m "
+                                      f"from the target ({x:.6g}, {y:.6g}) m (tolerance {tol['atol']:.2g} m).")
     if q[0, 1] < -1e-9 or q[1, 1] > 1e-9:
-        return False, (f"row 0 has q2 = {q[0, 1]:.6g} and row 1 q2 = {q[1, 1]:.6g} rad; row 0 is the solution "
-                       "with q2 >= 0 (elbow one way), row 1 the one with q2 <= 0.")
+        return 0.5, (f"both tips are on the target, but row 0 has q2 = {q[0, 1]:.6g} and row 1 q2 = {q[1, 1]:.6g} "
+                     "rad; row 0 is the solution with q2 >= 0 (elbow one way), row 1 the one with q2 <= 0.")
     return True, ""
 
 
@@ -71,11 +78,18 @@ def ik_loop(args, result, tol):
     if q is None:
         return False, why
     off = float(np.abs(_tool_xy(q)[0] - target).max())
-    if off > tol["atol"]:
-        return False, f"your angles put the tool {off:.3g} m from the target (tolerance {tol['atol']:.2g} m)."
     if ((q < SPEC.lower - 1e-12) | (q > SPEC.upper + 1e-12)).any():
         return False, f"q={np.round(q, 4).tolist()} is outside the joint limits {SPEC.lower}..{SPEC.upper} rad."
+    if off > tol["atol"]:
+        # near but not within the tolerance asked (a loop that stops too early): half the case
+        near = off <= NEAR * tol["atol"]
+        return 0.5 if near else False, (f"your angles put the tool {off:.3g} m from the target (tolerance "
+                                        f"{tol['atol']:.2g} m){'; near, not on it: half of this case' if near else ''}.")
     return True, ""
+
+
+#: 3.3: a tool within NEAR times the tolerance (1 mm at 1e-5 m) is near the target: half a case.
+NEAR = 100.0
 
 
 def task1(args, result, tol):

@@ -219,10 +219,13 @@ def _score_values(gid, handin, expected: Expected, max_score) -> ExerciseScore:
 
 
 def _cases_check(ok, why, name: str = "hidden cases", weight: float = 1.0) -> compare.Check:
-    n, nbad = len(ok), len(ok) - sum(ok)
+    """``ok``: per case whether it is right, or the share of it that is (a rule's partial credit)."""
+    n, nbad = len(ok), sum(float(x) < 1.0 for x in ok)
     if not nbad:
         return compare.Check(name, 1.0, f"all {n} hidden cases right.", weight)
-    return compare.Check(name, 1.0 - nbad / n, f"{nbad} of {n} hidden cases wrong; the first: {why[0]}", weight)
+    part = "" if all(float(x) in (0.0, 1.0) for x in ok) else " (some in part)"
+    return compare.Check(name, float(np.mean([float(x) for x in ok])),
+                         f"{nbad} of {n} hidden cases wrong{part}; the first: {why[0]}", weight)
 
 
 # --- trajectories and runs ------------------------------------------------------------------------
@@ -246,15 +249,16 @@ def _motion_checks(got: dict, want: dict, kind: str, tol: dict):
     # the properties the instructor's result has, the student's must have: a count, a rate, and
     # (where the reference has them) limits held, whole sweeps, home at both ends
     checks = [compare.point_count(cmd, len(ref_cmd)), compare.rate(cmd, ref_hz)]
+    safe = []  # properties any quiet trajectory has: they earn only on a sweep of the case's size
     if not ref_cmd.limit_violations():
-        checks.append(compare.limits(cmd))
+        safe.append(compare.limits(cmd))
     sweeps = compare.count_sweeps(ref_cmd.positions)
     if sweeps >= 1:
         checks.append(compare.sweep_count(cmd, max(1, round(sweeps))))
     if compare.home(ref_cmd).passed:
-        checks.append(compare.home(cmd))
-    checks += [compare.smoothness(cmd, ref_cmd),
-               compare.tracking(cmd, ref_cmd, max_tol=tol.get("commanded_max", tol["max"]),
+        safe.append(compare.home(cmd))
+    safe.append(compare.smoothness(cmd, ref_cmd))
+    checks += safe + [compare.tracking(cmd, ref_cmd, max_tol=tol.get("commanded_max", tol["max"]),
                                 rms_tol=tol.get("commanded_rms", tol["rms"]), name="commanded vs reference",
                                 weight=2.0)]
     curves = {"commanded": (cmd.times, cmd.positions), "reference commanded": (ref_cmd.times, ref_cmd.positions)}
@@ -269,6 +273,14 @@ def _motion_checks(got: dict, want: dict, kind: str, tol: dict):
                                            what="measured angle", name="run vs reference", weight=2.0))
             curves["measured"] = (meas.times, meas.positions)
             curves["reference measured"] = (ref_meas.times, ref_meas.positions)
+    if len(cmd) != len(ref_cmd) and abs(cmd.duration - ref_cmd.duration) > 0.01 * ref_cmd.duration:
+        # another number of points over another time: not the sweep this case asks for (a stored
+        # one returned whatever the arguments); only its count is judged, nothing earns for being
+        # safe, smooth or at home by accident
+        asked = f"{len(cmd)} points over {cmd.duration:.4g} s where {len(ref_cmd)} over {ref_cmd.duration:.4g} s " \
+                "were asked"
+        checks = [c if c.name == "points" else compare.Check(c.name, 0.0, f"{c.name}: not judged: {asked}.", c.weight)
+                  for c in checks]
     return checks, curves
 
 
@@ -293,11 +305,15 @@ def _score_motion(gid, handin, expected: Expected, max_score) -> ExerciseScore:
         curves = curves or c
     good = [r for _, r in rows if isinstance(r, dict)]
     errors = [r for _, r in rows if isinstance(r, str)]
+    # the case without arguments is the task itself (6.3: task2_sweep(), Task 2): it weighs as much
+    # as the other cases together, which show the function follows its arguments
+    motion = [args for args, want in zip(expected.cases, expected.results) if not isinstance(want, str)]
+    weights = [max(1, len(motion) - 1) if len(args) == 0 else 1 for args in motion]
     checks = []
     for name, first in (good[0].items() if good else ()):
         fractions = [r[name].fraction if isinstance(r, dict) else 0.0 for _, r in rows]
         bad = next((f"{w}: {r[name].message}" for w, r in rows if isinstance(r, dict) and not r[name].passed), "")
-        checks.append(compare.Check(name, float(np.mean(fractions)),
+        checks.append(compare.Check(name, float(np.average(fractions, weights=weights)),
                                     bad or f"{name}: right in every hidden case.", first.weight))
     if rows and not good:
         checks.append(compare.Check("results", 0.0, errors[0], 10.0))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import nbformat
 
-from . import feedback
+from . import feedback, rerun
 from .assignment import read_inside
 from .score import ExerciseScore, read_handin, score_exercise
 
@@ -45,7 +45,22 @@ class Verdicts:
         self.timeout, self.cell_timeout, self.memory = timeout, cell_timeout, memory
         self.expected: dict = {}
 
-    def collect(self, work, student, nbs, tampered, problems, outcome, t0) -> SubmissionResult:
+    def handin_scores(self, work, tampered) -> dict[str, ExerciseScore]:
+        """The score of every test cell with expected results, from the hand-ins in ``work``."""
+        out = {}
+        for gid, e in self.expected.items():
+            if gid in self.a.tests and gid not in tampered:
+                try:
+                    raw = read_inside(work, f"handin/{gid}.npz")
+                    handin = read_handin(raw) if raw is not None else None
+                except ValueError:
+                    continue
+                out[gid] = score_exercise(gid, handin, e, self.a.tests[gid].max_score)
+        return out
+
+    def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None) -> SubmissionResult:
+        """``second``: grade id -> (its hand-in, the answer cells replaced) from a second run with the
+        instructor's answers in those cells (:mod:`grader.rerun`); the better score counts."""
         a = self.a
         raw = read_inside(work, "result.json", limit=1 << 20)
         try:
@@ -82,6 +97,9 @@ class Verdicts:
                     scores.append(ExerciseScore(gid, 0.0, cell.max_score, "inconsistent", f"hand-in unreadable: {e}."))
                     continue
                 sc = score_exercise(gid, handin, self.expected[gid], cell.max_score)
+                if second and gid in second:
+                    again, replaced = second[gid]
+                    sc = rerun.better(sc, score_exercise(gid, again, self.expected[gid], cell.max_score), replaced)
                 if sc.status == "missing":
                     sc = dataclasses.replace(sc, message=why_missing(find_cell(executed.get(cell.notebook), gid),
                                                                      sc.message))

@@ -35,8 +35,8 @@ sys.path.insert(0, str(HERE))
 from class_submissions import exercise_of, hand_in, points, score_range  # noqa: E402
 from class_submissions import lesson03, lesson06  # noqa: E402
 
-#: flip to True when the grader of issue 20 (partial credit that follows the work) is merged
-NEW_GRADER = False
+#: the grader of issue 20 (partial credit that follows the work) grades the classes in the suite
+NEW_GRADER = True
 RUN = NEW_GRADER or os.environ.get("SNAKEKIT_CLASS_GRADES") == "1"
 
 REPO = HERE.parent

@@ -10,6 +10,9 @@ import numpy as np
 #: The lag is the minimum of a flat rms curve: 10 ms apart is the same lag (the lesson's check).
 TOLERANCES = {"ex06_4_phase_lag_test": {"rtol": 0.0, "atol": 0.010}}
 
+#: 6.3's sweep is built from 6.1 and 6.2: a slip there is graded again with the lesson's own.
+DEPENDS = {"ex06_3_task2_test": ["ex06_1_sweep_times", "ex06_2_sweep_positions"]}
+
 
 def ex06_1_sweep_times_test(rng, spec):
     """sweep_times(points, rate): 6 cases, and one goal alone."""
@@ -36,10 +39,12 @@ def _sweep(rng, spec, max_points):
 
 def ex06_3_task2_test(rng, spec):
     """task2_sweep(points, rate, sweeps, amplitude): 3 sweeps inside the limits (run on the simulator),
-    and one beyond the position limits (the instructor's raises LimitError: so must the student's)."""
+    one beyond the position limits (the instructor's raises LimitError: so must the student's), and
+    Task 2 itself: ``task2_sweep()`` at its defaults (the empty case; its 50 s run costs the
+    simulator about as much as the lesson's own run of it)."""
     cases = [_sweep(rng, spec, 200) for _ in range(3)]
     points, rate, sweeps, _ = _sweep(rng, spec, 200)
-    return cases + [(points, rate, sweeps, float(rng.uniform(spec.upper + 0.1, 2.5)))]
+    return cases + [(points, rate, sweeps, float(rng.uniform(spec.upper + 0.1, 2.5))), ()]
 
 
 def ex06_4_phase_lag_test(rng, spec):

@@ -272,8 +272,10 @@ def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):
 def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):
     return snakekit.side_sweep(points=points, rate=rate, sweeps=sweeps, amplitude=amplitude)
 '''),
-    S("fin", "6.3 returns snakekit.side_sweep() built at import time", "6.3 is a stored library result: no points",
-      {"6.3": (0.0, 0.1)}, T3='''\
+    S("fin", "6.3 returns snakekit.side_sweep() built at import time",
+      "6.3 is a stored library result: no points for it, but at Task 2 itself (task2_sweep(), half of 6.3's "
+      "weight) the stored sweep is the very sweep asked, and no grader can tell who computed it",
+      {"6.3": (0.0, 0.46)}, T3='''\
 TASK2 = snakekit.side_sweep()   # build it once
 
 def task2_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):
@@ -308,7 +310,9 @@ PAIRS = (
     + [Pair(s, "zed", "one slip in 6.1/6.2 (6.3 and 6.4 right) is more than skipping 6.1 and 6.2")
        for s in _SLIPS_BEFORE_63]
     + [Pair(s, "fin", "an honest 6.3 with one slip is more than a stored library result", strict=True)
-       for s in _SLIPS_IN_63]
+       for s in _SLIPS_IN_63 if s != "xan"]
+    + [Pair("xan", "fin", "xan's task2_sweep answers Task 2 itself and no other case, as fin's stored sweep does: "
+            "an honest slip is not less, but the hidden cases cannot tell the two apart")]
     + [Pair("abe", "zed", "6.2 written is more than 6.2 skipped", strict=True),
        Pair("bea", "yara", "6.3 written is more than stopping after 6.2", strict=True),
        Pair("yara", "dot", "6.2 written is more than 6.1 alone", strict=True),
