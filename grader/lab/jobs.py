@@ -44,7 +44,7 @@ class LabSettings:
         case: the spec's values of the sweep (``snakekit.side_sweep``'s arguments).
         max_duration_ratio: refuse a trajectory longer than this times the spec's.
         sim_tolerance: refuse a trajectory whose simulated run leaves the reference's by more [rad].
-        band_factor: the bands are this times the calibration's spread...
+        band_factor: the bands are this times the calibration's spread (the most two runs differ)...
         band_floor: ...and at least this [rad].
         max_points: the lab grade's points.
     """
@@ -54,7 +54,7 @@ class LabSettings:
     case: dict
     max_duration_ratio: float = 1.5
     sim_tolerance: float = 0.1
-    band_factor: float = 3.0
+    band_factor: float = 2.0
     band_floor: float = 0.01
     max_points: float = 1.0
 

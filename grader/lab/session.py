@@ -27,7 +27,7 @@ from .jobs import RUNNABLE, LabError, LabSettings, Queue, handin_path, lab_dir, 
 
 RECORD_RATE = 100.0  # [Hz]
 #: How many times a run the lab computer stalled in is run again before it counts as a lab fault.
-STALL_TRIES = 3
+STALL_TRIES = 5
 
 
 class Stalled(BackendError):
@@ -103,7 +103,8 @@ def calibrate(robot, course: Path, s: LabSettings, runs: int, out=sys.stdout) ->
     times = np.arange(int(round((ref.duration + 0.5) * RECORD_RATE)) + 1) / RECORD_RATE
     stack = np.stack([gate.resampled(on_plan(r, ref), r.measured.positions, times) for r in recorded])
     mean = stack.mean(axis=0)
-    spread = np.abs(stack - mean).max(axis=(0, 1))
+    # the arm's repeatability: the most two runs of the same trajectory differ, per joint
+    spread = np.abs(stack[:, None] - stack[None, :]).max(axis=(0, 1, 2))
     bands = np.maximum(s.band_factor * spread, s.band_floor)
     d = lab_dir(course, s.assignment)
     d.mkdir(parents=True, exist_ok=True)
@@ -113,7 +114,7 @@ def calibrate(robot, course: Path, s: LabSettings, runs: int, out=sys.stdout) ->
            **info}
     write_atomic(d / "calibration.json", json.dumps(cal, indent=1))
     print("lab calibrate: bands " + " ".join(f"j{j + 1} {np.degrees(b):.2f}" for j, b in enumerate(bands))
-          + f" deg (spread of {runs} runs x {s.band_factor:g}, at least {np.degrees(s.band_floor):.2f} deg)",
+          + f" deg (the most two of {runs} runs differ, x {s.band_factor:g}, at least {np.degrees(s.band_floor):.2f} deg)",
           file=out, flush=True)
     return cal
 
@@ -188,11 +189,40 @@ def write_result(course: Path, s: LabSettings, student: str, run, trajectory, ch
     return d
 
 
+def lab_assignment(s: LabSettings) -> str:
+    """The lab grade's own assignment in the gradebook (the course decides whether it counts)."""
+    return f"{s.assignment}-lab"
+
+
+def record_grade(course: Path, s: LabSettings, student: str, points: float) -> None:
+    """The lab grade into nbgrader's gradebook as its own assignment ``<a>-lab``: one notebook
+    ``lab``, one grade cell ``lab_run`` of ``max_points``, scored like an autograded cell."""
+    from nbgrader.api import MissingEntry
+
+    from grader.course import gradebook
+
+    name = lab_assignment(s)
+    with gradebook(course) as gb:
+        a = gb.update_or_create_assignment(name)
+        if not a.notebooks:
+            gb.add_notebook("lab", name)
+            gb.add_grade_cell("lab_run", "lab", name, max_score=s.max_points, cell_type="code")
+        gb.update_or_create_student(student)
+        try:
+            gb.find_submission(name, student)
+        except MissingEntry:
+            gb.add_submission(name, student)
+        grade = gb.find_grade("lab_run", "lab", name, student)
+        grade.auto_score = float(points)
+        gb.db.commit()
+
+
 class Pace:
     """``lab: job 3 of 10 (bob): running the sweep (52 s); about 7 min left at this pace`` on stderr."""
 
     def __init__(self, total: int, estimate: float, stream=None):
         self.total, self.estimate, self.done, self.t0 = total, estimate, 0, time.monotonic()
+        self.jobs = total  # as numbered; ``total`` drops the refused ones (they take no arm time)
         self.stream = stream if stream is not None else sys.stderr
         self.n, self.student = 0, ""
 
@@ -202,7 +232,7 @@ class Pace:
 
     def say(self, what: str) -> None:
         m = self.left() / 60
-        print(f"lab: job {self.n} of {self.total} ({self.student}): {what}; about {m:.0f} min left at this pace",
+        print(f"lab: job {self.n} of {self.jobs} ({self.student}): {what}; about {m:.0f} min left at this pace",
               file=self.stream, flush=True)
 
 
@@ -215,24 +245,30 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
     pace = Pace(len(todo), 2 * s.reference_trajectory().duration + 15, stream)
     robot = None
     try:
+        passed = []  # every job through the gate first: nothing heavy runs while the arm is open and idle
         for n, job in enumerate(todo, 1):
             pace.n, pace.student = n, job["student"]
             pace.say("checking the sweep in the simulator")
             path = handin_path(course, job["student"], s)
             if not path.is_file():
-                queue.set(job, "refused", "no sweep at the task's values was kept when this submission was graded: "
-                          f"grade it again (snakekit grade {s.assignment} --student {job['student']})")
-                pace.done += 1
-                continue
-            try:
-                checked = gate.check(load_handin(path), s)
-            except (OSError, ValueError) as e:
-                checked = gate.Checked(f"your hand-in cannot be read as arrays ({e})")
+                checked = gate.Checked("no sweep at the task's values was kept when this submission was graded: "
+                                       f"grade it again (snakekit grade {s.assignment} --student {job['student']})")
+            else:
+                try:
+                    checked = gate.check(load_handin(path), s)
+                except (OSError, ValueError) as e:
+                    checked = gate.Checked(f"your hand-in cannot be read as arrays ({e})")
             if checked.reason:
                 queue.set(job, "refused", checked.reason)
                 print(f"lab: {job['student']}: refused: {checked.reason}", file=out, flush=True)
-                pace.done += 1
-                continue
+                pace.total -= 1
+            else:
+                passed.append((n, job, checked))
+        pace.t0 = time.monotonic()
+        ran = []  # run on the arm; written up once the arm is closed (a plot drawn while the arm idles
+        code = 0  # would keep the bus quiet long enough, on a busy computer, for the servos' watchdog)
+        for n, job, checked in passed:
+            pace.n, pace.student = n, job["student"]
             queue.set(job, "running", "", attempts=job["attempts"] + 1)
             if robot is None:
                 pace.say("connecting to the arm")
@@ -244,23 +280,34 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
                 queue.set(job, "lab fault", f"the lab's fault, not yours: {first}; it runs again at the next start")
                 print(f"lab: {job['student']}: lab fault: {e}\nlab: the arm was stopped and the session ended; check "
                       f"the arm and its cable, then start `snakekit lab {s.assignment}` again", file=out, flush=True)
-                return 1
+                code = 1
+                break
+            ran.append((job, checked, run, info))
+            pace.done += 1
+        close(robot, out)
+        robot = None
+        for job, checked, run, info in ran:
             result = grade(run, checked.trajectory, cal, ref_t, ref_q, s)
             info.update(student=job["student"], sim_gap_rad=checked.sim_gap, calibration=cal)
             write_result(course, s, job["student"], run, checked.trajectory, checked, info, result, (ref_t, ref_q))
+            record_grade(course, s, job["student"], result["points"])
             queue.set(job, "graded", result["message"], points=result["points"])
             print(f"lab: {job['student']}: {result['points']:g}/{result['max_points']:g}: {result['message']}",
                   file=out, flush=True)
-            pace.done += 1
-        return 0
+        return code
     except BaseException:
         for job in todo:
             if job["state"] == "running":
                 queue.set(job, "queued", "interrupted by the TA; runs again at the next start")
         raise
     finally:
-        if robot is not None:
-            try:
-                robot.close()  # torque off at the end of the session (the driver's on_close)
-            except BackendError as e:  # the port is gone: the driver said what the arm was left doing
-                print(f"lab: closing the arm: {e}", file=out, flush=True)
+        close(robot, out)
+
+
+def close(robot, out) -> None:
+    """Torque off (the driver's ``on_close``), at the end of the arm's part of a session."""
+    if robot is not None:
+        try:
+            robot.close()
+        except BackendError as e:  # the port is gone: the driver said what the arm was left doing
+            print(f"lab: closing the arm: {e}", file=out, flush=True)
