@@ -59,7 +59,7 @@ def make_course(root):
     course = root / "course"
     (course / "source" / A).mkdir(parents=True)
     (course / "lab" / A).mkdir(parents=True)
-    (course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE}))
+    (course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE, "stall_delay": 0.03}))  # short sweeps
     for student, (tr, _) in CLASS.items():
         hand_in(course, student, tr)
     return course
@@ -276,3 +276,41 @@ def test_grading_keeps_each_trajectory_at_the_spec_values_for_the_lab(tmp_path):
         assert np.allclose(z["times"], task2.times) and np.allclose(z["positions"], task2.positions, atol=1e-12)
         assert z["measured_times"][-1] == pytest.approx(task2.duration + 0.5, abs=0.02)
     assert keep(course, A, "bob", None, batch) is None and not (course / "autograded" / "bob").exists()
+
+
+def test_the_command_calibrates_runs_and_on_sigterm_stops_the_arm_and_keeps_the_queue(tmp_path):
+    """Through `snakekit lab` (the entry point), with the emulator as the arm."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    course = make_course(tmp_path)
+    env = dict(os.environ, MUJOCO_GL="egl")
+    cmd = [sys.executable, "-m", "snakekit.cli", "lab"]
+    r = subprocess.run(cmd + ["calibrate", A, "--course", str(course), "--emulator", "--runs", "2"],
+                       capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 0, r.stderr
+    assert "lab calibrate: reference run 2 of 2" in r.stdout and "lab calibrate: bands j1 " in r.stdout
+    assert json.loads((course / "lab" / A / "calibration.json").read_text())["runs"] == 2
+
+    p = subprocess.Popen(cmd + [A, "--course", str(course), "--emulator", "--student", "bob", "alice", "frank"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    seen = ""
+    deadline = time.monotonic() + 120
+    while "running the sweep" not in seen and time.monotonic() < deadline:
+        seen += p.stderr.readline()
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 143, seen + err
+    assert "terminated (SIGTERM); the arm was stopped (torque off) and the queue kept" in err
+    q = Queue.load(course, A)
+    assert [j["student"] for j in q.jobs] == ["alice", "bob", "frank"]  # collected order: none listed, so by id
+    assert q.job("frank")["state"] == "refused"  # gated before the arm moved
+    running = [j for j in q.jobs if j["reason"].startswith("interrupted")]
+    assert len(running) == 1 and running[0]["state"] == "queued"
+
+    r = subprocess.run(cmd + [A, "--course", str(course), "--status"], capture_output=True, text=True, timeout=60,
+                       env=env)
+    assert r.returncode == 0 and "interrupted by the TA; runs again at the next start" in r.stdout

@@ -47,6 +47,9 @@ class LabSettings:
         band_factor: the bands are this times the calibration's spread (the most two runs differ)...
         band_floor: ...and at least this [rad].
         max_points: the lab grade's points.
+        stall_delay: a run is made again when a goal left this much later than planned after the
+            one before [s]: the arm waited on that one meanwhile, which changes the motion. Shorter
+            delays, and the sum of many, are taken out by comparing on the sweep's own clock.
     """
 
     assignment: str
@@ -57,6 +60,7 @@ class LabSettings:
     band_factor: float = 2.0
     band_floor: float = 0.01
     max_points: float = 1.0
+    stall_delay: float = 0.05
 
     def reference_trajectory(self):
         """The spec's trajectory: what every student's is run against."""

@@ -72,20 +72,23 @@ def run_on_arm(robot, trajectory, say=lambda what: None):
     run = robot.run(trajectory, record_rate=RECORD_RATE, progress=False)
     say("homing again")
     robot.home(progress=False)
+    # how much later than planned each goal left after the one before (the shifts add up over a run:
+    # harmless on the sweep's own clock; a single long wait is not)
+    waits = np.diff(run.commanded.times) - np.diff(trajectory.times)
     return run, {"servo_errors": _servo_errors(robot), "bus_retries": getattr(robot, "retried", 0) - retried0,
-                 "late_shifts": robot.late_shifts - shifts0,
+                 "late_shifts": robot.late_shifts - shifts0, "largest_goal_delay_s": float(max(waits.max(initial=0.0), 0.0)),
                  **_info(robot)}
 
 
-def run_unstalled(robot, trajectory, say=lambda what: None):
+def run_unstalled(robot, trajectory, stall_delay: float, say=lambda what: None):
     """:func:`run_on_arm`, again when the host stalled in the run (late goals change the motion on
     the arm: such a run is neither the reference's nor the student's). Raises :class:`Stalled`."""
     for k in range(STALL_TRIES):
         run, info = run_on_arm(robot, trajectory, say)
-        if info["late_shifts"] == 0:
+        if info["largest_goal_delay_s"] <= stall_delay:
             info["stalled_tries"] = k
             return run, info
-        say(f"the computer stalled during the run ({info['late_shifts']} late goals): running it again")
+        say(f"the computer stalled during the run (a goal {info['largest_goal_delay_s']:.2f} s late): running it again")
     raise Stalled(f"the lab computer stalled in each of {STALL_TRIES} tries of the run (goals sent late); close "
                   "other programs on it")
 
@@ -98,7 +101,8 @@ def calibrate(robot, course: Path, s: LabSettings, runs: int, out=sys.stdout) ->
     recorded = []
     for k in range(runs):
         print(f"lab calibrate: reference run {k + 1} of {runs} ({ref.duration:.0f} s)", file=out, flush=True)
-        run, info = run_unstalled(robot, ref)
+        run, info = run_unstalled(robot, ref, s.stall_delay,
+                                  lambda what: print(f"lab calibrate: {what}", file=out, flush=True))
         recorded.append(run)
     times = np.arange(int(round((ref.duration + 0.5) * RECORD_RATE)) + 1) / RECORD_RATE
     stack = np.stack([gate.resampled(on_plan(r, ref), r.measured.positions, times) for r in recorded])
@@ -114,7 +118,8 @@ def calibrate(robot, course: Path, s: LabSettings, runs: int, out=sys.stdout) ->
            **info}
     write_atomic(d / "calibration.json", json.dumps(cal, indent=1))
     print("lab calibrate: bands " + " ".join(f"j{j + 1} {np.degrees(b):.2f}" for j, b in enumerate(bands))
-          + f" deg (the most two of {runs} runs differ, x {s.band_factor:g}, at least {np.degrees(s.band_floor):.2f} deg)",
+          + f" deg (the most two of {runs} runs differ, x {s.band_factor:g}, "
+          f"at least {np.degrees(s.band_floor):.2f} deg)",
           file=out, flush=True)
     return cal
 
@@ -159,7 +164,8 @@ def plot(path: Path, run, trajectory, checked, ref_t, ref_q) -> None:
     t = on_plan(run, trajectory)
     for j, ax in enumerate(axes):
         ax.plot(ref_t, np.degrees(ref_q[:, j]), "k-", lw=1, label="reference run (arm)")
-        ax.plot(checked.sim_times, np.degrees(checked.sim_positions[:, j]), "C1--", lw=1, label="your sweep (simulator)")
+        ax.plot(checked.sim_times, np.degrees(checked.sim_positions[:, j]), "C1--", lw=1,
+                label="your sweep (simulator)")
         ax.plot(t, np.degrees(run.measured.positions[:, j]), "C0-", lw=1, label="your sweep (arm)")
         ax.set_ylabel(f"j{j + 1} [deg]")
     axes[0].legend(loc="upper right", fontsize=7, ncol=3)
@@ -267,23 +273,28 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
         pace.t0 = time.monotonic()
         ran = []  # run on the arm; written up once the arm is closed (a plot drawn while the arm idles
         code = 0  # would keep the bus quiet long enough, on a busy computer, for the servos' watchdog)
-        for n, job, checked in passed:
-            pace.n, pace.student = n, job["student"]
-            queue.set(job, "running", "", attempts=job["attempts"] + 1)
-            if robot is None:
-                pace.say("connecting to the arm")
-                robot = open_robot()
-            try:
-                run, info = run_unstalled(robot, checked.trajectory, pace.say)
-            except BackendError as e:
-                first = str(e).split(". ")[0]
-                queue.set(job, "lab fault", f"the lab's fault, not yours: {first}; it runs again at the next start")
-                print(f"lab: {job['student']}: lab fault: {e}\nlab: the arm was stopped and the session ended; check "
-                      f"the arm and its cable, then start `snakekit lab {s.assignment}` again", file=out, flush=True)
-                code = 1
-                break
-            ran.append((job, checked, run, info))
-            pace.done += 1
+        stopped = None
+        try:
+            for n, job, checked in passed:
+                pace.n, pace.student = n, job["student"]
+                queue.set(job, "running", "", attempts=job["attempts"] + 1)
+                if robot is None:
+                    pace.say("connecting to the arm")
+                    robot = open_robot()
+                try:
+                    run, info = run_unstalled(robot, checked.trajectory, s.stall_delay, pace.say)
+                except BackendError as e:
+                    first = str(e).split(". ")[0]
+                    queue.set(job, "lab fault", f"the lab's fault, not yours: {first}; it runs again at the next start")
+                    print(f"lab: {job['student']}: lab fault: {e}\nlab: the arm was stopped and the session ended; "
+                          f"check the arm and its cable, then start `snakekit lab {s.assignment}` again", file=out,
+                          flush=True)
+                    code = 1
+                    break
+                ran.append((job, checked, run, info))
+                pace.done += 1
+        except KeyboardInterrupt as e:  # Ctrl-C / SIGTERM: the runs already made are still written up
+            stopped = e
         close(robot, out)
         robot = None
         for job, checked, run, info in ran:
@@ -294,6 +305,8 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
             queue.set(job, "graded", result["message"], points=result["points"])
             print(f"lab: {job['student']}: {result['points']:g}/{result['max_points']:g}: {result['message']}",
                   file=out, flush=True)
+        if stopped is not None:
+            raise stopped
         return code
     except BaseException:
         for job in todo:
