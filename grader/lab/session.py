@@ -13,6 +13,7 @@ torque off.
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -208,6 +209,9 @@ def record_grade(course: Path, s: LabSettings, student: str, points: float) -> N
     from grader.course import gradebook
 
     name = lab_assignment(s)
+    bin_dir = str(Path(os.path.abspath(sys.executable)).parent)  # a new gradebook runs nbgrader's `alembic`
+    if bin_dir not in os.environ.get("PATH", "").split(os.pathsep):
+        os.environ["PATH"] = f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}"
     with gradebook(course) as gb:
         a = gb.update_or_create_assignment(name)
         if not a.notebooks:
