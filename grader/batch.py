@@ -40,6 +40,7 @@ from .records import CSV_COLUMNS, class_rows, late_penalties, read_class_csv, re
 from .references import REFERENCES, ReferenceError, expected
 from .runner import Runner
 from .verdict import SubmissionResult, Verdicts
+from .lab.keep import with_lab_case
 from .score import read_handin
 
 #: The student id the instructor notebook runs under in its sandbox (never a row of the gradebook).
@@ -98,6 +99,7 @@ class Grader:
             if a.reference is not None:  # the hidden cases of this batch, drawn anew
                 try:
                     self.draw = draw(self.course, self.assignment, self.seed)
+                    self.draw = with_lab_case(self.draw, self.course)  # the spec's case too, kept for `snakekit lab`
                 except CasesError as e:
                     raise GradingError(str(e)) from e
                 self.runner.cases = CaseServer(self.draw)
@@ -150,6 +152,7 @@ class Grader:
                     if s == INSTRUCTOR:
                         try:
                             self.verdicts.expected = fut.result()
+                            self.verdicts.draw = self.draw
                         except Exception:
                             for f in pending:
                                 f.cancel()

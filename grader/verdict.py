@@ -15,6 +15,7 @@ import nbformat
 
 from . import feedback, rerun
 from .assignment import read_inside
+from .lab.keep import keep_for_lab
 from .score import ExerciseScore, read_handin, score_exercise
 
 
@@ -44,6 +45,7 @@ class Verdicts:
         self.course, self.a, self.base = course, a, base
         self.timeout, self.cell_timeout, self.memory = timeout, cell_timeout, memory
         self.expected: dict = {}
+        self.draw = None  # the batch's cases (set with the expected results)
 
     def handin_scores(self, work, tampered) -> dict[str, ExerciseScore]:
         """The score of every test cell with expected results, from the hand-ins in ``work``."""
@@ -138,6 +140,8 @@ class Verdicts:
                 mine = [s for s in scores if a.tests[s.grade_id].notebook == name]
                 nbformat.write(feedback.record(nb, dataclasses.replace(result, exercises=tuple(mine)),
                                                stopped=stopped.get(name), timeout=self.timeout), dest / f"{name}.ipynb")
+            if self.draw is not None:  # the trajectory at the spec's values, for `snakekit lab`
+                keep_for_lab(self.course, a.name, student, work, self.draw)
         return self.feedback(result, nbs, executed, stopped)
 
     def zero(self, student, status, detail, t0) -> SubmissionResult:

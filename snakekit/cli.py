@@ -185,7 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: Commands another installed package provides (the grader's), by the entry point group they are in.
 PLUGIN_GROUP = "snakekit.commands"
-PLUGIN_COMMANDS = ("grade", "collect", "return", "export")
+PLUGIN_COMMANDS = ("grade", "collect", "return", "export", "lab")
 
 
 def plugin_command(name: str):

@@ -193,6 +193,9 @@ def test_snakekit_grade_reaches_the_grader_through_its_entry_point():
     assert cli.plugin_command("grade") is grader.cli.main
     assert cli.plugin_command("collect") is grader.collect.main
     assert (cli.plugin_command("return"), cli.plugin_command("export")) == (grader.lms.return_main, grader.lms.export_main)
+    import grader.lab.cli
+
+    assert cli.plugin_command("lab") is grader.lab.cli.main
     r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", "--help"], capture_output=True, text=True,
                        timeout=120)
     assert r.returncode == 0 and "usage: snakekit grade" in r.stdout

@@ -9,7 +9,10 @@ import sys
 from pathlib import Path
 
 import nbformat
+import numpy as np
 import pytest
+
+import snakekit
 
 from conftest import need_program
 from grader_helpers import read_csv
@@ -97,6 +100,13 @@ def test_task2_feedback_plots_the_run_against_the_reference(graded):
     html = (course / "feedback" / "ana" / LESSON / f"{LESSON}.html").read_text()
     assert "Grader: ex06_3_task2_test:" in html and "every check passed in every hidden case" in html
     assert 'alt="No description has been provided for this image" class="" src="data:image/png;base64,' in html
+
+
+def test_grading_keeps_task2_at_the_spec_values_for_the_lab(graded):
+    course, _ = graded
+    with np.load(course / "autograded" / "ana" / LESSON / "lab" / "ex06_3_task2_test.npz", allow_pickle=False) as z:
+        assert np.allclose(z["positions"], snakekit.side_sweep().positions, atol=1e-12)
+    assert not (course / "autograded" / "eve" / LESSON / "lab" / "ex06_3_task2_test.npz").exists()  # nothing returned
 
 
 # --- lesson 01: scored out of the kernel too, so patching numpy and the checks earns nothing ----

@@ -1,0 +1,7 @@
+"""The lab: graded runs of the students' Task 2 on the real arm (``snakekit lab``).
+
+:mod:`.jobs` (the course's lab settings, the queue in ``<course>/lab/<a>/queue.json``),
+:mod:`.gate` (each trajectory checked in the simulator, outside the student's code),
+:mod:`.session` (calibration, the runs on the arm, the grades and result folders),
+:mod:`.cli` (the command). docs/lab.md is the TA's guide.
+"""
