@@ -1,8 +1,10 @@
 """What ``snakekit grade`` keeps for the lab: each student's trajectory at the spec's own values.
 
-The hidden cases change every batch, so the grader also asks the lab's exercise for the spec's
+The hidden cases change every batch. Where the exercise's cases hold the call with no arguments
+(lesson 06: ``task2_sweep()``, Task 2 at the function's own defaults, which the spec's values
+are), that case is the lab's; otherwise the grader also asks the lab's exercise for the spec's
 case (:func:`with_lab_case`: one more case of that grade id, scored like the others against the
-instructor's run of it) and keeps what the student's function returned there, as arrays, beside
+instructor's run of it). It keeps what the student's function returned there, as arrays, beside
 the autograded notebook (:func:`keep`): ``autograded/<student>/<a>/lab/<grade id>.npz`` with
 ``times``, ``positions`` (the trajectory) and ``measured_times``, ``measured_positions`` (its
 simulator run in the sandbox). The lab reads it with ``allow_pickle=False``; the student's code
@@ -37,6 +39,8 @@ def with_lab_case(batch, course: Path):
     if found is None or found[0].exercise not in batch.cases:
         return batch
     s, case = found
+    if () in batch.cases[s.exercise]:
+        return batch  # Task 2 itself is a case already: the call with no arguments (kept by keep())
     cases = dict(batch.cases)
     cases[s.exercise] = [c for c in cases[s.exercise] if c != case] + [case]
     return dataclasses.replace(batch, cases=cases)
@@ -55,6 +59,8 @@ def keep(course: Path, assignment: str, student: str, results: list | None, batc
     path = handin_path(course, student, s)
     path.unlink(missing_ok=True)
     cases = batch.cases.get(s.exercise, [])
+    if () in cases:  # the student's Task 2 as their function makes it with no arguments
+        case = ()
     if results is None or case not in cases:
         return None
     k = cases.index(case)
