@@ -203,9 +203,13 @@ def test_lesson6_hands_in_sweeps_runs_and_lags(graded):
         assert r["positions"].shape == (len(t), 5) and bool(r["last_row_exactly_home"])
         assert np.allclose(r["positions"][:-1, 2], a * np.sin(2 * np.pi * k * t[:-1] / t[-1]), atol=1e-12)
     cases, results = run["cases"]["ex06_3_task2_test"], run["results"]["ex06_3_task2_test"]
-    assert isinstance(results[-1], str) and results[-1].startswith("LimitError: "), results[-1]
-    assert abs(cases[-1][3]) > snakekit.SPEC.upper, "the last case is a sweep beyond the limits"
-    for (n, f, k, a), r in zip(cases[:-1], results[:-1]):
+    assert cases[-1] == (), "the last case is Task 2 itself: task2_sweep() at its defaults"
+    task2 = snakekit.side_sweep()
+    assert np.allclose(results[-1]["times"], task2.times) and np.allclose(results[-1]["positions"], task2.positions,
+                                                                          atol=1e-12)
+    assert isinstance(results[-2], str) and results[-2].startswith("LimitError: "), results[-2]
+    assert abs(cases[-2][3]) > snakekit.SPEC.upper, "the case before it is a sweep beyond the limits"
+    for (n, f, k, a), r in zip(cases[:-2], results[:-2]):
         sweep = snakekit.side_sweep(points=n, rate=f, sweeps=k, amplitude=a)
         assert np.allclose(r["times"], sweep.times) and np.allclose(r["positions"], sweep.positions, atol=1e-12)
         with snakekit.make_robot("sim") as robot:
