@@ -20,6 +20,7 @@ For each ``<course>/submitted/<student>/<assignment>/`` the grader
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import shutil
 import sys
@@ -32,7 +33,7 @@ from pathlib import Path
 
 import nbformat
 
-from . import rerun, sandbox
+from . import rerun, sandbox, worker
 from .assignment import (MAX_FILE, GradingError, _Assignment, _Cell, ensure_released, load_assignment,  # noqa: F401
                          read_inside, tampered_cells, _template_gradebook)
 from .cases import CasesError, CaseServer, draw
@@ -283,6 +284,7 @@ class Grader:
             work = self.runner.stage(student, src, nbs, tampered)
             for name, nb in rerun.with_answers(nbs, source, cells).items():
                 nbformat.write(nb, work / "course" / "submitted" / student / self.a.name / f"{name}.ipynb")
+            (work / worker.ONLY).write_text(json.dumps({"tests": sorted(again)}))
             self.runner.run(work, student)
             for gid, replaced in again.items():
                 try:

@@ -31,6 +31,8 @@ from pathlib import Path
 import nbformat
 import numpy as np
 
+from .page import html_page
+
 HIDDEN = re.compile(r"^[ \t]*#+[ \t]*BEGIN HIDDEN TESTS.*?^[ \t]*#+[ \t]*END HIDDEN TESTS[^\n]*\n?",
                     re.MULTILINE | re.DOTALL | re.IGNORECASE)
 REMOVED = "[output removed by the grader: it showed hidden test code]"
@@ -527,7 +529,7 @@ def exporter_class():
             return MarkdownWithMath(renderer=renderer).render(source)
 
         def from_notebook_node(self, nb, resources=None, **kw):
-            body, resources = super().from_notebook_node(nb, resources, **kw)
+            body, resources = html_page(self, nb, resources, **kw)
             # the page's style sheets credit web pages in comments; a page with no address in it is simpler to check
             return _STYLE.sub(lambda m: _CSS_COMMENT.sub(lambda c: "" if "http" in c.group(0) else c.group(0),
                                                          m.group(0)), body), resources

@@ -25,6 +25,8 @@ from pathlib import Path
 from .gate import open_gate
 from .gate import say as gate_says
 
+#: beside the course copy in a second run: {"tests": [the test cells whose hand-ins are read]}
+ONLY = "only.json"
 #: the note put on the cell that was running when a notebook's time ran out (``{timeout}``: seconds)
 STOPPED_NOTE = "stopped here: the notebook ran longer than {timeout:g} s"
 _stopped: list[dict] = []  # where each notebook was stopped, filled in by the execute preprocessor
@@ -53,7 +55,9 @@ def main(argv: list[str], *, warm: bool = False) -> int:
         config.CourseDirectory.root = str(course)
         config.Execute.timeout = max(1, int(cell_timeout))
         config.Execute.interrupt_on_timeout = True
-        config.Autograde.autograde_preprocessors = _with_deadline(timeout, cell_timeout)
+        only = course.parent / ONLY
+        tests = set(json.loads(only.read_text())["tests"]) if only.is_file() else None
+        config.Autograde.autograde_preprocessors = _with_deadline(timeout, cell_timeout, tests)
         config.Execute.extra_arguments = ["--HistoryManager.hist_file=:memory:"]
         config.NbGraderAPI.timezone = "UTC"
         if warm:
@@ -72,8 +76,25 @@ def main(argv: list[str], *, warm: bool = False) -> int:
     return 0 if result["success"] else 3
 
 
-def _with_deadline(timeout: float, cell_timeout: float) -> list:
-    """nbgrader's autograde steps, with its ``Execute`` replaced by one that keeps the notebook's deadline."""
+def runs_cell(cells: list, index: int, tests: set) -> bool:
+    """Whether a second run (:mod:`grader.rerun`), which reads only the hand-ins of the test cells
+    ``tests``, runs cell ``index``: the lesson's cells before its first exercise (its imports),
+    every answer cell and those test cells, up to the last of them. The other test cells and
+    the lesson's cells between the exercises (its demonstrations: plots, the Task 2 run) are
+    not run, nor anything after the last of ``tests``.
+    """
+    def meta(c):
+        return c.get("metadata", {}).get("nbgrader", {})
+
+    last = max((i for i, c in enumerate(cells) if meta(c).get("grade_id") in tests), default=-1)
+    first = min((i for i, c in enumerate(cells) if meta(c).get("grade_id")), default=len(cells))
+    m = meta(cells[index])
+    return index <= last and (index < first or bool(m.get("solution")) or m.get("grade_id") in tests)
+
+
+def _with_deadline(timeout: float, cell_timeout: float, tests: set | None = None) -> list:
+    """nbgrader's autograde steps, with its ``Execute`` replaced by one that keeps the notebook's
+    deadline (and, in a second run, runs only the cells :func:`runs_cell` names)."""
     from nbgrader.converters import Autograde
     from nbgrader.preprocessors import Execute
 
@@ -83,6 +104,7 @@ def _with_deadline(timeout: float, cell_timeout: float) -> list:
         def preprocess(self, nb, resources=None, km=None):
             self._deadline = time.monotonic() + timeout
             self._stopped_at = None
+            self._cells = nb.cells
             self._notebook = ((resources or {}).get("nbgrader") or {}).get("notebook", "")
             # each cell: its own limit, or what is left of the notebook's, whichever is shorter
             self.timeout_func = lambda cell: max(0.05, min(cell_timeout, self._deadline - time.monotonic()))
@@ -91,6 +113,8 @@ def _with_deadline(timeout: float, cell_timeout: float) -> list:
         def preprocess_cell(self, cell, resources, index):
             if self._stopped_at is not None:
                 return cell, resources  # the notebook's time is up: not run
+            if tests is not None and not runs_cell(self._cells, index, tests):
+                return cell, resources
             meta = cell.get("metadata", {}).get("nbgrader", {})
             test = cell.cell_type == "code" and meta.get("grade") and not meta.get("solution") and meta.get("grade_id")
             try:
