@@ -498,6 +498,7 @@ def exporter_config():
     c.TagRemovePreprocessor.enabled = True
     c.HTMLExporter.exclude_input_prompt = True
     c.HTMLExporter.exclude_output_prompt = True
+    c.HTMLExporter.optimistic_validation = True  # the notebook validated once, not after each of a dozen steps
     return c
 
 
@@ -521,12 +522,22 @@ def exporter_class():
         @pass_context
         def markdown2html(self, context, source):
             cell = context.get("cell", {})
+            attachments = cell.get("attachments", {})
+            path = context.get("resources", {}).get("metadata", {}).get("path", "")
+            # every page of a class repeats the lesson's text: each cell is rendered once
+            key = (source, path, repr(_frozen(attachments)))
+            memo = self.__dict__.setdefault("_markdown_memo", OrderedDict())
+            if key in memo:
+                memo.move_to_end(key)
+                return memo[key]
             renderer = MathMLRenderer(
-                escape=False, attachments=cell.get("attachments", {}), embed_images=self.embed_images,
-                path=context.get("resources", {}).get("metadata", {}).get("path", ""),
+                escape=False, attachments=attachments, embed_images=self.embed_images, path=path,
                 anchor_link_text=self.anchor_link_text, exclude_anchor_links=self.exclude_anchor_links,
                 **self.lexer_options)
-            return MarkdownWithMath(renderer=renderer).render(source)
+            memo[key] = out = MarkdownWithMath(renderer=renderer).render(source)
+            if len(memo) > 2048:
+                memo.popitem(last=False)
+            return out
 
         def from_notebook_node(self, nb, resources=None, **kw):
             body, resources = html_page(self, nb, resources, **kw)
