@@ -333,6 +333,9 @@ MISTAKES = {
         ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n    q = np.asarray(q, dtype=float)\n"
          "    return np.column_stack([(f(q + h * e) - f(q - h * e)) / 2 * h for e in np.eye(len(q))])",
          "write `/ (2 * h)`"),
+        ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n    q = np.asarray(q, dtype=float)\n"
+         "    return np.column_stack([(f(q + 1e-6 * e) - f(q - 1e-6 * e)) / 2e-6 for e in np.eye(len(q))])",
+         "not for the step you were given"),
         ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[:2]\n"
          "    return float(np.sqrt(np.linalg.det(J @ J.T)))", "Clip it at 0 first"),
         ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[:2]\n"
