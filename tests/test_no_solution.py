@@ -384,6 +384,11 @@ MISTAKES = {
         ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n" + _IK2 +
          "    return np.array([[np.arctan2(y, x) + np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)])",
          "the second angle is subtracted"),
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n" + _IK2 +
+         "    return np.array([[np.arctan2(x, y) - np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)])",
+         "np.arctan2 takes y first"),
+        ("ex03_3_ik_loop_test", _SOLVE.replace("< tol", "< 1e-4").replace("    return q", "    return q\n"
+         "    raise ValueError('no solution')"), "does your loop stop once the distance is below `tol`"),
         ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])[:2]"),
          "keep the heading too")],
     "04_trajectories": [
