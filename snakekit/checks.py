@@ -295,6 +295,8 @@ class Exercise:
 
 
 def _shape_hint(arr: np.ndarray, exp: np.ndarray) -> str:
+    if exp.ndim == 0:
+        return "return one number, not a list or an array of them: float(...) makes one."
     if arr.ndim == 2 and arr.T.shape == exp.shape:
         return "this is the transpose of the expected shape: swap rows and columns (or build it the other way)."
     if arr.size == exp.size and arr.ndim != exp.ndim:

@@ -180,6 +180,8 @@ _SOLVE = ("def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n"
           "            break\n"
           "        q = np.clip(dls_step(q, target), spec.lower, spec.upper)\n"
           "    return q")
+_IK2 = ("    c2 = (x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2)\n"
+        "    if abs(c2) > 1 + 1e-12:\n        raise ValueError('out of reach')\n    q2 = np.arccos(np.clip(c2, -1, 1))\n")
 _TASK1 = ("def task1(panel, targets):\n    out = []\n    for x, y, heading in targets:\n"
           "        panel.set_target(x, y, heading)\n        run = panel.execute()\n"
           "        out.append({})\n    return np.array(out)")
@@ -188,7 +190,21 @@ MISTAKES = {
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
          "    return float(np.hypot(x - target[0], y - target[1]))", "this looks like metres"),
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
-         "    d = 1000 * float(np.hypot(x - target[0], y - target[1]))", "returned None (nothing)", True)],
+         "    d = 1000 * float(np.hypot(x - target[0], y - target[1]))", "returned None (nothing)", True),
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
+         "    return 1000 * ((x - target[0]) ** 2 + (y - target[1]) ** 2)", "the squared distance"),
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
+         "    return (1000 * (x - target[0])) ** 2 + (1000 * (y - target[1])) ** 2", "the squared distance in mm^2"),
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
+         "    return float(np.hypot(x - target[0], y - target[1])) / 1000", "divided by 1000"),
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
+         "    return 1000 * abs(x - target[0])", "only the x difference"),
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(np.radians(q))\n"
+         "    return 1000 * float(np.hypot(x - target[0], y - target[1]))", "q is in radians already"),
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
+         "    return 1000 * float(np.hypot(x - target[0], y - target[0]))", "the target's y is target[1]"),
+        ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
+         "    return [1000 * np.hypot(x - target[0], y - target[1])]", "return one number, not a list")],
     "01_forward_kinematics": [
         ("ex01_1_planar_fk_test", "def planar_fk(q):\n    L = spec.lengths\n"
          "    return np.array([np.sum(L * np.cos(q)), np.sum(L * np.sin(q)), np.sum(q)])",
@@ -232,7 +248,39 @@ MISTAKES = {
         ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n    return 4 * 0.071 + 0.0475",
          "not the arguments"),
         ("ex01_3_reach_test", "def reach(n_joints, link_length, tool_offset):\n    return spec.reach",
-         "`snakekit.SnakeSpec.reach` was called", True)],
+         "`snakekit.SnakeSpec.reach` was called", True),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), np.degrees(phi[-1])])",
+         "the heading looks like degrees"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    phi = np.cumsum(np.radians(q))\n    L = spec.lengths\n"
+         "    return np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), phi[-1]])",
+         "np.radians converts it a second time"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    phi = np.cumsum(q) - q\n    L = spec.lengths\n"
+         "    return np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), np.sum(q)])", "off by one joint"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    x = y = heading = 0.0\n    for i in range(5):\n"
+         "        x += spec.lengths[i] * np.cos(heading)\n        y += spec.lengths[i] * np.sin(heading)\n"
+         "        heading += q[i]\n    return np.array([x, y, heading])", "off by one joint"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n    x = y = heading = 0.0\n    for i in range(1, 5):\n"
+         "        heading += q[i]\n        x += spec.lengths[i] * np.cos(heading)\n"
+         "        y += spec.lengths[i] * np.sin(heading)\n    return np.array([x, y, heading])", "link 1 is missing"),
+        ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
+         "    return np.array([np.sum(L[:4] * np.cos(phi[:4])), np.sum(L[:4] * np.sin(phi[:4])), phi[-1]])",
+         "the tool link is missing"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n" + _FK +
+         "    return np.cumsum(L[:, None] * np.column_stack([np.cos(phi), np.sin(phi)]), axis=0)",
+         "row 0 is joint 1 at the origin"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n" + _FK +
+         "    steps = L[:4, None] * np.column_stack([np.cos(phi[:4]), np.sin(phi[:4])])\n"
+         "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])", "the tool row is missing"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n" + _FK +
+         "    return np.vstack([[0.0, 0.0], L[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])])",
+         "these are the link vectors"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n" + _FK +
+         "    steps = L[:, None] * np.column_stack([np.sin(phi), np.cos(phi)])\n"
+         "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])", "cos and sin are swapped"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n" + _FK +
+         "    steps = L[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])\n"
+         "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)]).T", "the transpose of the expected shape")],
     "02_jacobian": [
         ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
          "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
@@ -261,7 +309,39 @@ MISTAKES = {
         ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[:2]\n"
          "    return float(np.linalg.det(J @ J.T))", "without the square root"),
         ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)\n"
-         "    return float(np.sqrt(np.linalg.det(J @ J.T)))", "this uses all three rows")],
+         "    return float(np.sqrt(np.linalg.det(J @ J.T)))", "this uses all three rows"),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
+         "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
+         "    return np.vstack([down(-L * np.sin(phi)), down(L * np.cos(phi)), np.ones(len(q))]).T",
+         "the transpose of the expected shape"),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
+         "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
+         "    return np.vstack([down(-L * np.sin(phi)), down(L * np.cos(phi)), np.zeros(len(q))])", "a row of ones"),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n    J = np.ones((3, 5))\n"
+         "    for i in range(5):\n        J[0, i] = -np.sum(L[i + 1:] * np.sin(phi[i + 1:]))\n"
+         "        J[1, i] = np.sum(L[i + 1:] * np.cos(phi[i + 1:]))\n    return J", "column i starts at link i itself"),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n    J = np.ones((3, 5))\n"
+         "    for i in range(5):\n        J[0, i] = -np.sum(L[i:] * np.cos(phi[i:]))\n"
+         "        J[1, i] = np.sum(L[i:] * np.sin(phi[i:]))\n    return J", "cos and sin are swapped"),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n    J = np.ones((3, 5))\n"
+         "    for i in range(5):\n        J[0, i] = -np.sum(L[i:] * np.sin(phi[i:]))\n"
+         "        J[1, i] = np.sum(L[i:] * np.cos(phi[i:]))\n    return J.tolist()", "not a numpy array", True),
+        ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n    columns = []\n"
+         "    for i in range(len(q)):\n        qp = q\n        qp[i] += h\n        up = f(qp)\n        qm = q\n"
+         "        qm[i] -= 2 * h\n        columns.append((up - f(qm)) / (2 * h))\n    return np.column_stack(columns)",
+         "`qp = q` does not copy an array"),
+        ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n    q = np.asarray(q, dtype=float)\n"
+         "    return np.column_stack([(f(q + h * e) - f(q - h * e)) / 2 * h for e in np.eye(len(q))])",
+         "write `/ (2 * h)`"),
+        ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n    q = np.asarray(q, dtype=float)\n"
+         "    return np.column_stack([(f(q + 1e-6 * e) - f(q - 1e-6 * e)) / 2e-6 for e in np.eye(len(q))])",
+         "not for the step you were given"),
+        ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[:2]\n"
+         "    return float(np.sqrt(np.linalg.det(J @ J.T)))", "Clip it at 0 first"),
+        ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[:2]\n"
+         "    return float(np.sqrt(max(np.linalg.det(J.T @ J), 0.0)))", "take det(J J^T), 2 x 2"),
+        ("ex02_3_manipulability_test", "def manipulability(q):\n    J = snakekit.planar_jacobian(q)[1:]\n"
+         "    return float(np.sqrt(max(np.linalg.det(J @ J.T), 0.0)))", "this uses rows y and theta")],
     "03_inverse_kinematics": [
         ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n"
          "    c2 = np.clip((x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1, 1)\n"
@@ -294,7 +374,23 @@ MISTAKES = {
          "    return snakekit.inverse_kinematics(target)", "`snakekit.inverse_kinematics` was called", True),
         ("ex03_4_task1_test", _TASK1.format("run.measured.positions[-1]"), "are joint angles"),
         ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])"),
-         "raise a ValueError there", True)],
+         "raise a ValueError there", True),
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n" + _IK2 +
+         "    return np.array([[np.arctan(y / x) - np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)])",
+         "Use np.arctan2(y, x)"),
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n" + _IK2 +
+         "    q1 = np.arctan2(y, x) - np.arctan2(l2 * np.sin([q2, -q2]), l1 + l2 * np.cos(q2))\n"
+         "    return np.array([q1, [q2, -q2]])", "rows and columns are swapped"),
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n" + _IK2 +
+         "    return np.array([[np.arctan2(y, x) + np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)])",
+         "the second angle is subtracted"),
+        ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n" + _IK2 +
+         "    return np.array([[np.arctan2(x, y) - np.arctan2(l2 * np.sin(s), l1 + l2 * np.cos(s)), s] for s in (q2, -q2)])",
+         "np.arctan2 takes y first"),
+        ("ex03_3_ik_loop_test", _SOLVE.replace("< tol", "< 1e-4").replace("    return q", "    return q\n"
+         "    raise ValueError('no solution')"), "does your loop stop once the distance is below `tol`"),
+        ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])[:2]"),
+         "keep the heading too")],
     "04_trajectories": [
         ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)\n"
          "    return 3 * r ** 2 - 2 * r ** 3", "this is the cubic"),
