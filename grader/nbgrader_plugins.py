@@ -28,6 +28,7 @@ from pathlib import Path
 from nbconvert.exporters import HTMLExporter
 
 from . import feedback
+from .lab import feedback as lab_feedback
 
 #: where formgrader's request handlers live (imported only by a server that runs formgrader)
 FORMGRADER = "nbgrader.server_extensions.formgrader.apihandlers"
@@ -56,6 +57,9 @@ class SafeFeedbackExporter(HTMLExporter):
         page = regenerate(nb, student=student, assignment=assignment, notebook=notebook,
                           db_url=info.get("db_url"), course_id=course_id)
         body, _ = feedback._exporter().from_notebook_node(page)
+        root = getattr(getattr(self.parent, "coursedir", None), "root", None)
+        if root and student and assignment:  # the lab's result, when the lab ran the student's sweep
+            body = lab_feedback.add_to(body, Path(root), assignment, student)
         resources = dict(resources or {})
         resources["output_extension"] = ".html"
         return body, resources
