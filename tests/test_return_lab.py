@@ -135,3 +135,24 @@ def test_the_first_return_had_no_lab_part_and_the_second_loses_nothing_of_it(ret
         assert with_lab(returned["after"][student], "") == first  # the page again, the lab's part added, no more
     page = returned["after"]["erin"]  # after the page's heading, before the notebook's first cell
     assert page.index("Score: <strong>") < page.index("snakekit-lab:begin") < page.index("Test course: tool point")
+
+
+def test_a_page_written_again_keeps_the_lab_part(returned):
+    """``snakekit grade --student`` and ``nbgrader generate_feedback`` (the course's safe pages) write the
+    page anew: the lab's part is in it again, as the lab last wrote it."""
+    course = returned["course"]
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}", "MUJOCO_GL": "egl"}
+    page = course / "feedback" / "erin" / ASSIGNMENT / f"{ASSIGNMENT}.html"
+    want = lab_part(page.read_text())
+    assert want[0].startswith("Your sweep on the arm Lab run of t1_sweep on the arm: 1 / 1 points") and want[1]
+    page.unlink()
+    cli("snakekit", "grade", ASSIGNMENT, "--course", course, "--references", REFERENCES, "--timeout", "60",
+        "--student", "erin", cwd=REPO, env=env)
+    assert lab_part(page.read_text()) == want
+    with open(course / "nbgrader_config.py", "a") as f:
+        f.write("\nfrom grader.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n")
+    page.unlink()
+    cli("nbgrader", "generate_feedback", ASSIGNMENT, "--student", "fay", "--force", cwd=course, env=env)
+    cli("nbgrader", "generate_feedback", ASSIGNMENT, "--student", "erin", "--force", cwd=course, env=env)
+    assert lab_part(page.read_text()) == want
+    assert "too fast for the arm" in lab_part((course / "feedback" / "fay" / ASSIGNMENT / page.name).read_text())[0]
