@@ -52,8 +52,8 @@ def section(course: Path, assignment: str, student: str) -> str:
         colour = "#2a2" if ok else "#c33"
         img = ("<img alt='your sweep on the arm against the reference run and your simulated run, joint by joint' "
                f"style='max-width:100%' src='data:image/png;base64,{base64.b64encode(png).decode()}'>"
-               "<div style='font-size:85%'>The reference run is the mean of the runs the TA recorded of the "
-               "task's own sweep on this arm today.</div>")
+               "<div style='font-size:85%'>The reference run is the mean of the runs of the task's own sweep "
+               "that the TA recorded on this arm to set the bands.</div>")
     elif job["state"] == "refused":
         head, colour = f"{title}: not run, no points", "#c33"
         words = html.escape(job["reason"])
