@@ -7,7 +7,8 @@ does). Then:
   grader's safe pages (:mod:`grader.feedback`: no hidden tests, nothing loaded from the
   network), never nbgrader's own (which keep the hidden tests, its issue #917). The pages are
   built from the gradebook's scores, so a score or comment a TA entered in formgrader is on
-  the page, beside the grader's verdict (kept in the autograded notebook by the grader).
+  the page, beside the grader's verdict (kept in the autograded notebook by the grader), and
+  the lab's result when ``snakekit lab`` ran the student's sweep (docs/lab.md).
 * formgrader's Autograde button grades the submission with ``snakekit grade ASSIGNMENT
   --student STUDENT`` (the sandbox, the out-of-kernel scoring, the feedback), not with
   nbgrader's in-kernel autograde. Its options come from the config's ``SnakekitGrade``
