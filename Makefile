@@ -20,8 +20,9 @@ setup:
 lab: setup
 	$(VENV)/bin/snakekit start --ip=$(LAB_IP) --port=$(LAB_PORT)
 
+# The container tests run side by side with the rest (tools/test); PYTEST_ARGS: one plain pytest run.
 test: setup
-	$(PY) -m pytest -q $(PYTEST_ARGS)
+	PY=$(PY) tools/test $(PYTEST_ARGS)
 
 # Every benchmark under bench/, into bench/RESULTS.md and its plots (BENCH_ARGS: e.g. --only sim).
 bench: setup

@@ -7,7 +7,8 @@ does). Then:
   grader's safe pages (:mod:`grader.feedback`: no hidden tests, nothing loaded from the
   network), never nbgrader's own (which keep the hidden tests, its issue #917). The pages are
   built from the gradebook's scores, so a score or comment a TA entered in formgrader is on
-  the page, beside the grader's verdict (kept in the autograded notebook by the grader).
+  the page, beside the grader's verdict (kept in the autograded notebook by the grader), and
+  the lab's result when ``snakekit lab`` ran the student's sweep (docs/lab.md).
 * formgrader's Autograde button grades the submission with ``snakekit grade ASSIGNMENT
   --student STUDENT`` (the sandbox, the out-of-kernel scoring, the feedback), not with
   nbgrader's in-kernel autograde. Its options come from the config's ``SnakekitGrade``
@@ -28,6 +29,7 @@ from pathlib import Path
 from nbconvert.exporters import HTMLExporter
 
 from . import feedback
+from .lab import feedback as lab_feedback
 
 #: where formgrader's request handlers live (imported only by a server that runs formgrader)
 FORMGRADER = "nbgrader.server_extensions.formgrader.apihandlers"
@@ -56,6 +58,9 @@ class SafeFeedbackExporter(HTMLExporter):
         page = regenerate(nb, student=student, assignment=assignment, notebook=notebook,
                           db_url=info.get("db_url"), course_id=course_id)
         body, _ = feedback._exporter().from_notebook_node(page)
+        root = getattr(getattr(self.parent, "coursedir", None), "root", None)
+        if root and student and assignment:  # the lab's result, when the lab ran the student's sweep
+            body = lab_feedback.add_to(body, Path(root), assignment, student)
         resources = dict(resources or {})
         resources["output_extension"] = ".html"
         return body, resources

@@ -15,6 +15,7 @@ import nbformat
 
 from . import feedback, rerun
 from .assignment import read_inside
+from .lab.feedback import update_pages
 from .lab.keep import keep_for_lab
 from .score import ExerciseScore, read_handin, score_exercise
 
@@ -169,6 +170,7 @@ class Verdicts:
                                 stopped=(stopped or {}).get(name), timeout=self.timeout,
                                 hide_paths={str(self.base): "<sandbox>"})
             written = feedback.write_html(fb, path / f"{name}.html")
+        update_pages(self.course, a.name, result.student)  # the lab's result, when the lab ran the student's sweep
         return SubmissionResult(**{**result.__dict__, "feedback": written})
 
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
 import json
 import shutil
+import tempfile
 from pathlib import Path
 
 import nbformat
@@ -28,13 +30,26 @@ GOOD = {
 }
 
 
-def make_course(tmp: Path) -> Path:
-    """A fresh copy of the test course, released (``nbgrader generate_assignment``)."""
-    from grader.batch import ensure_released
+_released: Path | None = None
 
+
+def make_course(tmp: Path) -> Path:
+    """A fresh copy of the test course, released (``nbgrader generate_assignment``).
+
+    The release is made once per test run (about 5 s of nbgrader) and copied for each caller: every
+    course is the same released course, each its own copy to grade, break or write over.
+    """
+    global _released
+    if _released is None:
+        from grader.batch import ensure_released
+
+        cache = Path(tempfile.mkdtemp(prefix="snakekit-test-course-"))
+        atexit.register(shutil.rmtree, cache, ignore_errors=True)
+        shutil.copytree(FIXTURE, cache / "course", ignore=shutil.ignore_patterns("references", "__pycache__"))
+        ensure_released(cache / "course", ASSIGNMENT)
+        _released = cache / "course"
     course = tmp / "course"
-    shutil.copytree(FIXTURE, course, ignore=shutil.ignore_patterns("references", "__pycache__"))
-    ensure_released(course, ASSIGNMENT)
+    shutil.copytree(_released, course)
     return course
 
 

@@ -5,7 +5,12 @@ The trajectories here are short sweeps (2.9 s of robot time, not Task 2's 50 s),
 whole file runs in about a minute and a half on a loaded machine; bench/lab.py runs the real one.
 """
 
+import base64
+import html
+import io
 import json
+import re
+import shutil
 import threading
 
 import numpy as np
@@ -55,6 +60,35 @@ CLASS = {  # student: (trajectory, expected state)
 }
 
 
+def feedback_pages(course, students):
+    """Each student's feedback page as the grader writes them (a heading cell, then the lesson's cells)."""
+    import nbformat
+
+    from grader import feedback
+
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(f"# Feedback: {A}\n\nScore: **9 / 10**"),
+                                         nbformat.v4.new_markdown_cell("Grader: ex06_3_task2_test: 3 / 3 points")])
+    for i, c in enumerate(nb.cells):
+        c["id"] = f"cell-{i}"
+    page = feedback.write_html(nb, course / "feedback" / students[0] / A / f"{A}.html")
+    for st in students[1:]:
+        (course / "feedback" / st / A).mkdir(parents=True)
+        shutil.copyfile(page, course / "feedback" / st / A / f"{A}.html")
+
+
+def page(course, student):
+    return (course / "feedback" / student / A / f"{A}.html").read_text()
+
+
+def lab_part(text):
+    """The lab's part of a page (the text a student reads in it) and the PNG images it holds."""
+    m = re.search(r"<!-- snakekit-lab:begin -->(.*?)<!-- snakekit-lab:end -->", text, re.S)
+    if m is None:
+        return "", []
+    pngs = [base64.b64decode(b) for b in re.findall(r"src='data:image/png;base64,([^']+)'", m.group(1))]
+    return html.unescape(re.sub(r"<[^>]+>", " ", m.group(1))), pngs
+
+
 def make_course(root):
     course = root / "course"
     (course / "source" / A).mkdir(parents=True)
@@ -62,6 +96,7 @@ def make_course(root):
     (course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE, "stall_delay": 0.03}))  # short sweeps
     for student, (tr, _) in CLASS.items():
         hand_in(course, student, tr)
+    feedback_pages(course, list(CLASS))
     return course
 
 
@@ -149,8 +184,16 @@ def test_a_class_is_gated_run_and_graded_and_a_second_start_has_nothing_left(cal
         assert report["within_bands"] == bool((gap.max(axis=0) <= np.array(report["bands_rad"])).all())
         assert info["port"].startswith("/dev/pts/") and info["kit_version"] == snakekit.__version__
         assert info["servo_errors"] == {} and info["bus_retries"] >= 0
-        feedback = (course / "feedback" / st / A / "lab.txt").read_text()
-        assert report["message"] in feedback
+        # the student's feedback page: after its heading, the points, the message and the plot
+        text, pngs = lab_part(page(course, st))
+        assert f"Lab run of {A} on the arm: {report['points']:g} / 1 points" in text
+        assert " ".join(report["message"].split()) in " ".join(text.split())
+        assert pngs == [(d / "plot.png").read_bytes()] and pngs[0].startswith(b"\x89PNG\r\n\x1a\n")
+        assert page(course, st).index("snakekit-lab:begin") > page(course, st).index("Score: <strong>9 / 10")
+    for st in ("frank", "gina", "hank", "ivan", "judy"):  # a refused job's reason, no points, no plot
+        text, pngs = lab_part(page(course, st))
+        assert f"Lab run of {A} on the arm: not run, no points" in text and pngs == []
+        assert " ".join(reasons[st].split()) in " ".join(text.split())
     graded = {j["student"]: j for j in q.jobs if j["state"] == "graded"}
     assert all(graded[st]["points"] == 1.0 for st in ("alice", "bob", "carol", "dan"))
     assert graded["erin"]["points"] == 0.0 and "left the lab's bands" in graded["erin"]["reason"]
@@ -214,7 +257,9 @@ def test_a_lab_fault_mid_run_stops_the_arm_requeues_and_the_next_start_grades_it
     assert robot.closed
     if fault == "servo dropped out":  # the servos that can still hear were turned off
         assert [robot.emulator.servo(i).memory.get("Torque Enable") for i in (1, 2, 4, 5)] == [0] * 4
-    assert not (course / "feedback" / "bob" / A / "lab.txt").read_text().count("lab fault")
+    text, pngs = lab_part(page(course, "bob"))  # bob's page: the lab's fault, no points; carol's as it was
+    assert "not run yet, no points: a fault of the lab" in text and "the lab's fault, not yours" in text
+    assert pngs == [] and "1 / 1 points" in lab_part(page(course, "carol"))[0]
 
     assert until_done(Arm(), course, s, ["bob", "carol"])[-1] == 0  # the next start: bob again, then carol
     q = Queue.load(course, A)
@@ -316,3 +361,45 @@ def test_the_command_calibrates_runs_and_on_sigterm_stops_the_arm_and_keeps_the_
     r = subprocess.run(cmd + [A, "--course", str(course), "--status"], capture_output=True, text=True, timeout=60,
                        env=env)
     assert r.returncode == 0 and "interrupted by the TA; runs again at the next start" in r.stdout
+
+
+def test_a_job_that_faults_three_times_is_left_for_the_ta_until_retried(calibrated, capsys):
+    course, s, _ = calibrated
+    q = Queue.load(course, A)
+    q.set(q.add("dan"), "queued")
+    arm = Arm()
+
+    def unplugged():  # the adapter is gone as soon as the arm is open: each try faults at homing
+        robot = arm()
+        robot.emulator.stop()
+        return robot
+
+    said = io.StringIO()
+    for k in (1, 2, 3):
+        assert lab.session(unplugged, course, s, ["dan"], Queue.load(course, A), out=said) == 1
+        dan = Queue.load(course, A).job("dan")
+        assert (dan["state"], dan["faults"]) == ("lab fault", k)
+        assert dan["reason"].startswith("left for the TA: " if k == 3 else "the lab's fault, not yours: ")
+    assert "dan's job faulted 3 times in a row: it is left for you (`snakekit lab 06_coded_sweep --retry dan`" \
+        in said.getvalue()
+    assert "left for the TA: the lab's fault, not yours, in each of 3 tries" in lab_part(page(course, "dan"))[0]
+    assert all(r.closed for r in arm.robots) and len(arm.robots) == 3
+
+    again = Arm()  # the next start leaves it alone
+    assert lab.session(again, course, s, ["dan"], Queue.load(course, A)) == 0 and again.robots == []
+    assert Queue.load(course, A).job("dan")["state"] == "lab fault"
+
+    # the TA checked the arm; judy, refused for having no sweep kept, was graded again meanwhile
+    q = Queue.load(course, A)
+    q.add("judy")
+    assert lab.session(Arm(), course, s, ["judy"], q) == 0 and Queue.load(course, A).job("judy")["state"] == "refused"
+    np.savez(course / "autograded" / "judy" / A / "lab" / "ex06_3_task2_test.npz", times=sweep().times,
+             positions=sweep().positions)
+    code = lab_cli.main([A, "--course", str(course), "--emulator", "--student", "dan", "judy",
+                         "--retry", "dan", "judy"])
+    q = Queue.load(course, A)
+    assert code == 0 and [q.job(st)["state"] for st in ("dan", "judy")] == ["graded", "graded"]
+    assert q.job("dan")["faults"] == 0 and not q.job("dan")["held"]
+    assert "Lab run of 06_coded_sweep on the arm: 1 / 1 points" in lab_part(page(course, "judy"))[0]
+    assert lab_cli.main([A, "--course", str(course), "--emulator", "--retry", "zed"]) == 2
+    assert "--retry zed: zed has no job in the lab's queue" in capsys.readouterr().err

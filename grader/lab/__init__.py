@@ -3,5 +3,6 @@
 :mod:`.jobs` (the course's lab settings, the queue in ``<course>/lab/<a>/queue.json``),
 :mod:`.gate` (each trajectory checked in the simulator, outside the student's code),
 :mod:`.session` (calibration, the runs on the arm, the grades and result folders),
+:mod:`.feedback` (the lab's result in the student's feedback page),
 :mod:`.cli` (the command). docs/lab.md is the TA's guide.
 """

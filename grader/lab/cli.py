@@ -2,6 +2,7 @@
 
     snakekit lab calibrate ASSIGNMENT [--runs 5] [--course DIR] [--port PORT | --emulator]
     snakekit lab ASSIGNMENT [--course DIR] [--port PORT | --emulator] [--order collected|student] [--student S ...]
+                            [--retry S ...]
     snakekit lab ASSIGNMENT --status [--csv FILE]
 
 Exit codes: 0 done; 1 a lab fault stopped the session (the job runs again at the next start);
@@ -37,6 +38,9 @@ def parser(calibrating: bool) -> argparse.ArgumentParser:
         p.add_argument("--order", choices=("collected", "student"), default="collected",
                        help="collected: as collected (default); student: by student id")
         p.add_argument("--student", nargs="+", default=None, help="only these students")
+        p.add_argument("--retry", nargs="+", default=[], metavar="STUDENT",
+                       help="queue these students' jobs again, whatever their state (a job left for the TA after "
+                            "repeated lab faults; a refused one graded again)")
         p.add_argument("--status", action="store_true", help="list the jobs and their states; nothing moves")
         p.add_argument("--csv", type=Path, help="with --status: also write the list here")
     return p
@@ -120,6 +124,8 @@ def main(argv=None, out=None) -> int:
         q = Queue.load(course, args.assignment)
         for st in students:
             q.add(st)
+        for st in args.retry:
+            q.retry(st)
         q.save()
         code = session.session(opener, course, s, students, q, out)
         status(course, args.assignment, None, out)

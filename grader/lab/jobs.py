@@ -21,7 +21,8 @@ from snakekit.errors import ConfigurationError
 
 #: The states a student sees (``snakekit lab --status``).
 STATES = ("queued", "refused", "running", "graded", "lab fault")
-#: The states a session runs (a job left ``running`` by a session that died runs again).
+#: The states a session runs (a job left ``running`` by a session that died runs again; a
+#: ``lab fault`` one too, unless it faulted ``max_faults`` times: it is then left for the TA).
 RUNNABLE = ("queued", "running", "lab fault")
 
 #: The course's trajectory exercises the lab knows without a ``lab.json``: the grade id whose
@@ -50,6 +51,8 @@ class LabSettings:
         stall_delay: a run is made again when a goal left this much later than planned after the
             one before [s]: the arm waited on that one meanwhile, which changes the motion. Shorter
             delays, and the sum of many, are taken out by comparing on the sweep's own clock.
+        max_faults: a job that ended in a fault of the lab this many times in a row is left for the
+            TA (still ``lab fault``, not run again until ``snakekit lab A --retry STUDENT``).
     """
 
     assignment: str
@@ -61,6 +64,7 @@ class LabSettings:
     band_floor: float = 0.01
     max_points: float = 1.0
     stall_delay: float = 0.05
+    max_faults: int = 3
 
     def reference_trajectory(self):
         """The spec's trajectory: what every student's is run against."""
@@ -151,6 +155,19 @@ class Queue:
         except ValueError as e:
             raise LabError(f"{path} is not the lab's queue ({e}); move it away to start a new queue") from e
         return cls(path, assignment, data["jobs"])
+
+    @staticmethod
+    def runnable(job: dict) -> bool:
+        """Whether a session runs ``job``: queued, left running, or a lab fault not left for the TA."""
+        return job["state"] in RUNNABLE and not job.get("held", False)
+
+    def retry(self, student: str) -> dict:
+        """Queue ``student``'s job again, whatever its state (the TA's ``--retry``); its count of faults starts anew."""
+        job = self.job(student)
+        if job is None:
+            raise LabError(f"--retry {student}: {student} has no job in the lab's queue of {self.assignment}")
+        self.set(job, "queued", "queued again by the TA", faults=0, held=False)
+        return job
 
     def job(self, student: str) -> dict | None:
         return next((j for j in self.jobs if j["student"] == student), None)

@@ -24,7 +24,8 @@ import snakekit
 from snakekit.errors import BackendError
 
 from . import gate
-from .jobs import RUNNABLE, LabError, LabSettings, Queue, handin_path, lab_dir, load_handin, write_atomic
+from .feedback import update_pages
+from .jobs import LabError, LabSettings, Queue, handin_path, lab_dir, load_handin, write_atomic
 
 RECORD_RATE = 100.0  # [Hz]
 #: How many times a run the lab computer stalled in is run again before it counts as a lab fault.
@@ -189,10 +190,6 @@ def write_result(course: Path, s: LabSettings, student: str, run, trajectory, ch
     plot(d / "plot.png", run, trajectory, checked, *ref)
     report = {"student": student, "assignment": s.assignment, "state": "graded", **result}
     write_atomic(d / "report.json", json.dumps(report, indent=1))
-    fb = Path(course) / "feedback" / student / s.assignment
-    fb.mkdir(parents=True, exist_ok=True)
-    write_atomic(fb / "lab.txt", f"Lab run of {s.assignment} on the arm: {result['points']:g} of "
-                                 f"{result['max_points']:g} points.\n{result['message']}\n")
     return d
 
 
@@ -251,7 +248,7 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
     """Run the queue's runnable jobs of ``students`` in order. Returns the exit code (0: all ran;
     1: a lab fault stopped the session)."""
     cal, ref_t, ref_q = load_calibration(course, s)
-    todo = [queue.job(st) for st in students if queue.job(st)["state"] in RUNNABLE]
+    todo = [queue.job(st) for st in students if queue.runnable(queue.job(st))]
     pace = Pace(len(todo), 2 * s.reference_trajectory().duration + 15, stream)
     robot = None
     try:
@@ -270,6 +267,7 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
                     checked = gate.Checked(f"your hand-in cannot be read as arrays ({e})")
             if checked.reason:
                 queue.set(job, "refused", checked.reason)
+                update_pages(course, s.assignment, job["student"])
                 print(f"lab: {job['student']}: refused: {checked.reason}", file=out, flush=True)
                 pace.total -= 1
             else:
@@ -277,7 +275,7 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
         pace.t0 = time.monotonic()
         ran = []  # run on the arm; written up once the arm is closed (a plot drawn while the arm idles
         code = 0  # would keep the bus quiet long enough, on a busy computer, for the servos' watchdog)
-        stopped = None
+        stopped = faulted = None
         try:
             for n, job, checked in passed:
                 pace.n, pace.student = n, job["student"]
@@ -288,11 +286,14 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
                 try:
                     run, info = run_unstalled(robot, checked.trajectory, s.stall_delay, pace.say)
                 except BackendError as e:
-                    first = str(e).split(". ")[0]
-                    queue.set(job, "lab fault", f"the lab's fault, not yours: {first}; it runs again at the next start")
+                    faulted = fault(queue, job, s, e)
                     print(f"lab: {job['student']}: lab fault: {e}\nlab: the arm was stopped and the session ended; "
                           f"check the arm and its cable, then start `snakekit lab {s.assignment}` again", file=out,
                           flush=True)
+                    if job.get("held"):
+                        print(f"lab: {job['student']}'s job faulted {job['faults']} times in a row: it is left for you "
+                              f"(`snakekit lab {s.assignment} --retry {job['student']}` runs it again)", file=out,
+                              flush=True)
                     code = 1
                     break
                 ran.append((job, checked, run, info))
@@ -301,12 +302,15 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
             stopped = e
         close(robot, out)
         robot = None
+        if faulted is not None:
+            update_pages(course, s.assignment, faulted["student"])
         for job, checked, run, info in ran:
             result = grade(run, checked.trajectory, cal, ref_t, ref_q, s)
             info.update(student=job["student"], sim_gap_rad=checked.sim_gap, calibration=cal)
             write_result(course, s, job["student"], run, checked.trajectory, checked, info, result, (ref_t, ref_q))
             record_grade(course, s, job["student"], result["points"])
-            queue.set(job, "graded", result["message"], points=result["points"])
+            queue.set(job, "graded", result["message"], points=result["points"], faults=0)
+            update_pages(course, s.assignment, job["student"])
             print(f"lab: {job['student']}: {result['points']:g}/{result['max_points']:g}: {result['message']}",
                   file=out, flush=True)
         if stopped is not None:
@@ -319,6 +323,19 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
         raise
     finally:
         close(robot, out)
+
+
+def fault(queue: Queue, job: dict, s: LabSettings, error: BackendError) -> dict:
+    """Mark ``job`` a fault of the lab; after ``s.max_faults`` of them in a row it is left for the TA."""
+    first = str(error).split(". ")[0]
+    faults = job.get("faults", 0) + 1
+    if faults < s.max_faults:
+        queue.set(job, "lab fault", f"the lab's fault, not yours: {first}; it runs again at the next start",
+                  faults=faults)
+    else:
+        queue.set(job, "lab fault", f"left for the TA: the lab's fault, not yours, in each of {faults} tries "
+                  f"(the last: {first}); it runs again once the TA has checked the arm", faults=faults, held=True)
+    return job
 
 
 def close(robot, out) -> None:
