@@ -10,8 +10,9 @@ again, their volume kept, 22 servers running) and 50 clients on loopback, each s
 requests one at a time, alternating the hub's REST API and the student's server through the
 proxy. It prints the test's "figure:" lines, the load average, and a table of them.
 
-The cold start takes the images and the build's cache of them out of the engine: the next
-`docker compose build` (or test) after it builds every layer again.
+The cold start takes the images out of the engine, and with them the build's cache of their
+last stages: the next `docker compose build` (or test) after it makes those again (20 s here;
+the venv's stage stays cached).
 
 Run: ``.venv/bin/python bench/hub.py [--json PATH]``
 """

@@ -13,7 +13,9 @@
 # headless Chromium through the hub's proxy (docker/browser-check). On exit the engine stops and
 # the host is checked and restored (engine_stop), as after docker/test.sh.
 # Figures are printed on lines starting with "figure:". SNAKEKIT_HUB_BENCH=1 (bench/hub.py)
-# adds the benchmark's: warm spawns, and the hub and proxy under 50 users' requests.
+# adds the benchmark's: a cold start (the images out of the engine and loaded again from a
+# gzip'd save; the build's cache of their last stages goes too), five warm spawns, and the hub and proxy
+# under 50 users' requests.
 set -uo pipefail
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$ROOT"
@@ -68,8 +70,8 @@ SNAKEKIT_AUTH=lti SNAKEKIT_LTI_CLIENT_IDS=125900000000000001 \
 grep -q "ltiauthenticator.lti13.auth.LTI13Authenticator" "$RUN/lti.txt" || die "the LTI authenticator was not the one loaded"
 
 if [ -n "${SNAKEKIT_HUB_BENCH:-}" ]; then
-  # The cold start (bench/hub.py): both images out of the engine (with the build's cache of them;
-  # the next build is a full one), then loaded from a compressed save, the bytes a node's pull
+  # The cold start (bench/hub.py): both images out of the engine (with the build's cache of their
+  # last stages, which the next build makes again), then loaded from a compressed save, the bytes a node's pull
   # unpacks, without a registry or network; the first spawn below then starts from them.
   $DOCKER save snakekit-lab:latest snakekit-grader:latest | gzip -1 > "$RUN/images.tar.gz"
   $DOCKER image rm -f "$($DOCKER image inspect -f '{{.Id}}' snakekit-grader:latest)" >/dev/null
