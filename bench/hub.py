@@ -2,11 +2,17 @@
 grading the 20 collected submissions.
 
 Runs docker/hub/test.sh with SNAKEKIT_HUB_BENCH=1 on the private engine of docker/engine.sh
-(root and Debian's docker.io needed; otherwise the figures say "not measured" and why): the
-week of 20 students of the hub test, then three warm spawns (a student's server stopped and
-started again, their volume kept) and 50 clients on loopback, each sending 40 requests one at
-a time, alternating the hub's REST API and the student's server through the proxy. It prints
-the test's "figure:" lines and a table of them.
+(root and Debian's docker.io needed; otherwise the figures say "not measured" and why): a cold
+start first (the students' and the grader's images taken out of the engine and loaded again
+from a gzip'd `docker save`, the bytes a node's pull unpacks; then the first spawn), the week of
+20 students of the hub test, then five warm spawns (a student's server stopped and started
+again, their volume kept, 22 servers running) and 50 clients on loopback, each sending 40
+requests one at a time, alternating the hub's REST API and the student's server through the
+proxy. It prints the test's "figure:" lines, the load average, and a table of them.
+
+The cold start takes the images out of the engine, and with them the build's cache of their
+last stages: the next `docker compose build` (or test) after it makes those again (20 s here;
+the venv's stage stays cached).
 
 Run: ``.venv/bin/python bench/hub.py [--json PATH]``
 """
@@ -29,7 +35,9 @@ from _common import add_json_argument, write_json  # noqa: E402
 
 FIGURES = {
     "spawn_first_s": r"spawn to ready, first server .*: ([\d.]+) s",
+    "cold_load_s": r"cold: docker load of the two images .*: ([\d.]+) s$",
     "spawn_warm_median_s": r"spawn to ready, warm: median ([\d.]+) s",
+    "spawn_warm_all": r"spawn to ready, warm: median [\d.]+ s of ([\d., ]+) \(",
     "spawn_20_median_s": r"students' servers ready in [\d.]+ s \(each: median ([\d.]+) s",
     "hub_p50_ms": r"under load, the hub's API .*: p50 (\d+) ms",
     "hub_p95_ms": r"under load, the hub's API .*: p50 \d+ ms, p95 (\d+) ms",
@@ -52,6 +60,7 @@ def main(argv=None) -> int:
         write_json(args.json, result)
         return 0
     t = time.monotonic()
+    load_before = os.getloadavg()
     env = dict(os.environ, SNAKEKIT_HUB_BENCH="1", PATH=f"{REPO / '.venv/bin'}:{os.environ['PATH']}")
     proc = subprocess.run(["bash", str(REPO / "docker/hub/test.sh")], cwd=REPO, env=env, capture_output=True, text=True)
     out = proc.stdout + proc.stderr
@@ -64,14 +73,19 @@ def main(argv=None) -> int:
         return 1
     result = {}
     for key, pattern in FIGURES.items():
-        m = re.search(pattern, out)
-        result[key] = float(m.group(1)) if m else None
+        m = re.search(pattern, out, re.M)
+        result[key] = (m.group(1) if key == "spawn_warm_all" else float(m.group(1))) if m else None
+    result["spawn_cold_s"] = (round(result["cold_load_s"] + result["spawn_first_s"], 1)
+                              if result["cold_load_s"] is not None and result["spawn_first_s"] is not None else None)
     result["wall_s"] = round(time.monotonic() - t, 1)
+    result["load_average_1min"] = [round(load_before[0], 1), round(os.getloadavg()[0], 1)]
+    print(f"load average (1 min) before / after the run: {result['load_average_1min'][0]} / {result['load_average_1min'][1]}")
     print()
     print("| what | figure | target |")
     print("|---|---|---|")
-    print(f"| spawn to ready, warm (median of 3) | {result['spawn_warm_median_s']} s | <= 5 s |")
-    print(f"| spawn to ready, first server after the hub starts (new volume) | {result['spawn_first_s']} s | |")
+    print(f"| spawn to ready, warm (median of 5: {result['spawn_warm_all']}) | {result['spawn_warm_median_s']} s | <= 5 s |")
+    print(f"| spawn to ready, cold: the images loaded ({result['cold_load_s']} s), then the first spawn "
+          f"({result['spawn_first_s']} s) | {result['spawn_cold_s']} s | |")
     print(f"| 20 students' servers, five started at a time: each (median) | {result['spawn_20_median_s']} s | |")
     print(f"| hub API under 50 clients, p50 / p95 | {result['hub_p50_ms']} / {result['hub_p95_ms']} ms | |")
     print(f"| a server through the proxy under 50 clients, p50 / p95 | {result['proxy_p50_ms']} / {result['proxy_p95_ms']} ms | |")

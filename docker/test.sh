@@ -11,8 +11,11 @@
 # on Debian's docker.io); run `lab` and check /lab with the token, the user, the health check,
 # the work volume and the 3D viewer through the lab's port; open it in headless Chromium from the host
 # (docker/browser-check: the lessons listed, lesson 0 run, the arm drawn and moving in the 3D
-# view); execute a lesson inside (instructor and student versions); run `grader` with networking off
-# on sample submissions and check its CSV, gradebook and feedback.
+# view); build the grader's image (--target grader) and read every file of both images' layers:
+# nothing of the instructor's course (course/source, course/cases, grader/references, a solution
+# line) in the students', all of it in the grader's (docker/check-no-course); execute a lesson
+# inside (instructor and student versions); run `grader` with networking off on sample
+# submissions and check its CSV, gradebook and feedback.
 # Figures are printed on lines starting with "figure:".
 #
 # The engine, its start and stop and the host's restore are docker/engine.sh (shared with `make bench`).
@@ -84,6 +87,21 @@ figure "image: $(( size / 1000000 )) MB (target <= 800 MB, limit 1000 MB)"
 $DOCKER history --format '{{.Size}}\t{{.CreatedBy}}' "$IMAGE" \
   | awk -F'\t' '$1 ~ /MB|GB/ { sub(/^.*(RUN|COPY) /, "", $2); printf "figure:   %8s  %s\n", $1, substr($2, 1, 70) }'
 [ "$size" -le 1000000000 ] || die "the image is $(( size / 1000000 )) MB, above the 1000 MB limit"
+
+# --- the grader's image; the students' image holds nothing of the instructor's course ----------
+# (the grader's image, on the students' layers: compose's grader service, docker/hub/grade)
+t=$(now)
+"${COMPOSE[@]}" --profile grader build grader >"$RUN/build-grader.log" 2>&1 \
+  || { tail -40 "$RUN/build-grader.log" >&2; die "docker compose build grader failed"; }
+figure "build of the grader's image (compose build grader, --target grader): $(since "$t") s; $(( $($DOCKER image inspect -f '{{.Size}}' snakekit-grader:latest) / 1000000 )) MB"
+# every file of every layer, as a student who pulls the image gets them; and the same check on
+# the grader's image, which must find all of it (the check can fail)
+$DOCKER save "$IMAGE" | "$VENV_BIN/python" docker/check-no-course >"$RUN/no-course.log" 2>&1 \
+  || { cat "$RUN/no-course.log" >&2; die "the students' image holds files or solutions of the instructor's course"; }
+sed 's/^/docker-test: students'"'"' image: /' "$RUN/no-course.log"
+$DOCKER save snakekit-grader:latest | "$VENV_BIN/python" docker/check-no-course --expect-course >"$RUN/course.log" 2>&1 \
+  || { cat "$RUN/course.log" >&2; die "the grader's image lacks the course, or the check cannot find it"; }
+sed 's/^/docker-test: grader'"'"'s image: /' "$RUN/course.log"
 
 # --- time from docker run to /lab answering -------------------------------------------------
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
@@ -192,7 +210,7 @@ say "viewer: a 3D view served on the container's port $vport reaches the host at
 
 # the lab in a browser on the host: the lessons listed, lesson 0 run, the arm drawn and moving
 t=$(now)
-"$VENV_BIN/python" docker/browser-check "$LAB" "$TOKEN" "$ROOT/artifacts" >"$RUN/browser.log" 2>&1 \
+"$VENV_BIN/python" docker/browser-check "$LAB" "$ROOT/artifacts" --token "$TOKEN" >"$RUN/browser.log" 2>&1 \
   || { tail -30 "$RUN/browser.log" >&2; die "the lab in headless Chromium: see above (screenshots in artifacts/)"; }
 sed 's/^/docker-test: /' "$RUN/browser.log"
 figure "browser check of the lab (lessons listed, lesson 0 run, arm drawn and moved) in $(since "$t") s"
@@ -240,8 +258,10 @@ EOF
 }
 t=$(now)
 # (each in a folder of its own, as a student's lesson writes its files next to itself)
-$DOCKER exec "$CID" bash -c "mkdir -p /tmp/solved && cp /opt/snakekit/course/source/$LESSON/$LESSON.ipynb /tmp/solved/ \
-  && cd /tmp/solved && jupyter nbconvert --to notebook --execute --ExecutePreprocessor.timeout=300 \
+# (the instructor's version from the repository: the students' image holds none)
+$DOCKER exec "$CID" mkdir -p /tmp/solved
+$DOCKER cp "course/source/$LESSON/$LESSON.ipynb" "$CID:/tmp/solved/$LESSON.ipynb" >/dev/null
+$DOCKER exec "$CID" bash -c "cd /tmp/solved && jupyter nbconvert --to notebook --execute --ExecutePreprocessor.timeout=300 \
   --output-dir /tmp/executed $LESSON.ipynb" >"$RUN/lesson.log" 2>&1 \
   || { tail -30 "$RUN/lesson.log" >&2; die "lesson $LESSON (instructor version) failed inside the container"; }
 $DOCKER cp "$CID:/tmp/executed/$LESSON.ipynb" "$RUN/solved.ipynb"

@@ -8,13 +8,9 @@ with CI=true it runs or fails.
 
 import os
 import re
-import shutil
-import subprocess
 from pathlib import Path
 
-import pytest
-
-from tests.conftest import IN_CI, need, need_program
+from tests._engine import run_on_engine
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,26 +32,10 @@ def test_binder_builds_the_containers_dockerfile():
 
 def test_binder_image_builds_with_repo2docker_and_opens_a_lesson(capsys):
     """binder/test.sh: repo2docker --no-run, then the image as Binder runs it: /lab, the lessons, a cell run."""
-    if os.geteuid() != 0 or not shutil.which("apt-get"):
-        why = "the Binder test needs root and apt-get (it installs docker.io and runs dockerd)"
-        if IN_CI:
-            pytest.fail(f"{why}; under CI=true it must run")
-        pytest.skip(why)
-    need("repo2docker")  # jupyter-repo2docker, in .venv (the dev extra)
-    need_program("ip")
-    need_program("chromium")  # binder/open-lesson opens the lesson in JupyterLab from the host
-    need("playwright.sync_api")
-    env = dict(os.environ, PATH=f"{ROOT / '.venv/bin'}:{os.environ['PATH']}")
-    proc = subprocess.run(["bash", str(ROOT / "binder/test.sh")], cwd=ROOT, env=env, capture_output=True,
-                          text=True, timeout=30 * 60)
-    out = proc.stdout + proc.stderr
-    with capsys.disabled():
-        print()
-        for line in out.splitlines():
-            if line.startswith(("figure:", "open-lesson:", "binder-test: restored", "binder-test: host state")):
-                print(line)
-    assert proc.returncode == 0, out[-6000:]
-    assert "binder-test: passed" in out and "host state checked" in out
+    out = run_on_engine("binder/test.sh", capsys, what="the Binder test", timeout_min=30,
+                        modules=("repo2docker",),  # jupyter-repo2docker, in .venv (the dev extra)
+                        show=("figure:", "open-lesson:", "binder-test: restored", "binder-test: host state"))
+    assert "binder-test: passed" in out
     assert re.search(r"figure: repo2docker build: [\d.]+ s \(\d+ of \d+ steps from the engine's cache; \d{4}\.\d+\.\d+\)", out), out[-3000:]
     lessons = len(list((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb")))
     assert f"opens JupyterLab; the server's folder lists the {lessons} lessons" in out, out[-3000:]

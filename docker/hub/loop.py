@@ -351,11 +351,13 @@ def main() -> int:
         fail(f"lesson 00: {r.status_code}")
     say(f"lesson 00 and JupyterLab reached through the hub's proxy at {args.hub}/user/{a.name}/lab")
     if args.browser:
-        # the student's JupyterLab in Chromium through the hub: lessons listed, lesson 00 run,
-        # the arm drawn in the 3D view and moved (pixels compared), every request to the hub's port
+        # the student's JupyterLab in Chromium through the hub, logged in on the hub's page: lessons
+        # listed, lesson 00 run, the arm drawn in the 3D view and moved (pixels compared), every
+        # request to the hub's port
         t = time.monotonic()
-        r = subprocess.run([sys.executable, str(REPO / "docker/browser-check"), f"{args.hub}/user/{a.name}", a.token,
-                            args.browser], capture_output=True, text=True)
+        r = subprocess.run([sys.executable, str(REPO / "docker/browser-check"), f"{args.hub}/user/{a.name}", args.browser,
+                            "--hub-user", a.name], capture_output=True, text=True,
+                           env=dict(os.environ, SNAKEKIT_HUB_PASSWORD=args.password))
         for line in r.stdout.splitlines():
             if line.startswith("browser:"):
                 say(line)
@@ -378,14 +380,14 @@ def hub_memory() -> float:
 
 
 def bench(hub: str, students: list[User], clients: int = 50, per_client: int = 40) -> None:
-    """Warm spawns, then 50 users' worth of requests through the hub and its proxy."""
+    """Five warm spawns, then 50 users' worth of requests through the hub and its proxy."""
     s = students[1]
     warm = []
-    for _ in range(3):
+    for _ in range(5):
         s.stop()
         warm.append(s.spawn())
     print(f"figure: spawn to ready, warm: median {statistics.median(warm):.1f} s of {', '.join(f'{w:.1f}' for w in warm)} "
-          f"(target <= 5 s)", flush=True)
+          f"(target <= 5 s; {len(students) + 2} servers running)", flush=True)
     # a bounded load: 50 clients on loopback, each with its own connection, one request at a time,
     # alternating the hub's API (GET /hub/api/user) and a server through the proxy (GET .../api/status)
     idle_mem = hub_memory()
