@@ -59,7 +59,7 @@ class Grader:
         ``seed``: the batch's hidden cases (default: drawn from ``os.urandom``, printed)."""
         self.course = Path(course).resolve()
         self.assignment = assignment
-        self.jobs = jobs or os.cpu_count() or 1
+        self.jobs = jobs or default_jobs()
         self.timeout = float(timeout)
         self.cell_timeout = min(float(cell_timeout or timeout), self.timeout)
         self.references = references
@@ -298,6 +298,14 @@ class Grader:
             if work is not None:
                 shutil.rmtree(work, ignore_errors=True)
         return lambda: finish(second)
+
+
+def default_jobs() -> int:
+    """Sandboxes at once unless told: one more than the cores. A sandbox leaves its core idle at
+    times (its kernel starting and stopping, nbgrader reading and writing): with two cores, two
+    sandboxes kept them busy 85 % of a batch of lesson 06 and three 92 % (126 s and 112 s for 60
+    submissions, bench/grading.py)."""
+    return (os.cpu_count() or 1) + 1
 
 
 class Again:

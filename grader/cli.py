@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
                 "autograde in parallel sandboxes, scored against the reference runs, with feedback.")
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
     p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
-    p.add_argument("--jobs", type=int, default=None, help="submissions graded at once (default: one per core)")
+    p.add_argument("--jobs", type=int, default=None, help="submissions graded at once (default: one more than the cores)")
     p.add_argument("--timeout", type=float, default=120.0,
                    help="wall-clock limit of a whole notebook [s]: at its end the running cell is stopped and the "
                         "cells after it do not run (default: 120)")
