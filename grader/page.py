@@ -9,6 +9,7 @@ pattern instead; parsed, the page is nbconvert's (``tests/test_grader.py`` check
 
 from __future__ import annotations
 
+import html
 import re
 
 __all__ = ["html_page"]
@@ -29,10 +30,34 @@ def html_page(exporter, nb, resources=None, **kw):
     exporter.register_filter("filter_data_type", WidgetsDataTypeFilter(
         notebook_metadata=exporter._nb_metadata, parent=exporter, resources=resources))
     body, resources = TemplateExporter.from_notebook_node(exporter, nb, resources, **kw)
-    return _TAG.sub(_accessible, body), resources
+    return _as_soup_writes(body), resources
 
 
-_TAG = re.compile(r"<(img|div)\b[^>]*>", re.I)  # nbconvert's template writes no '>' inside an attribute
+# what BeautifulSoup writes as it is: raw-text elements, comments, declarations, and tags
+_RAW = re.compile(r"<(script|style)\b.*?</\1\s*>|<!--.*?-->|<![^>]*>|<[^>]*>", re.S | re.I)
+
+
+def _as_soup_writes(body: str) -> str:
+    """The page as nbconvert's BeautifulSoup pass writes it out: its tags given their alt text and
+    tabindex, and its text with entities only for ``&``, ``<`` and ``>`` (``it&#39;s`` is ``it's``
+    there, so a page reads the same as text and as HTML)."""
+    out, at = [], 0
+    for m in _RAW.finditer(body):
+        out.append(_minimal(body[at:m.start()]))
+        tag = m.group(0)
+        out.append(_TAG.sub(_accessible, tag) if tag[1:2] not in "!/" and not m.group(1) else tag)
+        at = m.end()
+    out.append(_minimal(body[at:]))
+    return "".join(out)
+
+
+def _minimal(text: str) -> str:
+    if "&" not in text:
+        return text
+    return html.escape(html.unescape(text), quote=False)
+
+
+_TAG = re.compile(r"^<(img|div)\b[^>]*>$", re.I)  # nbconvert's template writes no '>' inside an attribute
 _FOCUSABLE = re.compile(r'\sclass="(?:[^"]*\s)?(?:jp-Cell-inputWrapper|jp-OutputArea-output)[\s"]')
 
 

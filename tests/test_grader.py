@@ -469,7 +469,7 @@ def test_a_feedback_page_is_what_nbconvert_writes_with_its_alt_texts_and_tabinde
     assert base64.b64decode(png).startswith(b"\x89PNG")
     code = new_code_cell("import numpy as np\nplt.plot([1, 2])", execution_count=3)
     code.outputs = [new_output("display_data", data={"image/png": png, "text/plain": "<Figure>"}),
-                    new_output("stream", name="stdout", text="<div> is text, not a tag\n"),
+                    new_output("stream", name="stdout", text="<div> is text, not a tag; it's \"quoted\" & done\n"),
                     new_output("display_data", data={"text/html": '<img src="x.png" alt="mine"><img src="y.png">'})]
     verdict = new_code_cell("", metadata={"tags": ["grader-verdict"]})
     verdict.outputs = [new_output("display_data", data={"text/html": "<div class='v'>Grader: 1 / 2 points</div>"})]
@@ -483,7 +483,9 @@ def test_a_feedback_page_is_what_nbconvert_writes_with_its_alt_texts_and_tabinde
     assert feedback._STYLE.sub("", parsed) == feedback._STYLE.sub("", theirs)  # the style sheets: comments out
     assert ours.count('tabindex="0"') == theirs.count('tabindex="0"') >= 4
     assert ours.count('alt="No description has been provided for this image"') == 2  # the plot, y.png
-    assert 'alt="mine"' in ours and "&lt;div&gt; is text, not a tag" in ours
+    assert 'alt="mine"' in ours
+    assert "&lt;div&gt; is text, not a tag; it's \"quoted\" &amp; done" in ours  # as nbconvert's page has it
+    assert "&lt;div&gt; is text, not a tag; it's \"quoted\" &amp; done" in theirs
 
 
 def test_a_trajectory_is_held_only_to_the_properties_its_reference_has():
