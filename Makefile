@@ -20,9 +20,8 @@ setup:
 lab: setup
 	$(VENV)/bin/snakekit start --ip=$(LAB_IP) --port=$(LAB_PORT)
 
-# The container tests run side by side with the rest (tools/test); PYTEST_ARGS: one plain pytest run.
 test: setup
-	PY=$(PY) tools/test $(PYTEST_ARGS)
+	$(PY) -m pytest -q $(PYTEST_ARGS)
 
 # Every benchmark under bench/, into bench/RESULTS.md and its plots (BENCH_ARGS: e.g. --only sim).
 bench: setup
