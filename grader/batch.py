@@ -54,9 +54,10 @@ class Grader:
     def __init__(self, course: Path, assignment: str, *, jobs: int | None = None, timeout: float = 120.0,
                  references: Path | None = REFERENCES, memory: int = 4 << 30, progress=None,
                  workroot: Path | None = None, use_sandbox: bool = True, cell_timeout: float | None = None,
-                 seed: int | None = None):
+                 seed: int | None = None, retry_timeouts: bool = True):
         """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: ``timeout``);
-        ``seed``: the batch's hidden cases (default: drawn from ``os.urandom``, printed)."""
+        ``seed``: the batch's hidden cases (default: drawn from ``os.urandom``, printed);
+        ``retry_timeouts``: a submission stopped by a clock runs once more before the timeout counts."""
         self.course = Path(course).resolve()
         self.assignment = assignment
         self.jobs = jobs or default_jobs()
@@ -69,6 +70,7 @@ class Grader:
         self.workroot = workroot
         self.use_sandbox = use_sandbox
         self.seed = seed
+        self.retry_timeouts = retry_timeouts
         self.draw = None
         self.late_plugin = None
         self._lock = threading.Lock()
@@ -247,6 +249,13 @@ class Grader:
             return self.verdicts.zero(student, "missing notebook", detail, t0)
         work = self.runner.stage(student, src, nbs, tampered)
         outcome = self.runner.run(work, student)
+        runs = 1
+        if self.retry_timeouts and stopped_by_clock(work, outcome, student, a):
+            # a busy or stuck machine must not cost a student points: a timeout counts only when a
+            # second run from scratch times out too (a real endless loop costs the batch twice)
+            shutil.rmtree(work, ignore_errors=True)
+            work = self.runner.stage(student, src, nbs, tampered)
+            outcome, runs = self.runner.run(work, student), 2
 
         def finish(second=None):
             keep = False
@@ -256,7 +265,7 @@ class Grader:
                 if again:  # run once more with the lesson's own parts, in the pool; score both then
                     keep = True
                     return Again(lambda: self._run_again(student, src, nbs, tampered, again, finish))
-                return self.verdicts.collect(work, student, nbs, tampered, problems, outcome, t0, second)
+                return self.verdicts.collect(work, student, nbs, tampered, problems, outcome, t0, second, runs)
             finally:
                 if not keep:
                     shutil.rmtree(work, ignore_errors=True)
@@ -298,6 +307,25 @@ class Grader:
             if work is not None:
                 shutil.rmtree(work, ignore_errors=True)
         return lambda: finish(second)
+
+
+def stopped_by_clock(work: Path, outcome, student: str, a) -> bool:
+    """Whether a sandbox's run ended by a clock: its wall limit, the notebook's ``--timeout`` or a
+    cell's ``--cell-timeout`` (read from what the worker wrote, which is only ever a reason to run
+    again, never a score)."""
+    if outcome.timed_out:
+        return True
+    raw = read_inside(work, "result.json", limit=1 << 20)
+    try:
+        if raw and json.loads(raw).get("stopped"):
+            return True
+    except (ValueError, AttributeError):
+        pass
+    for name in a.notebooks:
+        raw = read_inside(work, f"course/autograded/{student}/{a.name}/{name}.ipynb")
+        if raw and b'"ename": "CellTimeoutError"' in raw:
+            return True
+    return False
 
 
 def default_jobs() -> int:

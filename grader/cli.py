@@ -39,7 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=None, help="submissions graded at once (default: one more than the cores)")
     p.add_argument("--timeout", type=float, default=120.0,
                    help="wall-clock limit of a whole notebook [s]: at its end the running cell is stopped and the "
-                        "cells after it do not run (default: 120)")
+                        "cells after it do not run; a submission stopped by a clock runs once more from the start "
+                        "and the timeout counts only if it comes again (default: 120)")
     p.add_argument("--cell-timeout", type=float, default=None,
                    help="wall-clock limit of one cell [s]: that cell is interrupted and the notebook goes on "
                         "(default: the --timeout)")

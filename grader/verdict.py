@@ -61,9 +61,10 @@ class Verdicts:
                 out[gid] = score_exercise(gid, handin, e, self.a.tests[gid].max_score)
         return out
 
-    def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None) -> SubmissionResult:
+    def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None, runs=1) -> SubmissionResult:
         """``second``: grade id -> (its hand-in, the answer cells replaced) from a second run with the
-        instructor's answers in those cells (:mod:`grader.rerun`); the better score counts."""
+        instructor's answers in those cells (:mod:`grader.rerun`); the better score counts. ``runs``: 2
+        when the first run was stopped by a clock and this is the run from scratch after it."""
         a = self.a
         raw = read_inside(work, "result.json", limit=1 << 20)
         try:
@@ -111,7 +112,9 @@ class Verdicts:
                 scores.append(kernel_score(gid, cell, executed.get(cell.notebook)))
         stopped = stopped_cells(worker.get("stopped"), executed)
         if outcome.timed_out or stopped:
-            status, detail = "timeout", f"the notebook ran longer than {self.timeout:g} s and was stopped"
+            where = "".join(f" in cell {i + 1}" + (f" of {n}.ipynb" if len(a.notebooks) > 1 else "")
+                            for n, i in sorted(stopped.items())[:1])
+            status, detail = "timeout", f"the notebook ran longer than {self.timeout:g} s and was stopped{where}"
         elif "CellTimeoutError" in errors:
             status, detail = "timeout", f"a cell ran longer than {self.cell_timeout:g} s and was interrupted"
         elif "MemoryError" in errors or "MemoryError" in log:
@@ -130,6 +133,11 @@ class Verdicts:
             status, detail = "missing notebook", "; ".join(problems)
         else:
             status, detail = "graded", ""
+        if status == "timeout" and runs > 1:
+            detail += " (in both of its runs: a notebook stopped by the clock is run once more before it counts)"
+        elif runs > 1:
+            detail = (detail + "; " if detail else "") + ("graded on its second run: the first was stopped by the "
+                                                           "clock, so it ran once more from the start")
         score = round(sum(s.score for s in scores), 4)
         result = SubmissionResult(student, a.name, score, a.max_score, status, detail, tuple(scores),
                                   time.monotonic() - t0)

@@ -68,8 +68,9 @@ def grade_class(lesson: str, tmp: Path) -> dict:
     assert r.returncode == 0, f"snakekit grade {lesson} exited {r.returncode}:\n{r.stderr[-3000:]}"
     seed = re.search(r"drawn with seed (\d+)", r.stderr)
     with open(course / f"grades-{lesson}.csv", newline="") as f:
-        rows = {row["student"]: (float(row["score"]), float(row["max_score"]), row["status"])
-                for row in csv.DictReader(f)}
+        read = list(csv.DictReader(f))
+    rows = {row["student"]: (float(row["score"]), float(row["max_score"]), row["status"]) for row in read}
+    details = {row["student"]: row["detail"] for row in read}
     exercises = {}
     with Gradebook(f"sqlite:///{course / 'gradebook.db'}") as gb:
         for student in module.STUDENTS:
@@ -82,7 +83,8 @@ def grade_class(lesson: str, tmp: Path) -> dict:
                 ex = exercise_of(g.name)
                 per[ex] = per.get(ex, 0.0) + float(g.score or 0.0)
             exercises[student.name] = per
-    return {"rows": rows, "exercises": exercises, "seconds": seconds, "seed": seed and seed.group(1)}
+    return {"rows": rows, "details": details, "exercises": exercises, "seconds": seconds,
+            "seed": seed and seed.group(1)}
 
 
 def _describe(student, result, pts) -> str:
@@ -106,7 +108,8 @@ def range_failures(module, result) -> list[str]:
         low, high = score_range(s, pts, module.SLIP_FLOOR)
         score, max_score, status = result["rows"].get(s.name, (None, None, "no row in the CSV"))
         if status != "graded" or max_score != total:
-            out.append(f"{_describe(s, result, pts)}: status {status!r}, max {max_score} (the lesson has {total:g})")
+            out.append(f"{_describe(s, result, pts)}: status {status!r}, max {max_score} (the lesson has {total:g}): "
+                       f"{result.get('details', {}).get(s.name, '')}")
         elif not low - 1e-9 <= score <= high + 1e-9:
             out.append(f"{_describe(s, result, pts)}: a fair grader gives {low:g} to {high:g}: {s.why}")
     return out
@@ -159,7 +162,9 @@ def graded(request, tmp_path_factory):
     need_program("unshare")
     lesson = request.param
     result = grade_class(lesson, tmp_path_factory.mktemp(f"class{lesson[:2]}"))
-    print(f"\n{lesson}: {len(CLASSES[lesson].STUDENTS)} submissions graded in {result['seconds']:.1f} s")
+    again = sorted(n for n, d in result["details"].items() if "second run" in d or "both of its runs" in d)
+    print(f"\n{lesson}: {len(CLASSES[lesson].STUDENTS)} submissions graded in {result['seconds']:.1f} s"
+          + (f"; stopped by the clock in a first run and run again: {', '.join(again)}" if again else ""))
     return CLASSES[lesson], result
 
 

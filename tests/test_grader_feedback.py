@@ -8,6 +8,7 @@ and Generate Feedback buttons pressed in Chromium on a tampered submission.
 
 from __future__ import annotations
 
+import copy
 import os
 import re
 import subprocess
@@ -64,6 +65,7 @@ def _loads_nothing(page: str) -> None:
 def graded(tmp_path_factory):
     need_program("unshare")
     from grader.batch import Grader
+    from grader.runner import Runner
 
     course = make_course(tmp_path_factory.mktemp("feedback"))
     _use_safe_grading(course)
@@ -71,19 +73,52 @@ def graded(tmp_path_factory):
     submit(course, "edited", edit=_edit)
     submit(course, "loop", LOOP)
     submit(course, "extras", EXTRAS)
+    submit(course, "flaky")  # a right submission whose first run the machine stalls (below)
     grader = Grader(course, ASSIGNMENT, jobs=2, timeout=TIMEOUT, references=REFERENCES)
-    results = {r.student: r for r in grader.run()}
+    stage, first = Runner.stage, []
+
+    def stalled_once(self, student, src, nbs, tampered):
+        """flaky's first run stalls in its first answer cell as a stuck machine would; its second runs as handed in."""
+        work = stage(self, student, src, nbs, tampered)
+        if student == "flaky" and not first:
+            first.append(True)
+            for name, nb in nbs.items():
+                nb = nbformat.from_dict(copy.deepcopy(nb))
+                cell = next(c for c in nb.cells if c.metadata.get("nbgrader", {}).get("solution"))
+                cell.source = "import time\ntime.sleep(10**6)\n" + cell.source
+                nbformat.write(nb, work / "course" / "submitted" / student / ASSIGNMENT / f"{name}.ipynb")
+        return work
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Runner, "stage", stalled_once)
+        results = {r.student: r for r in grader.run()}
+    assert first, "flaky's first run was not stalled"
+
     return course, results
 
 
-def test_an_infinite_loop_costs_the_batch_only_the_notebooks_timeout(graded):
+def test_an_infinite_loop_costs_the_batch_only_twice_the_notebooks_timeout(graded):
     _, results = graded
     loop = results["loop"]
-    assert (loop.status, loop.detail) == ("timeout", f"the notebook ran longer than {TIMEOUT} s and was stopped")
-    # the sandbox ran TIMEOUT s, not the backstop (TIMEOUT + 30 s) nor one limit per cell
-    assert TIMEOUT <= loop.wall < TIMEOUT + 10, loop.wall
+    nb = nbformat.read(graded[0] / "submitted" / "loop" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", 4)
+    cell = 1 + next(i for i, c in enumerate(nb.cells) if "while True" in c.source)  # counted from the top, as a TA would
+    assert (loop.status, loop.detail) == ("timeout", f"the notebook ran longer than {TIMEOUT} s and was stopped in cell "
+                                          f"{cell} (in both of its runs: a notebook stopped by the clock is run once "
+                                          "more before it counts)")
+    # each of its two sandboxes ran TIMEOUT s, not the backstop (TIMEOUT + 30 s) nor one limit per cell
+    assert 2 * TIMEOUT <= loop.wall < 2 * TIMEOUT + 20, loop.wall
     assert [(e.grade_id, e.score) for e in loop.exercises] == [
         ("ex1_tool_xy_test", 2.0), ("ex2_sweep_test", 0.0), ("ex3_peak_speed_test", 0.0)]
+
+
+def test_a_notebook_the_machine_stalled_once_is_graded_on_its_second_run(graded):
+    course, results = graded
+    flaky, alice = results["flaky"], results["alice"]
+    assert (flaky.status, flaky.score) == ("graded", alice.score) and alice.score == alice.max_score
+    assert flaky.detail == "graded on its second run: the first was stopped by the clock, so it ran once more from the start"
+    assert TIMEOUT <= flaky.wall < TIMEOUT + 30, flaky.wall   # the stalled run, then the right one
+    page = re.sub(r"<[^>]+>", "", _page(course, "flaky"))
+    assert "graded on its second run" in page and "stopped here" not in page and "time.sleep" not in page
 
 
 def test_a_stopped_notebooks_page_keeps_its_outputs_up_to_the_stopped_cell(graded):
@@ -109,7 +144,7 @@ def test_a_stopped_notebooks_page_keeps_its_outputs_up_to_the_stopped_cell(grade
 def test_no_feedback_page_loads_anything_from_the_network(graded):
     course, _ = graded
     pages = sorted((course / "feedback").glob(f"*/{ASSIGNMENT}/*.html"))
-    assert len(pages) == 4
+    assert len(pages) == 5
     for page in pages:
         _loads_nothing(page.read_text())
 
