@@ -319,6 +319,19 @@ def differences(old: Reference, new: Reference) -> list[str]:
     return out
 
 
+def check_repeats(ref: Reference) -> int:
+    """How many runs ``--check`` needs to record ``ref`` again: a run's tolerance follows the spread
+    of repeated recordings (3 runs); a values or trajectory exercise's does not (1 run). Whether
+    values come out the same run after run is checked when they are recorded.
+
+    >>> check_repeats(Reference("a", {"exercises": {"x": {"kind": "values"}, "y": {"kind": "run"}}}))
+    3
+    >>> check_repeats(Reference("a", {"exercises": {"x": {"kind": "values"}}}))
+    1
+    """
+    return 3 if any(e.get("kind") == "run" for e in ref.exercises.values()) else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m grader.references",
                                 description="Record the reference runs from the instructor notebooks.")
@@ -326,7 +339,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
     p.add_argument("--out", type=Path, default=REFERENCES, help="where references live (default: grader/references/)")
     p.add_argument("--check", action="store_true", help="only check that the stored references are current")
+    p.add_argument("--repeats", type=int, default=None,
+                   help="runs of each instructor notebook (default: 3 when recording; with --check, 3 for a "
+                        "reference with a run exercise and 1 for one of values and trajectories only, whose "
+                        "tolerances do not depend on the repeats)")
     args = p.parse_args(argv)
+    if args.repeats is not None and args.repeats < 1:
+        print(f"--repeats must be at least 1, got {args.repeats}", file=sys.stderr)
+        return 2
     names = args.assignments or sorted(f.stem for f in args.out.glob("*.npz"))
     if not names:
         print(f"no references in {args.out}; name the assignments to record", file=sys.stderr)
@@ -334,16 +354,18 @@ def main(argv: list[str] | None = None) -> int:
     stale = 0
     try:
         for name in names:
-            new = record(name, args.course)
             path = args.out / f"{name}.npz"
             if args.check:
-                diff = differences(Reference.load(path), new)
+                old = Reference.load(path)
+                repeats = args.repeats or check_repeats(old)
+                diff = differences(old, record(name, args.course, repeats=repeats))
                 if diff:
                     stale += 1
                     print(f"{path} is stale:\n  " + "\n  ".join(diff), file=sys.stderr)
                 else:
                     print(f"{path} is current")
             else:
+                new = record(name, args.course, repeats=args.repeats or 3)
                 args.out.mkdir(parents=True, exist_ok=True)
                 new.save(path)
                 print(f"wrote {path} ({len(new.exercises)} exercises: {', '.join(sorted(new.exercises))})")
