@@ -102,6 +102,23 @@ def exercises(instructor, student) -> list[dict]:
 PARTS = ("result", "result[0]", "result[1]", "result[2]", '__import__("snakekit").Trajectory(*result)')
 
 
+#: after a trial: fails when the counted stand-in's helper returned at least once (and resets the count)
+NEVER_RETURNED = "assert not globals().pop('_stand_in_returned', None)"
+
+
+def counted(stand_in: str) -> str:
+    """The stand-in, noting in the kernel each time its helper returns (rather than raises).
+
+    >>> print(counted("def f(x):\\n    result = g(x)\\n    return result"))
+    def f(x):
+        result = g(x)
+        globals().setdefault('_stand_in_returned', []).append(1)
+        return result
+    """
+    head, _, tail = stand_in.partition("\n    return ")
+    return f"{head}\n    globals().setdefault('_stand_in_returned', []).append(1)\n    return {tail}"
+
+
 def answers_in_sight(instructor_path: Path, student_path: Path, work: Path,
                      mistakes: tuple = ()) -> tuple[list[str], list[str]]:
     """Run the lesson and try every helper of its visible test cells as every exercise's answer.
@@ -145,11 +162,17 @@ def answers_in_sight(instructor_path: Path, student_path: Path, work: Path,
             for helper in names:
                 if helper == ex["name"]:
                     continue
-                for stand_in in stand_ins(ex["function"], helper):
-                    tried = True
-                    run(stand_in)
-                    if run(ex["visible"]) is None:
-                        passed.append(f"{ex['grade_id']}: this answer passes its visible check:\n{stand_in}")
+                made = stand_ins(ex["function"], helper)
+                for form in range(0, len(made), len(PARTS)):
+                    for k, stand_in in enumerate(made[form:form + len(PARTS)]):
+                        tried = True
+                        run(stand_in if k else counted(stand_in))
+                        if run(ex["visible"]) is None:
+                            passed.append(f"{ex['grade_id']}: this answer passes its visible check:\n{stand_in}")
+                        if not k and run(NEVER_RETURNED) is None:
+                            # the helper raised at every call, so no part of its result was ever
+                            # taken: the other parts' trials would run exactly as this one did
+                            break
             for gid, wrong, hint, *anywhere in mistakes:
                 if gid == ex["grade_id"]:
                     tried = True
