@@ -201,6 +201,10 @@ class Grader:
         work = self.runner.stage(INSTRUCTOR, src, nbs, {})
         try:
             outcome = self.runner.run(work, INSTRUCTOR)
+            if self.retry_timeouts and stopped_by_clock(work, outcome, INSTRUCTOR, a):  # as a student's: once more
+                shutil.rmtree(work, ignore_errors=True)
+                work = self.runner.stage(INSTRUCTOR, src, nbs, {})
+                outcome = self.runner.run(work, INSTRUCTOR)
             handins = {}
             for gid in self.draw.cases:
                 raw = read_inside(work, f"handin/{gid}.npz")
