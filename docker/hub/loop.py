@@ -87,8 +87,12 @@ class User:
             model = self.api("GET", f"/users/{self.name}").json()
             srv = model.get("servers", {}).get("", {})
             if srv.get("ready"):
+                # twice in a row: a swarm service just made again can answer once, then refuse a
+                # moment (its address taken over from the removed one) before the new server listens
                 if self.server("GET", "api/status").status_code == 200:
-                    return time.monotonic() - t
+                    time.sleep(0.25)
+                    if self.server("GET", "api/status").status_code == 200:
+                        return time.monotonic() - t
             elif not srv.get("pending") and time.monotonic() - t > 5:
                 fail(f"{self.name}: the server did not start: {model}")
             time.sleep(0.25)
@@ -330,6 +334,11 @@ def main() -> int:
     warm = a.spawn()
     print(f"figure: spawn to ready, warm (the student's volume exists): {warm:.1f} s", flush=True)
     r = a.server("GET", "api/contents/saved-before-cull.txt")
+    for _ in range(60):  # the proxy says 503 while the new server is not listening yet; a browser retries
+        if r.status_code not in (502, 503):
+            break
+        time.sleep(0.5)
+        r = a.server("GET", "api/contents/saved-before-cull.txt")
     if r.status_code != 200 or r.json()["content"] != "kept":
         fail(f"after the restart: {r.status_code}")
     r = a.server("GET", f"api/contents/{LESSON}/{LESSON}.ipynb")
