@@ -198,13 +198,8 @@ class Grader:
             if not path.is_file():
                 raise GradingError(f"{where}: {path} is missing, so the batch has no expected results")
             nbs[name] = nbformat.read(path, as_version=4)
-        work = self.runner.stage(INSTRUCTOR, src, nbs, {})
+        work, outcome, _ = self._run(INSTRUCTOR, src, nbs, {})
         try:
-            outcome = self.runner.run(work, INSTRUCTOR)
-            if self.retry_timeouts and stopped_by_clock(work, outcome, INSTRUCTOR, a):  # as a student's: once more
-                shutil.rmtree(work, ignore_errors=True)
-                work = self.runner.stage(INSTRUCTOR, src, nbs, {})
-                outcome = self.runner.run(work, INSTRUCTOR)
             handins = {}
             for gid in self.draw.cases:
                 raw = read_inside(work, f"handin/{gid}.npz")
@@ -219,6 +214,18 @@ class Grader:
                 raise GradingError(f"{e}{detail}; nothing was graded") from e
         finally:
             shutil.rmtree(work, ignore_errors=True)
+
+    def _run(self, student: str, src: Path, nbs: dict, tampered: dict):
+        """Stage and run one notebook set in a sandbox: (its folder, how it ended, runs). A busy or
+        stuck machine must not cost points: a run stopped by a clock is run once more from scratch,
+        and only a second stop counts (an endless loop costs the batch twice its timeout)."""
+        work = self.runner.stage(student, src, nbs, tampered)
+        outcome = self.runner.run(work, student)
+        if not (self.retry_timeouts and stopped_by_clock(work, outcome, student, self.a)):
+            return work, outcome, 1
+        shutil.rmtree(work, ignore_errors=True)
+        work = self.runner.stage(student, src, nbs, tampered)
+        return work, self.runner.run(work, student), 2
 
     def _grade_one(self, student: str):
         """Run one submission's sandbox; returns its result, or (it ran) the call that scores it."""
@@ -251,15 +258,7 @@ class Grader:
                                             f"<that folder>` finds a renamed notebook by its cells)" if others else
                                             " (no notebook in the folder)")
             return self.verdicts.zero(student, "missing notebook", detail, t0)
-        work = self.runner.stage(student, src, nbs, tampered)
-        outcome = self.runner.run(work, student)
-        runs = 1
-        if self.retry_timeouts and stopped_by_clock(work, outcome, student, a):
-            # a busy or stuck machine must not cost a student points: a timeout counts only when a
-            # second run from scratch times out too (a real endless loop costs the batch twice)
-            shutil.rmtree(work, ignore_errors=True)
-            work = self.runner.stage(student, src, nbs, tampered)
-            outcome, runs = self.runner.run(work, student), 2
+        work, outcome, runs = self._run(student, src, nbs, tampered)
 
         def finish(second=None):
             keep = False
