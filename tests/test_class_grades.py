@@ -24,6 +24,7 @@ import shutil
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import nbformat
@@ -165,6 +166,9 @@ def graded(request, tmp_path_factory):
     again = sorted(n for n, d in result["details"].items() if "second run" in d or "both of its runs" in d)
     print(f"\n{lesson}: {len(CLASSES[lesson].STUDENTS)} submissions graded in {result['seconds']:.1f} s"
           + (f"; stopped by the clock in a first run and run again: {', '.join(again)}" if again else ""))
+    if again:   # a stall of the machine, not of the students: said where CI's summary shows it
+        warnings.warn(f"{lesson}: a first run stopped by the clock ({result['seconds']:.0f} s for the class):\n"
+                      + "\n".join(f"  {n}: {result['details'][n]}" for n in again), stacklevel=1)
     return CLASSES[lesson], result
 
 

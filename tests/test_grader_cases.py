@@ -229,3 +229,22 @@ def test_an_instructor_run_that_only_raises_stops_the_batch(course):
     errors = ["OSError: out of pty devices"] * len(batch.cases[gid])
     with pytest.raises(ReferenceError, match=r"ex_a_test raised at every one of its 4 hidden cases .*OSError: out of pty"):
         expected(ref, batch, {gid: errors})
+
+
+def test_lesson_06s_sweeps_catch_a_sweep_that_ignores_its_rate_at_every_seed():
+    """6.3's sweeps inside the limits are inside them (the library's own side_sweep passes
+    check_limits), and at every seed a sweep that sends 10 Hz whatever its rate is wrong in at
+    least two of them: one draw in 27 once had all three at 10 Hz, and such a slip got 6.3 in full."""
+    from grader.cases import draw
+    from snakekit import LimitError, side_sweep
+
+    course = Path(__file__).resolve().parents[1] / "course"
+    for seed in range(300):
+        *inside, beyond, task2 = draw(course, "06_coded_sweep", seed).cases["ex06_3_task2_test"]
+        assert task2 == ()
+        for points, rate, sweeps, amplitude in inside:      # side_sweep raises LimitError beyond them
+            assert len(side_sweep(points=points, rate=rate, sweeps=sweeps, amplitude=amplitude)) == points
+        assert sum(rate != 10.0 for _, rate, _, _ in inside) >= 2, f"seed {seed}: {inside}"
+        points, rate, sweeps, amplitude = beyond
+        with pytest.raises(LimitError):
+            side_sweep(points=points, rate=rate, sweeps=sweeps, amplitude=amplitude).check_limits()

@@ -26,10 +26,15 @@ def ex06_2_sweep_positions_test(rng, spec):
             zip(rng.integers(20, 300, 5), rng.uniform(5.0, 50.0, 5), rng.integers(1, 6, 5), rng.uniform(0.05, 0.5, 5))]
 
 
-def _sweep(rng, spec, max_points):
-    """(points, rate, sweeps, amplitude) of a sweep well inside the limits: at least 8 goals a sweep,
-    a peak speed of at most 2/3 of the velocity limit, at most 20 s long."""
-    rate = float(rng.choice([5.0, 10.0, 20.0]))
+#: The rates of 6.3's sweeps inside the limits: each once, so a sweep that ignores its rate argument
+#: (and sends Task 2's 10 Hz) is wrong in two of the three, whatever the seed.
+RATES = (5.0, 10.0, 20.0)
+
+
+def _sweep(rng, spec, max_points, rate):
+    """(points, rate, sweeps, amplitude) of a sweep at ``rate`` [Hz] well inside the limits: at least
+    8 goals a sweep, a peak speed of at most 2/3 of the velocity limit, at most 20 s long."""
+    rate = float(rate)
     points = int(rng.integers(40, min(max_points, int(20 * rate) + 2)))     # at most 20 s of robot time
     amplitude = float(rng.uniform(0.05, 0.3))
     fastest = spec.velocity_limit * 2 / 3 * (points - 1) / (amplitude * 2 * np.pi * rate)
@@ -39,11 +44,12 @@ def _sweep(rng, spec, max_points):
 
 def ex06_3_task2_test(rng, spec):
     """task2_sweep(points, rate, sweeps, amplitude): 3 sweeps inside the limits (run on the simulator),
+    one at each of :data:`RATES`,
     one beyond the position limits (the instructor's raises LimitError: so must the student's), and
     Task 2 itself: ``task2_sweep()`` at its defaults (the empty case; its 50 s run costs the
     simulator about as much as the lesson's own run of it)."""
-    cases = [_sweep(rng, spec, 200) for _ in range(3)]
-    points, rate, sweeps, _ = _sweep(rng, spec, 200)
+    cases = [_sweep(rng, spec, 200, rate) for rate in rng.permutation(RATES)]
+    points, rate, sweeps, _ = _sweep(rng, spec, 200, rng.choice(RATES))
     return cases + [(points, rate, sweeps, float(rng.uniform(spec.upper + 0.1, 2.5))), ()]
 
 
