@@ -221,6 +221,7 @@ class Grader:
         and only a second stop counts (an endless loop costs the batch twice its timeout)."""
         work = self.runner.stage(student, src, nbs, tampered)
         outcome = self.runner.run(work, student)
+        late_replies(work, student)
         if not (self.retry_timeouts and stopped_by_clock(work, outcome, student, self.a)):
             return work, outcome, 1
         shutil.rmtree(work, ignore_errors=True)
@@ -310,6 +311,20 @@ class Grader:
             if work is not None:
                 shutil.rmtree(work, ignore_errors=True)
         return lambda: finish(second)
+
+
+def late_replies(work: Path, student: str) -> None:
+    """Say (on stderr, for the TA) where a kernel finished a cell whose reply never came, which the
+    worker took as finished (:data:`grader.worker.LATE_REPLY`): the kernel's fault, never a score."""
+    raw = read_inside(work, "result.json", limit=1 << 20)
+    try:
+        late = json.loads(raw).get("late_replies") or [] if raw else []
+        where = ", ".join(f"{d['notebook']} cell {int(d['cell'])}" for d in late)
+    except (ValueError, AttributeError, KeyError, TypeError):
+        return
+    if where:
+        print(f"snakekit grade: {student}: the kernel finished {where} but its reply never came; taken as finished "
+              f"after {worker.LATE_REPLY:g} s (the grade is not affected)", file=sys.stderr)
 
 
 def stopped_by_clock(work: Path, outcome, student: str, a) -> bool:

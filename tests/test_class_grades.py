@@ -85,7 +85,7 @@ def grade_class(lesson: str, tmp: Path) -> dict:
                 per[ex] = per.get(ex, 0.0) + float(g.score or 0.0)
             exercises[student.name] = per
     return {"rows": rows, "details": details, "exercises": exercises, "seconds": seconds,
-            "seed": seed and seed.group(1)}
+            "seed": seed and seed.group(1), "late": [line for line in r.stderr.splitlines() if "reply never came" in line]}
 
 
 def _describe(student, result, pts) -> str:
@@ -166,6 +166,8 @@ def graded(request, tmp_path_factory):
     again = sorted(n for n, d in result["details"].items() if "second run" in d or "both of its runs" in d)
     print(f"\n{lesson}: {len(CLASSES[lesson].STUDENTS)} submissions graded in {result['seconds']:.1f} s"
           + (f"; stopped by the clock in a first run and run again: {', '.join(again)}" if again else ""))
+    if result["late"]:   # a kernel's lost reply, taken as finished: said where CI's summary shows it
+        warnings.warn(f"{lesson}: " + "\n".join(result["late"]), stacklevel=1)
     if again:   # a stall of the machine, not of the students: said where CI's summary shows it
         warnings.warn(f"{lesson}: a first run stopped by the clock ({result['seconds']:.0f} s for the class):\n"
                       + "\n".join(f"  {n}: {result['details'][n]}" for n in again), stacklevel=1)

@@ -657,3 +657,76 @@ def test_fork_server_that_cannot_start_says_why(tmp_path):
     with pytest.raises(RuntimeError, match="the grader's fork server did not start: ModuleNotFoundError: No module named 'no_such_module_anywhere'"):
         server.wait_ready()
     assert server.proc.poll() is not None  # not left running
+
+
+def test_a_cell_whose_reply_never_comes_counts_as_finished_once_its_kernel_is_idle(tmp_path, monkeypatch):
+    """About once in 2,000 notebooks a kernel ran a cell to its end (IOPub: its outputs, then idle) and
+    its execute_reply never arrived: the notebook waited out its whole timeout. The worker gives the
+    reply LATE_REPLY s after the idle, then takes the cell as finished with the outputs it sent (an
+    error stays an error) and goes on; result.json lists those cells."""
+    import time
+
+    import nbformat
+    from jupyter_core.utils import run_sync
+
+    from grader import worker
+
+    monkeypatch.setattr(worker, "LATE_REPLY", 1.0)
+    monkeypatch.setattr(worker, "_late", [])
+    execute = next(s for s in worker._with_deadline(120, 15) if s.__name__ == "DeadlineExecute")
+
+    class LosesReplies(execute):
+        """The shell channel loses the execute_reply of each cell that asks for it."""
+
+        async def async_execute_cell(self, cell, cell_index, **kw):
+            if "lose my reply" not in cell.source:
+                return await super().async_execute_cell(cell, cell_index, **kw)
+            channel = self.kc.shell_channel
+            get = channel.get_msg
+
+            async def losing(*a, **k):
+                msg = await get(*a, **k)
+                while msg["msg_type"] == "execute_reply":
+                    msg = await get(*a, **k)
+                return msg
+
+            channel.get_msg = losing
+            try:
+                return await super().async_execute_cell(cell, cell_index, **kw)
+            finally:
+                del channel.get_msg
+
+        execute_cell = run_sync(async_execute_cell)   # nbclient binds its own at class level
+
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(src) for src in (
+        "x = 6 * 7\nprint('first', x)",
+        "# lose my reply\nprint('second', x + 1)",
+        "# lose my reply\nprint('third', x + 2)\nraise ValueError('kept as the cell error')",
+        "print('fourth', x + 3)")])
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    started = time.monotonic()
+    LosesReplies(timeout=15, kernel_name="python3").preprocess(nb, {"metadata": {"path": str(tmp_path)}})
+    seconds = time.monotonic() - started
+    text = ["".join(o.get("text", "") for o in c.outputs if o.output_type == "stream") for c in nb.cells]
+    assert text == ["first 42\n", "second 43\n", "third 44\n", "fourth 45\n"]
+    assert [o.ename for o in nb.cells[2].outputs if o.output_type == "error"] == ["ValueError"]
+    assert not any(o.output_type == "error" for c in (nb.cells[0], nb.cells[1], nb.cells[3]) for o in c.outputs)
+    assert [c.execution_count for c in nb.cells] == [1, 2, 3, 4]
+    assert [d["cell"] for d in worker._late] == [1, 2]
+    assert seconds < 25, f"{seconds:.0f} s: each lost reply was waited for as long as the cell's limit (15 s)"
+
+
+def test_the_ta_is_told_where_a_lost_reply_was_taken_as_finished(tmp_path, capsys):
+    from grader.batch import late_replies
+
+    (tmp_path / "result.json").write_text(json.dumps({"success": True, "late_replies": [
+        {"notebook": "03_inverse_kinematics", "cell": 17, "id": "03-code-17"}]}))
+    late_replies(tmp_path, "fy")
+    assert capsys.readouterr().err == (
+        "snakekit grade: fy: the kernel finished 03_inverse_kinematics cell 17 but its reply never came; taken as "
+        "finished after 20 s (the grade is not affected)\n")
+    for written in ('{"success": true}', '{"late_replies": [{"cell": "x"}]}', "not json"):
+        (tmp_path / "result.json").write_text(written)      # nothing late, or what a sandbox wrote instead
+        late_replies(tmp_path, "fy")
+        assert capsys.readouterr().err == ""
