@@ -366,12 +366,20 @@ def test_faults_refuse_nonsense():
 def test_return_delay_is_emulated_when_timing_is_on():
     # Noise on a busy machine only ever adds time, so the fastest of many pings shows the
     # emulated delay: 250 x 2 us = 0.5 ms more with the default Return Delay Time than with 0.
+    # A ping the SDK gave up on (the emulator's thread held up past the SDK's 34 ms timeout on a
+    # loaded machine) is no timing sample: it is tried again, a few of them at most.
     def fastest_ping(ph, port):
-        times = []
-        for _ in range(40):
+        times, failed = [], []
+        while len(times) < 40:
             t = time.perf_counter()
-            assert ph.ping(port, 1)[1] == sdk.COMM_SUCCESS
-            times.append(time.perf_counter() - t)
+            result = ph.ping(port, 1)[1]
+            if result == sdk.COMM_SUCCESS:
+                times.append(time.perf_counter() - t)
+            else:
+                failed.append(result)
+                assert len(failed) <= 4, f"{len(failed)} pings failed ({failed}) for {len(times)} answered"
+                time.sleep(0.05)
+                port.clearPort()
         return min(times)
 
     with BusEmulator(motion="profile", timing=True) as bus:
@@ -381,7 +389,12 @@ def test_return_delay_is_emulated_when_timing_is_on():
         ph = sdk.PacketHandler(2.0)
         assert ph.read1ByteTxRx(port, 1, 9)[0] == 250
         slow = fastest_ping(ph, port)
-        ph.write1ByteTxRx(port, 1, 9, 0)
+        for _ in range(3):  # as the pings: a write the SDK gave up on under load is sent again
+            if ph.write1ByteTxRx(port, 1, 9, 0) == (sdk.COMM_SUCCESS, 0):
+                break
+            time.sleep(0.05)
+            port.clearPort()
+        assert ph.read1ByteTxRx(port, 1, 9)[0] == 0
         fast = fastest_ping(ph, port)
         port.closePort()
     assert 0.00045 < slow - fast < 0.002, (slow, fast)
