@@ -52,7 +52,7 @@ def drive_and_read(robot, n, gap):
             t_a = bus.now()
             s = robot.read()
             t_b = bus.now()
-        except (snakekit.CommunicationError, snakekit.BackendError) as e:
+        except snakekit.BackendError as e:  # CommunicationError is one
             if not isinstance(e, snakekit.CommunicationError):
                 if "Bus Watchdog stopped" not in str(e):
                     raise
