@@ -5,9 +5,8 @@ what to install there (:func:`snakekit.host.missing`); then it starts JupyterLab
 lessons in ``notebooks/``:
 
 - nbgrader's Validate button on, its teacher tools (formgrader, create assignment, the
-  exchange's lists) off: their server extensions by ``tools/student-lab/jupyter_server_config.json``,
-  their UI by ``tools/student-lab/labconfig/page_config.json`` (the container's JupyterLab reads
-  the same folder);
+  exchange's lists) off: their server extensions here, their UI by
+  ``tools/student-lab/labconfig/page_config.json``;
 - offline: no update check (and the news feed off, by ``tools/jupyterlab-overrides.json``,
   which tools/setup copies into the venv);
 - without rfc3987-syntax: jsonschema loads it, when installed, for an "iri" format check
@@ -41,7 +40,11 @@ LAB_MAIN = ('import sys; sys.modules["rfc3987_syntax"] = None; '
 def lab_arguments(notebooks: Path, *, ip: str, port: int) -> list[str]:
     """JupyterLab's command-line options for the student's lab on ``notebooks``."""
     return ["--no-browser", "--allow-root", f"--ip={ip}", f"--port={port}",
-            f"--ServerApp.root_dir={notebooks}", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate"]
+            f"--ServerApp.root_dir={notebooks}", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
+            "--ServerApp.jpserver_extensions", "nbgrader.server_extensions.validate_assignment=True",
+            "--ServerApp.jpserver_extensions", "nbgrader.server_extensions.formgrader=False",
+            "--ServerApp.jpserver_extensions", "nbgrader.server_extensions.course_list=False",
+            "--ServerApp.jpserver_extensions", "nbgrader.server_extensions.assignment_list=False"]
 
 
 def build_parser() -> argparse.ArgumentParser:
