@@ -418,6 +418,44 @@ def test_a_run_the_watchdog_stopped_midway_says_so_and_keeps_the_run():
         assert run.measured.positions[-1, 0] < 0.45 and physical_angles(robot.emulator)[0] < 0.45
 
 
+STALLED = textwrap.dedent("""
+    import sys
+    import snakekit
+    robot = snakekit.make_robot("emulator", motion="profile")
+    bus = robot.emulator
+    print("ready", flush=True)
+    sys.stdin.readline()              # the test stops this whole process (SIGSTOP) for 1 s, then goes on
+    robot.move_to([0.3, 0, 0, 0, 0], duration=0.5)
+    print(robot.servo_status(), max(bus.stalls, default=0), round(float(bus.motion.state(bus.now())[0][0]), 4), flush=True)
+    robot.close()
+""")
+
+
+def test_a_machine_that_stalls_emulator_and_program_alike_does_not_trip_the_emulated_watchdog():
+    """A loaded grading machine (or a swapping laptop) can stop the student's process for longer
+    than the watchdog period: the emulator in it stops with the program. The program was not
+    silent while the emulator listened, so the run must go on as on any other machine: a student's
+    graded run must not depend on the grader's load."""
+    proc = subprocess.Popen([sys.executable, "-c", STALLED], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline() == "ready\n"
+        time.sleep(0.3)                       # the keep-alive at work
+        os.kill(proc.pid, signal.SIGSTOP)
+        time.sleep(1.0)                       # twice the watchdog period
+        os.kill(proc.pid, signal.SIGCONT)
+        proc.stdin.write("\n")
+        proc.stdin.flush()
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    status, stalled, q = out.rsplit(" ", 2)
+    assert eval(status) == {i: (True, 25) for i in IDS}  # read back from the servos: torque on, no stop
+    assert 0.9 < float(stalled) < 2.0                 # the emulator saw its own stall
+    assert abs(float(q) - 0.3) < 2e-3                 # and the move went on to its goal
+
+
 HOST = textwrap.dedent("""
     import sys, time
     import snakekit

@@ -35,6 +35,7 @@ from .servo import OVERLOAD, EmulatedServo
 from .tcp import FtdiChip, PtyLine, TcpLine
 
 SWITCH_INTERVAL = 0.0005  # s, while an emulator thread runs
+STALL = 0.02  # s: a serve loop later than its wait by more than this was held up by the machine
 _CLASS_LOCK = threading.Lock()
 BAUD_RATES = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
 
@@ -138,6 +139,8 @@ class BusEmulator:
         self._rng = random.Random(0)
         self._overload_at = math.inf
         self._heard = 0.0  # when the last instruction packet reached the servos (the Bus Watchdog's clock)
+        #: how long [s] each time the machine held the serve loop up (not counted by the watchdog)
+        self.stalls: collections.deque[float] = collections.deque(maxlen=1000)
         self.faults = faults
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -251,12 +254,14 @@ class BusEmulator:
         """Answer packets until :meth:`stop` (or Ctrl-C in the foreground)."""
         advance = getattr(self.motion, "advance", None)
         line = self._line
+        listened = self.now()
         while not self._stop.is_set():
             watching = any(s.watchdog_period for s in self.servos)
             wait = 0.005 if watching else 0.05
             if self._chip is not None:
                 wait = self._chip.wait(wait)
             ready, _, _ = select.select(line.readers() + [self._wake_r], [], [], wait)
+            self._not_listening(self.now() - listened - wait)
             if self._chip is not None:
                 self._chip.poll()
             if ready:
@@ -278,6 +283,19 @@ class BusEmulator:
                     self._overload(t)
                 if advance is not None:
                     advance(t)
+            listened = self.now()
+
+    def _not_listening(self, late: float) -> None:
+        """The serve loop came back ``late`` [s] after its wait: the machine held this thread up
+        (a loaded machine, a swapping laptop, a process stopped as a whole). Real servos listen all
+        the time, so the Bus Watchdog does not count that time as the client's silence: a packet
+        sent during it reached them, only this thread read it late. (Should the client have been
+        silent too, the watchdog still stops the arm once the client's silence, counted without
+        that time, passes its period.)"""
+        if late > STALL:
+            with self._lock:
+                self._heard += late
+                self.stalls.append(late)
 
     def stop(self) -> None:
         """Stop serving, close the pty and free the motion source. Safe to call twice."""
