@@ -88,5 +88,5 @@ def better(first: ExerciseScore, second: ExerciseScore | None, replaced: list[st
     parts = sorted({exercise(c) for c in replaced})
     names = " and ".join(parts)
     line = (f"graded with the lesson's own {names} in place of yours: {second.score:g} of {second.max_score:g} "
-            f"(with yours: {first.score:g}).")
+            f"(with yours: {first.score:g}, the run below).")
     return dataclasses.replace(first, score=second.score, message=f"{line} {first.message}")

@@ -66,7 +66,8 @@ def test_the_better_run_counts_and_its_line_names_the_parts_and_its_score_only()
                            checks=("theirs",))
     got = rerun.better(first, second, ["ex06_1_sweep_times", "ex06_2_sweep_positions"])
     assert got.score == 6.5 and got.checks == ("mine",)
-    assert got.message == ("graded with the lesson's own 6.1 and 6.2 in place of yours: 6.5 of 7 (with yours: 1.5). "
+    assert got.message == ("graded with the lesson's own 6.1 and 6.2 in place of yours: 6.5 of 7 "
+                           "(with yours: 1.5, the run below). "
                            "3 of 4 hidden cases gave no trajectory.")
     assert rerun.better(second, first, ["ex06_1_sweep_times"]) is second
 
