@@ -13,15 +13,17 @@ like the simulated arm and fail on demand (:class:`Faults`).
 
 Modules: :mod:`.protocol` (framing), :mod:`.control_table` (registers),
 :mod:`.servo` (one servo's firmware), :mod:`.motion` (how the servos move),
-:mod:`.faults`, :mod:`.bus` (the pty and the packet loop), :mod:`.cli`.
+:mod:`.faults`, :mod:`.bus` (the pty and the packet loop), :mod:`.record` (what it
+keeps of the packets), :mod:`.cli`.
 """
 
 from __future__ import annotations
 
-from .bus import BusEmulator, Received, Write
+from .bus import BusEmulator
 from .cli import cli
 from .faults import Faults
 from .motion import MujocoMotion, ProfileMotion
+from .record import Received, Write
 
 __all__ = ["BusEmulator", "Faults", "Received", "Write", "MujocoMotion", "ProfileMotion", "cli",
            "make_emulated_robot"]

@@ -21,8 +21,6 @@ import sys
 import threading
 import time
 import traceback
-from dataclasses import dataclass
-
 
 from ..errors import ConfigurationError, InputTypeError
 from ..model import SPEC, SnakeSpec
@@ -31,6 +29,7 @@ from . import protocol as p
 from .control_table import FIRMWARE_VERSION_ADDRESS, MODEL_NUMBER_ADDRESS, field_at, to_signed
 from .faults import NO_FAULTS, Faults
 from .motion import MOTION_SOURCES, MotionSource
+from .record import Received, Write
 from .servo import OVERLOAD, EmulatedServo
 from .tcp import FtdiChip, PtyLine, TcpLine
 
@@ -38,44 +37,6 @@ SWITCH_INTERVAL = 0.0005  # s, while an emulator thread runs
 STALL = 0.02  # s: a serve loop later than its wait by more than this was held up by the machine
 _CLASS_LOCK = threading.Lock()
 BAUD_RATES = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
-
-
-@dataclass(frozen=True)
-class Received:
-    """One instruction packet as it reached the bus.
-
-    Attributes:
-        time: emulator clock when it was decoded [s].
-        packet: the decoded packet.
-        fault: the fault injected on it (``"dropped"``, ``"corrupted"``, ``"delayed"``) or "".
-    """
-
-    time: float
-    packet: p.Packet
-    fault: str = ""
-
-    @property
-    def name(self) -> str:
-        return self.packet.name
-
-
-@dataclass(frozen=True)
-class Write:
-    """One value written to a servo register, decoded from the record.
-
-    Attributes:
-        time: emulator clock [s].
-        id: servo id (254 for a broadcast WRITE).
-        value: the value (two's complement decoded for signed registers).
-        instruction: which instruction carried it.
-        dropped: True if a fault dropped the packet before any servo saw it.
-    """
-
-    time: float
-    id: int
-    value: int
-    instruction: str
-    dropped: bool
 
 
 class BusEmulator:
@@ -286,12 +247,9 @@ class BusEmulator:
             listened = self.now()
 
     def _not_listening(self, late: float) -> None:
-        """The serve loop came back ``late`` [s] after its wait: the machine held this thread up
-        (a loaded machine, a swapping laptop, a process stopped as a whole). Real servos listen all
-        the time, so the Bus Watchdog does not count that time as the client's silence: a packet
-        sent during it reached them, only this thread read it late. (Should the client have been
-        silent too, the watchdog still stops the arm once the client's silence, counted without
-        that time, passes its period.)"""
+        """The serve loop came back ``late`` [s] after its wait: the machine held this thread up.
+        Real servos listen all the time, so the Bus Watchdog does not count that time as the
+        client's silence (a packet sent meanwhile reached them; only this thread read it late)."""
         if late > STALL:
             with self._lock:
                 self._heard += late
