@@ -2,8 +2,9 @@
 # The Binder test: jupyter-repo2docker builds the repository as mybinder.org does, on the
 # private Docker engine of docker/engine.sh, then the image is started with repo2docker's own
 # command (`jupyter notebook ... --NotebookApp.default_url=/lab`, as Binder starts it) and a
-# lesson is opened: the server lands on the lessons, lesson 00's kernel runs a cell, and
-# headless Chromium opens the lesson in JupyterLab and runs that cell from the page
+# lesson is opened: the server lands on the lessons and serves none of nbgrader's teacher tools,
+# lesson 00's kernel runs a cell, and headless Chromium opens the lesson in JupyterLab (no
+# teacher's tools in the page either) and runs that cell from the page
 # (screenshot in artifacts/).
 #
 #   binder/test.sh            (as root; tests/test_binder.py runs it within `make test`)

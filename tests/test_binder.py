@@ -43,5 +43,8 @@ def test_binder_image_builds_with_repo2docker_and_opens_a_lesson(capsys):
         assert "the 3D view's page answers through the Jupyter server" in out, out[-3000:]
         assert "the control panel's 3D view, through the Jupyter server, draws the arm" in out, out[-3000:]
     assert "in headless Chromium, /lab/tree/00_meet_the_arm.ipynb opened and its first cell ran from the page" in out
+    # a self-learner's lab: nbgrader's Validate, none of the teacher's tools, on the server and in the page
+    assert "the server serves no formgrader, course list or assignment list (404), and Validate" in out, out[-3000:]
+    assert "none of nbgrader's teacher tools in the page (no menu, no Create Assignment panel)" in out, out[-3000:]
     assert re.search(r"00_meet_the_arm\.ipynb's first code cell ran in its kernel .* it printed: <snakekit Viewer",
                      out), out[-3000:]
