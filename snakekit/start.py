@@ -5,8 +5,9 @@ what to install there (:func:`snakekit.host.missing`); then it starts JupyterLab
 lessons in ``notebooks/``:
 
 - nbgrader's Validate button on, its teacher tools (formgrader, create assignment, the
-  exchange's lists) off: their server extensions here, their UI by
-  ``tools/student-lab/labconfig/page_config.json``;
+  exchange's lists) off: their server extensions by
+  ``tools/student-server/jupyter_server_config.json``, their UI by
+  ``tools/student-lab/labconfig/page_config.json`` (the container and Binder read both too);
 - offline: no update check (and the news feed off, by ``tools/jupyterlab-overrides.json``,
   which tools/setup copies into the venv);
 - without rfc3987-syntax: jsonschema loads it, when installed, for an "iri" format check
@@ -32,6 +33,8 @@ from . import host
 #: the checkout the kit runs from (``make lab``): the lessons and the student lab's settings
 KIT = Path(__file__).resolve().parents[1]
 STUDENT_LAB_CONFIG = KIT / "tools" / "student-lab"
+#: the same lab's server settings (apart, so that a TA's JupyterLab can share the page's)
+STUDENT_SERVER_CONFIG = KIT / "tools" / "student-server"
 
 LAB_MAIN = ('import sys; sys.modules["rfc3987_syntax"] = None; '
             'from jupyterlab.labapp import main; sys.exit(main())')
@@ -40,11 +43,7 @@ LAB_MAIN = ('import sys; sys.modules["rfc3987_syntax"] = None; '
 def lab_arguments(notebooks: Path, *, ip: str, port: int) -> list[str]:
     """JupyterLab's command-line options for the student's lab on ``notebooks``."""
     return ["--no-browser", "--allow-root", f"--ip={ip}", f"--port={port}",
-            f"--ServerApp.root_dir={notebooks}", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
-            "--ServerApp.jpserver_extensions", "nbgrader.server_extensions.validate_assignment=True",
-            "--ServerApp.jpserver_extensions", "nbgrader.server_extensions.formgrader=False",
-            "--ServerApp.jpserver_extensions", "nbgrader.server_extensions.course_list=False",
-            "--ServerApp.jpserver_extensions", "nbgrader.server_extensions.assignment_list=False"]
+            f"--ServerApp.root_dir={notebooks}", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -71,9 +70,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
     if not args.notebooks.is_dir():
         needs.append(host.Need(f"the lessons' folder {args.notebooks} does not exist",
                                "run from the kit's folder (`make lab`), or give the folder with --notebooks DIR"))
-    if not STUDENT_LAB_CONFIG.is_dir():
-        needs.append(host.Need(f"the student lab's settings ({STUDENT_LAB_CONFIG}) are missing",
-                               "run from a checkout of the kit (`make lab`)"))
+    for settings in (STUDENT_LAB_CONFIG, STUDENT_SERVER_CONFIG):
+        if not settings.is_dir():
+            needs.append(host.Need(f"the student lab's settings ({settings}) are missing",
+                                   "run from a checkout of the kit (`make lab`)"))
     where = f"{host.describe()}, Python {sys.version.split()[0]}, MUJOCO_GL={gl or '(MuJoCo default)'}"
     if needs:
         print(f"snakekit start: this system ({where}) lacks what the lessons need:", file=sys.stderr)
@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
 
     print(f"snakekit: JupyterLab on the lessons in {args.notebooks} (the simulator is the default robot)", file=out)
     out.flush()
-    os.environ["JUPYTER_CONFIG_PATH"] = str(STUDENT_LAB_CONFIG)
+    os.environ["JUPYTER_CONFIG_PATH"] = os.pathsep.join(map(str, (STUDENT_LAB_CONFIG, STUDENT_SERVER_CONFIG)))
     command = [sys.executable, "-c", LAB_MAIN, *lab_arguments(args.notebooks, ip=args.ip, port=args.port)]
     if os.name == "posix":  # JupyterLab takes this process's place: Ctrl-C and SIGTERM reach it directly
         sys.stderr.flush()
