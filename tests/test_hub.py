@@ -33,7 +33,9 @@ def test_hub_week_of_a_class(capsys):
     assert "every student fetched their feedback page" in out
     for refusal in ("submitting as", "collecting or reading others' submissions", "another's feedback",
                     "the hub's tokens", "over the size limit", "a full exchange",
-                    "the saved file and the filled lesson are there"):
+                    "the saved file and the filled lesson are there",
+                    "nbgrader's teacher tools on a student's server (formgrader, course list: 404/404); "
+                    "the teacher's formgrader answers 200"):
         assert refusal in out, refusal
     # a student logged in on the hub's page reaches lesson 00 with the arm drawn, and it moves
     assert "browser: the hub's log-in page as s01, then /user/s01/lab lists the 8 lessons" in out, out[-3000:]

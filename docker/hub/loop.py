@@ -291,6 +291,14 @@ def main() -> int:
         fail(f"{a.name}'s container mounts {mounts}")
     say(f"refused: {b.name}'s files ({a.name}'s token at {b.name}'s server: {r.status_code}; "
         f"{a.name}'s container has only {a.name}'s volume, no course, no engine socket)")
+    tools = {path: a.server("GET", path, allow_redirects=False).status_code for path in ("formgrader", "formgraders")}
+    if set(tools.values()) != {404}:
+        fail(f"{a.name}'s server serves nbgrader's teacher tools: {tools}")
+    r = teacher.server("GET", "formgrader")  # its page: manage_assignments
+    if r.status_code != 200:
+        fail(f"the teacher's formgrader answered {r.status_code}")
+    say(f"refused: nbgrader's teacher tools on a student's server (formgrader, course list: "
+        f"{'/'.join(map(str, tools.values()))}); the teacher's formgrader answers {r.status_code}")
     env = a.sh("env").stdout
     if any(k in env for k in ("CONFIGPROXY_AUTH_TOKEN", "JPY_COOKIE_SECRET", "JUPYTERHUB_CRYPT_KEY")):
         fail("a hub secret is in a student's environment")
