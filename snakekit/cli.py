@@ -71,6 +71,7 @@ def _save_run(run, path: Path, out) -> bool:
 
 def _sweep(args, out) -> int:
     from .collision import check_path
+    from .profile_planner import ReferencePath
     from .robot import make_robot
     from .trajectory import side_sweep
 
@@ -95,7 +96,8 @@ def _sweep(args, out) -> int:
             return 2
         options["port"] = port
     trajectory = side_sweep()
-    check_path(trajectory.times, trajectory.positions)  # before a robot is even made (every run checks again)
+    check_path(trajectory.times, trajectory.positions,  # before a robot is made (every run checks again)
+               path=ReferencePath.from_rest(trajectory.times, trajectory.positions))
     print(f"Task 2: {len(trajectory)} goals at 10 Hz, 50 side-to-side sweeps, on the {args.backend} backend"
           + (" in real time" if args.realtime or args.backend != "sim" else ""), file=out, flush=True)
     wall0 = time.perf_counter()

@@ -155,43 +155,84 @@ def collision_free(qs, *, spec: SnakeSpec = SPEC) -> np.ndarray:
     return np.array([c.closest(q)[1] >= spec.collision_margin for q in qs], dtype=bool)
 
 
+class StraightPath:
+    """The straight path in joint space through ``positions`` (N, n_joints) [rad] at ``times``
+    (N,) [s]: what a check follows when the servos' profile is not known (a lesson's goals,
+    a trajectory checked before a robot is made). It has what a :class:`snakekit.profile_planner.ReferencePath`
+    has: ``checkpoints``, ``positions(t)``, ``variation(t)``."""
+
+    def __init__(self, times, positions):
+        self._times = np.asarray(times, dtype=float)
+        self._positions = np.asarray(positions, dtype=float).reshape(len(self._times), -1)
+        self._travel = np.vstack([np.zeros((1, self._positions.shape[1])),
+                                  np.cumsum(np.abs(np.diff(self._positions, axis=0)), axis=0)])
+        self.checkpoints = self._times
+        self.start, self.end = float(self._times[0]), float(self._times[-1])
+
+    def _interp(self, values, times):
+        times = np.asarray(times, dtype=float)
+        if len(self._times) == 1:
+            return np.repeat(values[:1], len(times), axis=0)
+        return np.column_stack([np.interp(times, self._times, v) for v in values.T])
+
+    def positions(self, times) -> np.ndarray:
+        return self._interp(self._positions, times)
+
+    def variation(self, times) -> np.ndarray:
+        return self._interp(self._travel, times)
+
+
 def first_collision(times, positions, *, spec: SnakeSpec = SPEC) -> Clearance | None:
     """The first pose, in time, on the straight path through ``positions`` (N, n_joints)
     [rad] at ``times`` (N,) [s] that brings two non-neighbouring links closer than
     ``spec.collision_margin``; None when the whole path keeps them apart.
 
     Between goals the time is interpolated linearly. See the module doc for how the path
-    between goals is covered.
+    between goals is covered; :func:`first_collision_on` checks any other path (the one the
+    servos' profile makes).
+    """
+    return first_collision_on(StraightPath(times, positions), spec=spec)
+
+
+def first_collision_on(path, *, spec: SnakeSpec = SPEC) -> Clearance | None:
+    """The first pose, in time, on ``path`` (a :class:`StraightPath` or the servos'
+    :class:`snakekit.profile_planner.ReferencePath`) that brings two non-neighbouring links
+    closer than ``spec.collision_margin``; None when the whole path keeps them apart.
+
+    The path is looked at its checkpoints (its goals), and each stretch between two is proven
+    safe by the bound of the module doc, with the joints' travel along the path (back and
+    forth counted alike) in place of their change, or split in time until it is.
     """
     c = _checker(spec)
     margin = spec.collision_margin
-    positions = np.asarray(positions, dtype=float)
-    times = np.asarray(times, dtype=float)
+    times = path.checkpoints
+    positions, travel = path.positions(times), path.variation(times)
     D = np.array([c.distances(q) for q in positions])
-    L = np.abs(np.diff(positions, axis=0)) @ c.radii.T
+    L = np.diff(travel, axis=0) @ c.radii.T
     bad = D.min(axis=1) < margin
-    unproven = np.append(((D[:-1] + D[1:] - L) < 2 * margin).any(axis=1), False)  # segment k: goals k, k+1
+    unproven = np.append(((D[:-1] + D[1:] - L) < 2 * margin).any(axis=1), False)  # stretch k: checkpoints k, k+1
     for k in np.flatnonzero(bad | unproven).tolist():  # in time order
         if bad[k]:
             return _at(c, D[k], positions[k], times[k])
-        hit = _split(c, positions[k], positions[k + 1], D[k], D[k + 1], times[k], times[k + 1], margin)
+        hit = _split(c, path, (times[k], D[k], travel[k]), (times[k + 1], D[k + 1], travel[k + 1]), margin)
         if hit is not None:
             return hit
     return None
 
 
 def worst_between(q0, q1, t0: float = 0.0, t1: float = 1.0, *, samples: int = 200,
-                  spec: SnakeSpec = SPEC) -> Clearance:
-    """The closest approach of two non-neighbouring links on the straight path q0 -> q1 [rad],
-    among ``samples`` evenly spaced poses (ends included); times from ``t0`` to ``t1`` [s]."""
+                  spec: SnakeSpec = SPEC, path=None) -> Clearance:
+    """The closest approach of two non-neighbouring links between ``t0`` and ``t1`` [s], among
+    ``samples`` evenly spaced times (ends included): on ``path`` when given, else on the
+    straight path q0 -> q1 [rad]."""
     c = _checker(spec)
-    q0, q1 = as_configuration(q0, spec), as_configuration(q1, spec)
+    if path is None:
+        path = StraightPath([t0, t1], [as_configuration(q0, spec), as_configuration(q1, spec)])
     best = None
-    for s in np.linspace(0.0, 1.0, samples):
-        q = q0 + s * (q1 - q0)
+    for t, q in zip(np.linspace(t0, t1, samples), path.positions(np.linspace(t0, t1, samples))):
         k, d = c.closest(q)
         if best is None or d < best.distance:
-            best = Clearance(d, c.pair_names[k], q, t0 + s * (t1 - t0))
+            best = Clearance(d, c.pair_names[k], q, float(t))
     return best
 
 
@@ -200,56 +241,83 @@ def _at(c: _Checker, d: np.ndarray, q: np.ndarray, t: float) -> Clearance:
     return Clearance(float(d[k]), c.pair_names[k], q, float(t))
 
 
-def _split(c: _Checker, q0, q1, d0, d1, t0, t1, margin) -> Clearance | None:
-    """The first pose closer than ``margin`` on the straight segment q0 -> q1 (whose ends are
-    not), or None: bisects, earlier half first, until the bound proves each piece safe."""
-    L = c.radii @ np.abs(q1 - q0)
+def _split(c: _Checker, path, a, b, margin) -> Clearance | None:
+    """The first pose closer than ``margin`` on ``path`` between the times of ``a`` and ``b``
+    (each ``(time, distances, travel)``; neither too close), or None: bisects in time, earlier
+    half first, until the bound proves each piece safe."""
+    (t0, d0, v0), (t1, d1, v1) = a, b
+    L = c.radii @ (v1 - v0)
     bound = (d0 + d1 - L) / 2
     if (bound >= margin).all():
         return None
-    if L.max() < RESOLUTION:  # too short to split: refuse on the bound, the safe side
+    if L.max() < RESOLUTION or t1 - t0 < 1e-9:  # too short to split: refuse on the bound, the safe side
         k = int(bound.argmin())
-        return Clearance(float(bound[k]), c.pair_names[k], (q0 + q1) / 2, (t0 + t1) / 2)
-    qm, tm = (q0 + q1) / 2, (t0 + t1) / 2
+        tm = (t0 + t1) / 2
+        return Clearance(float(bound[k]), c.pair_names[k], path.positions([tm])[0], tm)
+    tm = (t0 + t1) / 2
+    qm, vm = path.positions([tm])[0], path.variation([tm])[0]
     dm = np.array(c.distances(qm))
-    hit = _split(c, q0, qm, d0, dm, t0, tm, margin)
+    hit = _split(c, path, a, (tm, dm, vm), margin)
     if hit is not None:
         return hit
     if dm.min() < margin:
         return _at(c, dm, qm, tm)
-    return _split(c, qm, q1, dm, d1, tm, t1, margin)
+    return _split(c, path, (tm, dm, vm), b, margin)
 
 
-def check_path(times, positions, *, what: str = "trajectory", spec: SnakeSpec = SPEC) -> None:
-    """Raise :class:`~snakekit.errors.CollisionError` if the straight path through
+def check_path(times, positions, *, what: str = "trajectory", spec: SnakeSpec = SPEC, path=None) -> None:
+    """Raise :class:`~snakekit.errors.CollisionError` if the path through the goals
     ``positions`` (N, n_joints) [rad] at ``times`` (N,) [s] brings two non-neighbouring links
-    closer than ``spec.collision_margin`` (:func:`first_collision`).
+    closer than ``spec.collision_margin`` (:func:`first_collision_on`).
 
-    The message names when (the time, or for ``what="command"``, with times ``[0, 1]``, how
-    far along the move from the last goal), the two links, and the closest they come on that
-    stretch. For a command whose start is already too close (a robot started folded), only
-    the goal is judged, so the arm can move out.
+    Args:
+        path: the path the arm takes through those goals, in the same time, when it is known:
+            the servos' :class:`~snakekit.profile_planner.ReferencePath` (each joint on its own
+            profile; what every robot checks). Default: the straight path in joint space.
+
+    The message names when (the time; for ``what="command"``, from when the goal is sent, or
+    with times ``[0, 1]`` and no ``path``, how far along the move from the last goal), the two
+    links, and the closest they come on that stretch. For a command whose start is already too
+    close (a robot started folded), only the goal is judged, so the arm can move out.
     """
     times, positions = np.asarray(times, dtype=float), np.asarray(positions, dtype=float)
-    hit = first_collision(times, positions, spec=spec)
-    if hit is not None and what == "command" and hit.time == 0.0:
-        hit = first_collision(times[1:], positions[1:], spec=spec)
+    straight = StraightPath(times, positions)
+    profiled, path = path is not None, straight if path is None else path
+    hit = first_collision_on(path, spec=spec)
+    if hit is not None and what == "command" and hit.time == path.start:
+        hit = first_collision(times[-1:], positions[-1:], spec=spec)  # only the goal
+        if hit is not None:
+            hit = Clearance(hit.distance, hit.links, hit.q, path.end)
     if hit is None:
         return
     margin = spec.collision_margin
-    k = min(int(np.searchsorted(times, hit.time, side="right")), len(times) - 1)  # the goal after the hit
-    worst = worst_between(positions[max(k - 1, 0)], positions[k], times[max(k - 1, 0)], times[k], spec=spec)
-    if what == "command":
-        where = ("at the goal" if hit.time == 1.0 else
-                 f"{100 * hit.time:.0f} % of the way from the last goal, on the straight path")
+    cps = path.checkpoints
+    k = min(max(int(np.searchsorted(cps, hit.time, side="right")), 1), len(cps) - 1)  # the checkpoint after the hit
+    worst = worst_between(None, None, cps[k - 1], cps[k], spec=spec, path=path)
+    at_goal = hit.time == path.end
+    if what == "command" and not profiled:
+        where = "at the goal" if at_goal else f"{100 * hit.time:.0f} % of the way from the last goal, on the straight path"
         deepest = "at the goal" if worst.time == 1.0 else f"{100 * worst.time:.0f} % of the way"
         when = None
+    elif what == "command":
+        where = ("at the goal" if at_goal else f"{hit.time - times[0]:.2f} s after the goal is sent, on the way the "
+                 "servos take (each joint at its profile's speed: one with less to travel arrives first)")
+        deepest = "at the goal" if worst.time == path.end else f"{worst.time - times[0]:.2f} s after it is sent"
+        when = hit.time - times[0]
     else:
         where, when = f"at t = {hit.time:.3f} s", hit.time
+        if profiled:
+            where += " on the way the servos take between the goals (each joint at its profile's speed)"
         deepest = f"at t = {worst.time:.3f} s"
+    advice = ("Choose goals that keep the links apart (snakekit.clearance(q) says how far apart they are), "
+              "or go around through a more open pose.")
+    if profiled and not at_goal and first_collision_on(straight, spec=spec) is None:
+        advice = ("The straight path between the goals is clear: " + (
+            "robot.move_to(q) keeps the joints together along it." if what == "command" else
+            "send goals closer together in time (snakekit.joint_trajectory samples a move at 100 Hz) so "
+            "the joints keep together along it.") + " " + advice)
     raise CollisionError(
         f"the {what} would fold the arm onto itself: {where}, {hit.links[0]} and {hit.links[1]} come "
         f"closer than the {1000 * margin:.0f} mm margin, and {deepest} {worst.describe()} "
-        f"(q = {np.round(worst.q, 3).tolist()} rad). Nothing was sent. Choose goals that keep the links "
-        "apart (snakekit.clearance(q) says how far apart they are), or go around through a more open pose.",
+        f"(q = {np.round(worst.q, 3).tolist()} rad). Nothing was sent. " + advice,
         when, hit.links, hit.distance, hit.q, margin)

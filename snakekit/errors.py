@@ -161,7 +161,8 @@ class CollisionError(LimitError):
     than the spec's collision margin (the arm folding onto itself); nothing was sent.
 
     Attributes:
-        time: when on the path [s] (None for a single goal).
+        time: when on the path [s]: a trajectory's time; for a command, from when it is sent
+            (None for a command judged on the straight path from the last goal).
         links: the two bodies (``"base_link"``, ``"link1"``...).
         distance: their distance there [m] (negative: they would overlap by that much).
         q: the joint angles there [rad].

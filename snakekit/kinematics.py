@@ -169,44 +169,58 @@ def _residual(k: _Kin, target: np.ndarray, use_heading: bool, q: np.ndarray) -> 
 
 
 def _closest(k: _Kin, target: np.ndarray, use_heading: bool, starts, *, max_iter: int = 40) -> np.ndarray:
-    """The configuration, inside the limits, whose tool comes closest to an unreachable target.
+    """The configuration, inside the limits and with the links apart, whose tool comes closest
+    to an unreachable target.
 
     Projected Levenberg-Marquardt from each start: a step is kept only if it brings the tool
     closer, so every run descends to a local minimum of the distance, even with joints
     pressed against their limits. The best of the runs that end with the links apart is
-    returned (a folded one only if every run ends folded).
+    returned. If every run ends folded (a target inside the arm's own body), the runs are
+    made again from the starts that are not folded, keeping only steps that leave the links
+    apart, so the answer is never a folded pose.
     """
+    best_q, best_f = None, np.inf
+    for safe in (False, True):
+        for q in starts:
+            q = np.clip(np.asarray(q, dtype=float), k.spec.lower, k.spec.upper)
+            if safe and collides(q, spec=k.spec):
+                continue
+            q, f = _descend(k, target, use_heading, q, max_iter, safe)
+            if f < best_f and (safe or not collides(q, spec=k.spec)):
+                best_q, best_f = q, f
+        if best_q is not None:
+            return best_q
+    raise AssertionError("the stretched arm is always a start with the links apart")
+
+
+def _descend(k: _Kin, target: np.ndarray, use_heading: bool, q: np.ndarray, max_iter: int,
+             safe: bool) -> tuple[np.ndarray, float]:
+    """One run of :func:`_closest` from ``q``: the configuration it ends at and its squared
+    distance; with ``safe``, a step that folds the arm is refused like one that goes farther."""
     lo, hi = k.spec.lower, k.spec.upper
     rows = _PLANAR_ROWS if use_heading else _PLANAR_ROWS[:2]
     scale = np.array([1.0, 1.0, k.spec.link_length])[: len(rows)]
     eye = np.eye(len(rows))
-    best_q, best_f, folded = None, np.inf, None
-    for q in starts:
-        q = np.clip(np.asarray(q, dtype=float), lo, hi)
-        e = _residual(k, target, use_heading, q)
-        f, lam = e @ e, 1e-2
-        for _ in range(max_iter):
-            J = pin.computeFrameJacobian(k.model, k.data, q, k.tool, pin.LOCAL_WORLD_ALIGNED)[rows]
-            J *= scale[:, None]
-            while lam < 1e6:
-                qn = np.clip(q + J.T @ np.linalg.solve(J @ J.T + lam * eye, e), lo, hi)
-                en = _residual(k, target, use_heading, qn)
-                fn = en @ en
-                if fn < f:
-                    lam = max(lam / 3, 1e-9)
-                    break
-                lam *= 4
-            else:
-                break  # no step brings the tool closer: a local minimum
-            done = f - fn < 1e-9
-            q, e, f = qn, en, fn
-            if done:
+    e = _residual(k, target, use_heading, q)
+    f, lam = e @ e, 1e-2
+    for _ in range(max_iter):
+        J = pin.computeFrameJacobian(k.model, k.data, q, k.tool, pin.LOCAL_WORLD_ALIGNED)[rows]
+        J *= scale[:, None]
+        while lam < 1e6:
+            qn = np.clip(q + J.T @ np.linalg.solve(J @ J.T + lam * eye, e), lo, hi)
+            en = _residual(k, target, use_heading, qn)
+            fn = en @ en
+            if fn < f and not (safe and collides(qn, spec=k.spec)):
+                lam = max(lam / 3, 1e-9)
                 break
-        if not collides(q, spec=k.spec) and f < best_f:
-            best_q, best_f = q, f
-        elif best_q is None:
-            folded = q
-    return folded if best_q is None else best_q
+            lam *= 4
+        else:
+            break  # no step brings the tool closer: a local minimum
+        done = f - fn < 1e-9
+        q, e, f = qn, en, fn
+        if done:
+            break
+    return q, f
 
 
 def _closest_configuration(k: _Kin, target: np.ndarray, use_heading: bool, starts, rng) -> np.ndarray:
@@ -342,13 +356,16 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
     what = f"({_fmt(target_xy[0])}, {_fmt(target_xy[1])}) m" + (
         f" with heading {heading:.4f} rad" if use_heading else "")
     if folded is not None:
+        safe_q = _closest_configuration(k, target, use_heading, [best_q], rng)  # never a folded pose
+        closest = tool_pose_2d(safe_q, spec=spec)
         raise UnreachableTargetError(
             f"target {what} is reached only with the arm folded onto itself: in the solutions found "
             f"from {len(starts)} starts, {folded.describe()} (they must stay "
-            f"{1000 * spec.collision_margin:.0f} mm apart). Pick a target the arm reaches more openly, "
+            f"{1000 * spec.collision_margin:.0f} mm apart). The closest tool point found with the links apart "
+            f"is ({closest[0]:.4f}, {closest[1]:.4f}) m. Pick a target the arm reaches more openly, "
             "or try another q0 or more restarts.",
             target=(*target_xy.tolist(), *([heading] if use_heading else [])),
-            closest=tuple(target_xy.tolist()), q_closest=folded.q)
+            closest=tuple(closest[:2]), q_closest=safe_q)
     best_q = _closest_configuration(k, target, use_heading, [best_q], rng)
     closest = tool_pose_2d(best_q, spec=spec)
     why = (f"it is {_fmt(dist)} m from joint 1 and the arm reaches {spec.reach:.4f} m"

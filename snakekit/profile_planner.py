@@ -247,36 +247,27 @@ class ProfilePlanner:
     def moving(self, t: float) -> bool:
         return any(p.end_time > t for p in self.profiles)
 
-    def step_velocities(self, first: int, dt: float, goal_steps, goals) -> np.ndarray:
+    def step_velocities(self, first: int, dt: float, goal_steps, goals, *, path=None) -> np.ndarray:
         """Apply ``goals`` at their ``goal_steps`` and return the reference's mean velocity of
         every step [rad/s] from step ``first`` until every joint is at rest again.
 
         Row i moves the reference from step ``first + i`` to ``first + i + 1``; the simulator
         feeds it to MuJoCo as the actuator's control. Steps are of ``dt`` [s]; goal steps
         must not decrease. With no profile (velocity 0) a goal's jump happens in one step.
+        ``path``: a :meth:`ReferencePath.of_goals` of this planner for the same goals at the
+        same times (the collision check's), whose planning is then used instead of done again.
         """
         n = len(self.profiles)
         goal_steps = np.asarray(goal_steps, dtype=int)
-        profiles, plans = self.profiles, [list(p.segments) for p in self.profiles]
-        vmax = [int(x) * VELOCITY_UNIT for x in self.profile_velocity]
-        amax = [int(x) * ACCELERATION_UNIT for x in self.profile_acceleration]
         step_list = goal_steps.tolist()
-        goal_rows = np.asarray(goals, dtype=float).reshape(len(step_list), n).tolist()
-        before = [None] * len(step_list)  # the reference at each goal step, before it
-        for g, step in enumerate(step_list):
-            t = step * dt
-            same = g > 0 and step == step_list[g - 1]
-            row = before[g - 1] if same else [0.0] * n
-            for j in range(n):  # what set_goal does, with the reference read once
-                p, v = profiles[j].at(t)
-                if not same:
-                    row[j] = p
-                prof = profiles[j] = JointProfile(t, p, v, goal_rows[g][j], vmax[j], amax[j])
-                plan = plans[j]
-                while plan and plan[-1].t0 >= t:  # the old plan's future is replaced
-                    plan.pop()
-                plan.extend(prof.segments)
-            before[g] = row
+        goals = np.asarray(goals, dtype=float).reshape(len(step_list), n)
+        after = getattr(path, "_after", None)
+        if (after is not None and after[0] is self and np.array_equal(after[1], goal_steps * dt)
+                and np.array_equal(after[2], goals)):
+            self.profiles, plans, before = list(after[3]), [list(p) for p in after[4]], after[5]
+        else:
+            plans = [list(p.segments) for p in self.profiles]
+            before = _apply_goals(self, plans, [s * dt for s in step_list], goals.tolist())
         before = np.array(before, dtype=float).reshape(len(step_list), n)
         end = max(p.end_time for p in self.profiles)
         last = max(int(np.ceil(end / dt - 1e-9)), int(goal_steps[-1]) + 1 if len(goal_steps) else first + 1)
@@ -284,10 +275,132 @@ class ProfilePlanner:
         pos = np.empty((len(steps), n))
         t = steps * dt
         for j, plan in enumerate(plans):
-            table = np.array(plan)  # rows t0, p0, v0, a
-            i = np.maximum(np.searchsorted(table[:, 0], t, side="right") - 1, 0)
-            dtj = np.maximum(t - table[i, 0], 0.0)
-            pos[:, j] = table[i, 1] + table[i, 2] * dtj + 0.5 * table[i, 3] * dtj * dtj
+            pos[:, j] = _evaluate(np.array(plan), t)  # rows t0, p0, v0, a
         inside = (goal_steps >= first) & (goal_steps <= last)
         pos[goal_steps[inside] - first] = before[inside]
         return np.diff(pos, axis=0) / dt
+
+
+def _apply_goals(planner: ProfilePlanner, plans: list[list[Segment]], times: list[float],
+                 goal_rows: list[list[float]]) -> list[list[float]]:
+    """Send ``goal_rows`` at ``times`` [s] (not decreasing) to ``planner``, as :meth:`ProfilePlanner.set_goal`
+    does, and extend each joint's segment list in ``plans`` with what follows (the old plan's
+    future replaced). Returns the reference positions at each goal time, before the goal."""
+    n = len(planner.profiles)
+    profiles = planner.profiles
+    vmax = [int(x) * VELOCITY_UNIT for x in planner.profile_velocity]
+    amax = [int(x) * ACCELERATION_UNIT for x in planner.profile_acceleration]
+    before: list = [None] * len(times)
+    for g, t in enumerate(times):
+        same = g > 0 and t == times[g - 1]
+        row = before[g - 1] if same else [0.0] * n
+        for j in range(n):  # what set_goal does, with the reference read once
+            p, v = profiles[j].at(t)
+            if not same:
+                row[j] = p
+            prof = profiles[j] = JointProfile(t, p, v, goal_rows[g][j], vmax[j], amax[j])
+            plan = plans[j]
+            while plan and plan[-1].t0 >= t:
+                plan.pop()
+            plan.extend(prof.segments)
+        before[g] = row
+    return before
+
+
+class ReferencePath:
+    """The path the servos' references take when goals are sent at given times.
+
+    Each joint follows its own profile (:class:`JointProfile`): a joint with less to travel
+    arrives first, and a goal sent while moving is re-planned from the present velocity, so
+    the arm does not keep to the straight line between goals in joint space. This is what the
+    self-collision check follows (:func:`snakekit.collision.check_path`).
+
+    Besides positions it gives each joint's *variation*: the distance it has travelled since
+    the start, back and forth counted alike, so that ``variation(t1) - variation(t0)`` bounds
+    how far a joint moved between two times, whatever it did in between.
+
+    >>> path = ReferencePath.of_goals(ProfilePlanner([0.0] * 5), [0.0], [[1.0, 0.1, 0, 0, 0]])
+    >>> q = path.positions([0.2])[0]           # joint 2 (0.1 rad) has arrived, joint 1 has not
+    >>> round(float(q[0]), 3), round(float(q[1]), 3), round(path.end, 3)
+    (0.241, 0.1, 0.793)
+    """
+
+    def __init__(self, plans: list[list[Segment]], checkpoints):
+        self._tables = [np.array(p, dtype=float).reshape(-1, 4) for p in plans]
+        self._turns = [_turning_points(t) for t in self._tables]
+        #: the times [s] a check looks at first: the start, each goal, the end
+        self.checkpoints = np.unique(np.asarray(checkpoints, dtype=float))
+        self.start = float(self.checkpoints[0])
+        #: when every joint is at rest again [s]
+        self.end = float(self.checkpoints[-1])
+
+    @classmethod
+    def of_goals(cls, planner: ProfilePlanner, times, goals) -> ReferencePath:
+        """The reference of ``planner`` (left untouched) from ``times[0]`` on, when the goals
+        ``goals`` (N, n) [rad] are sent at ``times`` (N,) [s], not decreasing."""
+        times = np.asarray(times, dtype=float).reshape(-1)
+        goals = np.asarray(goals, dtype=float).reshape(len(times), len(planner.profiles))
+        shadow = ProfilePlanner.__new__(ProfilePlanner)
+        shadow.profile_velocity, shadow.profile_acceleration = planner.profile_velocity, planner.profile_acceleration
+        shadow.profiles = list(planner.profiles)
+        plans = [list(p.segments) for p in shadow.profiles]
+        before = _apply_goals(shadow, plans, times.tolist(), goals.tolist())
+        end = max([times[-1]] + [p.end_time for p in shadow.profiles])
+        path = cls(plans, np.append(times, end))
+        # what ProfilePlanner.step_velocities needs to follow the same goals without planning again
+        path._after = (planner, times, goals, shadow.profiles, plans, before)
+        return path
+
+    @classmethod
+    def from_rest(cls, times, goals, profile_velocity=DEFAULT_PROFILE_VELOCITY,
+                  profile_acceleration=DEFAULT_PROFILE_ACCELERATION) -> ReferencePath:
+        """The way servos at rest on the first goal take through ``goals`` (N, n) [rad] sent at
+        ``times`` (N,) [s]: a trajectory's path on an arm with this profile (the kit's by default)."""
+        goals = np.asarray(goals, dtype=float)
+        return cls.of_goals(ProfilePlanner(goals[0], profile_velocity, profile_acceleration, float(times[0])),
+                            times, goals)
+
+    def positions(self, times) -> np.ndarray:
+        """Reference positions (len(times), n) [rad]."""
+        times = np.asarray(times, dtype=float)
+        return np.column_stack([_evaluate(tab, times) for tab in self._tables])
+
+    def variation(self, times) -> np.ndarray:
+        """How far each joint has travelled since the path's first segment (len(times), n) [rad]."""
+        times = np.asarray(times, dtype=float)
+        out = np.empty((len(times), len(self._tables)))
+        for j, (tab, (crit, at_crit, total)) in enumerate(zip(self._tables, self._turns)):
+            k = np.maximum(np.searchsorted(crit, times, side="right") - 1, 0)
+            out[:, j] = total[k] + np.abs(_evaluate(tab, times) - at_crit[k])
+        return out
+
+    def shifted(self, dt: float) -> ReferencePath:
+        """The same path with every time moved by ``dt`` [s]."""
+        out = ReferencePath.__new__(ReferencePath)
+        out._tables = [t + np.array([dt, 0.0, 0.0, 0.0]) for t in self._tables]
+        out._turns = [(c + dt, a, v) for c, a, v in self._turns]
+        out.checkpoints, out.start, out.end = self.checkpoints + dt, self.start + dt, self.end + dt
+        return out
+
+
+def _evaluate(table: np.ndarray, times: np.ndarray, *, left: bool = False) -> np.ndarray:
+    """Positions of one joint's segments (rows t0, p0, v0, a) at ``times``; with ``left``, the
+    limit from before each time (where a step jumps, the position before the jump)."""
+    i = np.maximum(np.searchsorted(table[:, 0], times, side="left" if left else "right") - 1, 0)
+    dt = np.maximum(times - table[i, 0], 0.0)
+    return table[i, 1] + table[i, 2] * dt + 0.5 * table[i, 3] * dt * dt
+
+
+def _turning_points(table: np.ndarray):
+    """The times where one joint's motion may change direction (each segment's start, and
+    where its velocity crosses zero inside it), the positions there, and the distance
+    travelled up to each: between two of them the joint moves one way only."""
+    t0, _, v0, a = table.T
+    ends = np.append(t0[1:], np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        turn = np.where(a != 0, t0 - v0 / a, np.nan)
+    inside = (turn > t0) & (turn < ends)
+    crit = np.unique(np.concatenate([t0, turn[inside]]))
+    right, left = _evaluate(table, crit), _evaluate(table, crit, left=True)
+    steps = np.abs(left[1:] - right[:-1]) + np.abs(right[1:] - left[1:])  # the way there, then any jump
+    return crit, right, np.concatenate([[0.0], np.cumsum(steps)])

@@ -192,6 +192,7 @@ class Robot(ABC):
     #: and the run ends later (:attr:`late_shifts` counts these).
     late_goal = 0.03
     late_shifts = 0
+    _checked = None  # the servos' way of the goals last checked (snakekit.profile_planner.ReferencePath)
     #: The longest trajectory :meth:`run` accepts [s]; longer is refused as probably given in
     #: milliseconds. Raise it on a robot to run a longer one on purpose.
     max_duration = MAX_DURATION
@@ -239,8 +240,8 @@ class Robot(ABC):
 
         Raises:
             LimitError: ``q`` is outside the joint limits.
-            CollisionError: the straight path from the last goal sent (or, before the first,
-                from the present position) to ``q`` brings two links that are not
+            CollisionError: the way the servos take from where they are now to ``q`` (each
+                joint on its own profile, :meth:`_profiles`) brings two links that are not
                 neighbours closer than ``spec.collision_margin``. Nothing is sent.
         """
         self._check_open()
@@ -250,11 +251,36 @@ class Robot(ABC):
         self._send(q)
         self.last_goal = q
 
-    def _check_path(self, times: np.ndarray, positions: np.ndarray, what: str) -> None:
-        """Refuse a path that folds the arm onto itself (:func:`snakekit.collision.check_path`)."""
-        from .collision import check_path  # Pinocchio only when a goal is checked: runs load without it
+    def _profiles(self):
+        """The servos' profile generator as it stands now, with its clock at :meth:`_now`
+        (a :class:`snakekit.profile_planner.ProfilePlanner`, left untouched by the checks), or
+        None for a backend that has none: its paths are checked as straight lines."""
+        return None
 
-        check_path(times, positions, what=what, spec=self.spec)
+    def _goal_times(self, times: np.ndarray) -> np.ndarray:
+        """When goals due ``times`` [s] from now reach the servos, on the robot clock [s]."""
+        return self._now() + times
+
+    def _check_path(self, times: np.ndarray, positions: np.ndarray, what: str) -> None:
+        """Refuse goals whose path folds the arm onto itself (:func:`snakekit.collision.check_path`):
+        the path the servos' profiles make of them, sent from now on, when the backend has
+        profiles; for a command (``times`` ``[0, 1]``: from the last goal to the new one) only
+        the new goal is sent."""
+        from .collision import check_path  # Pinocchio only when a goal is checked: runs load without it
+        from .profile_planner import ReferencePath
+
+        planner = self._profiles()
+        if planner is None:
+            return check_path(times, positions, what=what, spec=self.spec)
+        now = self._now()
+        if what == "command":
+            times, positions = times[1:] - times[1], positions[1:]
+        sent = self._goal_times(times - times[0])
+        self._checked = ReferencePath.of_goals(planner, sent, positions)  # a backend may reuse its planning
+        path = self._checked.shifted(times[0] - now)
+        if what == "command":  # judged from where the servos are now, not from the last goal
+            times, positions = np.array([0.0, path.end]), np.array([path.positions([0.0])[0], positions[-1]])
+        check_path(times, positions, what=what, spec=self.spec, path=path)
 
     def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5,
             progress: bool | None = None) -> Run:

@@ -99,6 +99,12 @@ class SimRobot(Robot):
         d = self.data
         return self._now(), d.qpos, d.qvel, d.actuator_force
 
+    def _profiles(self) -> ProfilePlanner:
+        return self.planner
+
+    def _goal_times(self, times: np.ndarray) -> np.ndarray:
+        return (self._steps + np.ceil(times / self.dt - 1e-6)) * self.dt  # on the step a run sends them
+
     def _send(self, q: np.ndarray) -> None:
         self._ref = (self._steps, self.planner.step_velocities(self._steps, self.dt, [self._steps], [q]))
 
@@ -150,7 +156,8 @@ class SimRobot(Robot):
         rec_steps = np.ceil(record_at / dt - 1e-6).astype(int)
         before = copy.deepcopy(self.planner) if self.realtime else None  # to replay, if interrupted
         # The controls of the whole run, in one pass (and what follows, for later steps).
-        ctrl = self.planner.step_velocities(k0, dt, k0 + goal_steps, trajectory.positions)
+        ctrl = self.planner.step_velocities(k0, dt, k0 + goal_steps, trajectory.positions,
+                                            path=self._checked)  # planned by the check
         if self.realtime:
             rec = self._step_paced(k0, ctrl, goal_steps, rec_steps, record_at, trajectory, before, progress)
         else:

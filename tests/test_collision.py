@@ -115,7 +115,8 @@ def test_sim_refuses_a_folding_command_and_sends_nothing():
         msg = str(e.value)
         assert "the command would fold the arm onto itself" in msg
         assert "base_link and link4 come closer than the 5 mm margin" in msg
-        assert "% of the way from the last goal" in msg and "Nothing was sent" in msg
+        assert "s after the goal is sent, on the way the servos take" in msg and "Nothing was sent" in msg
+        assert 0 < e.value.time and f"{e.value.time:.2f} s after the goal is sent" in msg
         assert e.value.links == ("base_link", "link4") and e.value.distance < SPEC.collision_margin
         robot.step(1.0)
         assert np.abs(robot.read().positions).max() < 1e-3 and robot.last_goal is None
@@ -127,8 +128,10 @@ def test_sim_refuses_a_trajectory_whose_path_folds_and_names_time_links_distance
         with pytest.raises(CollisionError) as e:
             robot.run(tr)
         err = e.value
-        assert 0 < err.time < 2.0 and err.links == ("base_link", "link5")
-        assert f"at t = {err.time:.3f} s, base_link and link5 come closer than the 5 mm margin" in str(err)
+        # the second goal is sent at t = 2 s; the servos swing joint 5 over the base after it
+        assert 2.0 < err.time < 4.0 and err.links == ("base_link", "link5")
+        assert (f"at t = {err.time:.3f} s on the way the servos take between the goals (each joint at its "
+                "profile's speed), base_link and link5 come closer than the 5 mm margin") in str(err)
         assert robot.read().positions == pytest.approx(SAFE_A, abs=1e-3)
         # the same goal as a command: its path from the last goal (the start) is refused too
         with pytest.raises(CollisionError, match="base_link and link5"):
@@ -158,8 +161,8 @@ def test_emulator_refuses_a_fold_with_nothing_on_the_bus():
         assert robot.goals_sent == 0
         robot.move_to([0.0, 0.5, 1.5, 1.5, -0.9], duration=0.5)  # the driver's run: its last goal is remembered
         assert robot.last_goal == pytest.approx([0.0, 0.5, 1.5, 1.5, -0.9])
-        with pytest.raises(CollisionError, match="from the last goal"):
-            robot.command(SAFE_B)  # safe itself, but the straight path from the last goal swings over the base
+        with pytest.raises(CollisionError, match="s after the goal is sent, on the way the servos take"):
+            robot.command(SAFE_B)  # safe itself, but the way there from the last goal swings over the base
         before = len(bus.writes(GOAL_POSITION, 4))
         robot.command(SAFE_A)  # a safe goal still goes through (the bus thread records it soon after)
         deadline = time.monotonic() + 2.0

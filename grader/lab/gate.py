@@ -3,7 +3,7 @@ code, before the arm moves. The hand-in is arrays only (read with ``allow_pickle
 
 In order: the arrays form a trajectory of the arm; joint and speed limits
 (:meth:`snakekit.Trajectory.limit_violations`); self-collision on the path between goals
-(:func:`snakekit.collision.first_collision`); its duration against the spec's (refused above
+(:func:`snakekit.collision.first_collision_on`, on the way the servos take); its duration against the spec's (refused above
 ``max_duration_ratio`` times); and its run on the simulator against the simulated run of the
 spec's trajectory (refused when they part by more than ``sim_tolerance``). A refusal is one
 sentence addressed to the student.
@@ -80,9 +80,10 @@ def check(handin: dict, s: LabSettings, spec=SPEC) -> Checked:
                            f"at t = {v.time:.2f} s (limit {v.bound:+.3f} rad); the arm does not run it")
         return Checked(f"your sweep is too fast for the arm: joint {v.joint} must move at {abs(v.value):.2f} rad/s "
                        f"at t = {v.time:.2f} s (the limit is {abs(v.bound):.2f} rad/s); the arm does not run it")
-    from snakekit.collision import first_collision
+    from snakekit.collision import first_collision_on
+    from snakekit.profile_planner import ReferencePath
 
-    hit = first_collision(tr.times, tr.positions, spec=spec)
+    hit = first_collision_on(ReferencePath.from_rest(tr.times, tr.positions), spec=spec)  # the way the servos take
     if hit is not None:
         return Checked(f"your sweep would fold the arm onto itself: at t = {hit.time:.2f} s, {hit.links[0]} and "
                        f"{hit.links[1]} come within {1000 * hit.distance:.0f} mm (the margin is "

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from ..errors import (CommunicationError, ConfigurationError, HardwareError,
                        InstructionError, LimitError, ServoMismatchError)
 from ..model import SPEC, SnakeSpec
-from ..profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY
+from ..profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner
 from ..robot import JointState, Robot
 from ..bridge import is_url
 from .bus import Bus, SyncRead, describe, sdk
@@ -131,6 +131,10 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
         self._t0 = time.perf_counter()
         self._last_positions = None
         self._last_status: dict = {}  # the keep-alive's last status read
+        # The servos' profile generators as the kit models them (what the paths are checked on):
+        # built from a read when first needed, fed the goals sent since (cheaply, when checked).
+        self._planner: ProfilePlanner | None = None
+        self._goals_since: list = []
 
         key = self.port_name if is_url(self.port_name) else os.path.realpath(self.port_name)
         old = _OPEN.get(key)
@@ -319,8 +323,19 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
         for i, tick in zip(self.ids, self._goal_ticks(q)):
             self._writer.changeParam(i, position_bytes(tick))
 
+    def _profiles(self) -> ProfilePlanner:
+        now = self._now()
+        if self._planner is None:  # the servos at rest where they are (torque just came on)
+            self._planner = ProfilePlanner(self.read().positions, self.profile_velocity, self.profile_acceleration, now)
+            self._goals_since.clear()
+        for t, q in self._goals_since:
+            self._planner.set_goal(t, q)
+        self._goals_since.clear()
+        return self._planner
+
     def _send(self, q: np.ndarray) -> None:
         """One SyncWrite of the five goals, clamped to the position limits in ticks."""
+        self._goals_since.append((self._now(), np.clip(q, self.spec.lower, self.spec.upper)))
         self._load_goals(q)
         writer = self._writer
         result, _ = self.bus.retry(lambda: (writer.txPacket(), None), answered=False)
@@ -375,6 +390,7 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
     # --- torque, stop, reboot ------------------------------------------------------------------
 
     def _torque(self, on: bool) -> None:
+        self._planner = None  # each servo's reference starts again where it is
         for i in self.ids:
             self._write(i, TORQUE_ENABLE, 1, int(on))
         self.torque_enabled = on
@@ -383,6 +399,7 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
     def _hold_here(self, servo_id: int) -> tuple[int, int]:
         """Goal = present position (clamped into the limits), so torque-on doesn't jump.
         Returns (present, goal) ticks: they differ when the joint is outside its limits."""
+        self._planner = None  # the servo's reference starts again where it is
         lo, hi = self.tick_limits
         present = to_signed(self._read(servo_id, PRESENT_POSITION, 4), 4)
         goal = min(max(present, lo), hi)

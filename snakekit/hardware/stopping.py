@@ -22,6 +22,7 @@ class StopMixin:
 
         Returns what was done, in words, saying only what the servos confirmed.
         """
+        self._planner = None  # the servos' references start again where they stop
         with self.bus.hold():
             self.port.is_using = False  # an exception may have left the SDK's flag set
             try:
