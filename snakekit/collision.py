@@ -21,15 +21,23 @@ True
 **Paths between goals.** A path is checked with a bound, not by sampling at a fixed step:
 in the frame of link ``a``, a point of link ``b`` moves by at most ``sum_j R_j |dq_j|`` when
 joints ``a+1..b`` change by ``dq`` (``R_j``: the farthest that link ``b`` reaches from the
-axis of joint ``j``), whatever the order in which the joints move. So along any path whose
-joints move monotonically from goal ``q_k`` to goal ``q_k+1`` (the straight line included),
-their distance stays above ``(d_k + d_k+1 - L)/2`` with ``L = sum_j R_j |q_k+1,j - q_k,j|``.
-A segment whose bound is above the margin for every pair is safe without looking inside it;
-otherwise its midpoint (on the straight line) is computed and each half checked the same way.
-The step so shrinks with the largest joint change and grows with the clearance: in Task 2's
-sweep (0.13 rad a goal at most) the goals alone prove every segment safe; a move that
-grazes the margin is split until a piece is shorter than 0.1 mm of link travel, and is then
-refused (the error's distance is the bound, so the check never errs on the unsafe side).
+axis of joint ``j``), whatever the order in which the joints move; for a joint that goes back
+and forth, ``|dq_j|`` is the way it travels. So between two checkpoints of a path (its goals)
+their distance stays above ``(d_k + d_k+1 - L)/2`` with ``L = sum_j R_j travel_j``. A stretch
+whose bound is above the margin for every pair is safe without looking inside it; otherwise
+its middle (in time) is computed and each half checked the same way. The step so shrinks
+with the largest joint change and grows with the clearance: in Task 2's sweep the goals
+alone prove every stretch safe; a move that grazes the margin is split until a piece is
+shorter than 0.1 mm of link travel, and is then refused (the error's distance is the bound,
+so the check never errs on the unsafe side).
+
+**Which path.** A robot does not move along the straight line between goals in joint space:
+the servos' firmware moves each joint on its own profile, at the profile's speed, so a joint
+with less to travel arrives first, and a goal sent while moving is re-planned from the
+present velocity. Two safe poses whose straight path is clear can so fold the arm on the
+way. Every robot checks the way its servos take (:class:`snakekit.profile_planner.ReferencePath`,
+the same arithmetic the simulator and the bus emulator move by); :func:`first_collision`
+checks the straight path (a lesson's goals), :func:`first_collision_on` any path.
 This is the "adaptive dynamic collision checking" of Schwarzer, Saha and Latombe (2005).
 """
 

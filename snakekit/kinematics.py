@@ -180,8 +180,8 @@ def _closest(k: _Kin, target: np.ndarray, use_heading: bool, starts, *, max_iter
     apart, so the answer is never a folded pose.
     """
     best_q, best_f = None, np.inf
-    for safe in (False, True):
-        for q in starts:
+    for safe, tries in ((False, starts), (True, [*starts, np.zeros(k.spec.n_joints)])):  # the straight arm: 46 mm apart
+        for q in tries:
             q = np.clip(np.asarray(q, dtype=float), k.spec.lower, k.spec.upper)
             if safe and collides(q, spec=k.spec):
                 continue
@@ -189,8 +189,8 @@ def _closest(k: _Kin, target: np.ndarray, use_heading: bool, starts, *, max_iter
             if f < best_f and (safe or not collides(q, spec=k.spec)):
                 best_q, best_f = q, f
         if best_q is not None:
-            return best_q
-    raise AssertionError("the stretched arm is always a start with the links apart")
+            break
+    return best_q
 
 
 def _descend(k: _Kin, target: np.ndarray, use_heading: bool, q: np.ndarray, max_iter: int,
