@@ -46,16 +46,17 @@ from pathlib import Path
 from snakekit.errors import SnakekitError
 
 from .course import CourseError, default_roster, gradebook, require
-from .files import ALLOWED_ID, MAX_DOWNLOAD, STUDENT_ID, MAX_FILE, excerpt, file_name, one_line, read_table, student_id, unique_in
+from .files import (ALLOWED_ID, MAX_DOWNLOAD, MAX_FILE, STUDENT_ID, excerpt, file_name, one_line, read_table, size_text,
+                    student_id, unique_in)
 
 COURSE = Path("course")
 MANIFEST_COLUMNS = ["student", "lms", "lms_id", "lms_name", "file", "notebook", "submitted_at", "late", "attempts", "note"]
 ROSTER_IDS = ("canvas_id", "moodle_id", "name", "email", "sis_id", "login_id")
 
 CANVAS = re.compile(r"^(?:(?P<name>.*?)_)??(?:(?P<late>late)_)?(?P<uid>\d+|anon_[A-Za-z0-9]+)_(?P<fid>\d+)_(?P<file>.+)$",
-                    re.I)
+                    re.I | re.S)
 MOODLE_DIR = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_[a-z]+_?$")
-MOODLE_FLAT = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_file_(?P<file>.+)$")
+MOODLE_FLAT = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_file_(?P<file>.+)$", re.S)
 RESUBMISSION = re.compile(r"^(?P<stem>.*?)-(?P<n>\d+)$")
 
 
@@ -111,26 +112,36 @@ def read_download(source: Path) -> tuple[list[Upload], list[str]]:
 
     def too_big(entry: str, size: int) -> bool:
         if size > MAX_FILE:
-            problems.append(f"{excerpt(entry, quote=False)}: {size / 2**20:.0f} MB uncompressed, more than the {MAX_FILE >> 20} MB "
-                            "a notebook may have; not read (ask the student for the notebook without its outputs)")
+            problems.append(f"{excerpt(entry, quote=False)}: {size_text(size)} uncompressed, more than the "
+                            f"{size_text(MAX_FILE)} a notebook may have; not read (ask the student for the notebook "
+                            "without its outputs)")
         return size > MAX_FILE
 
+    def climbs(entry: str) -> bool:
+        parts = entry.replace("\\", "/").split("/")
+        if ".." in parts and parts[-1].lower().endswith(".ipynb"):
+            problems.append(f"{excerpt(entry, quote=False)}: a name that climbs out of the download (..); not read")
+        return ".." in parts
+
+    def at_most(total: int) -> None:
+        if total > MAX_DOWNLOAD:
+            raise CourseError(f"{source}: its notebooks hold {size_text(total)}, more than the "
+                              f"{size_text(MAX_DOWNLOAD)} a download may hold; nothing was read (download the "
+                              "submissions in parts, or check the download)")
+
     if source.is_dir():
-        for p in sorted(source.rglob("*")):
-            if p.is_file() and not p.is_symlink():
-                u = classify(str(p.relative_to(source)), b"")
-                if u is not None and not too_big(u.entry, p.stat().st_size):
-                    out.append(replace(u, data=p.read_bytes()))
+        found = [(p, u) for p in sorted(source.rglob("*")) if p.is_file() and not p.is_symlink()
+                 for u in [classify(str(p.relative_to(source)), b"")] if u is not None]
+        at_most(sum(p.stat().st_size for p, _ in found))
+        for p, u in found:
+            if not too_big(u.entry, p.stat().st_size):
+                out.append(replace(u, data=p.read_bytes()))
         return out, problems
     try:
         with zipfile.ZipFile(source) as z:
-            found = [(info, u) for info in z.infolist() if not info.is_dir()
+            found = [(info, u) for info in z.infolist() if not info.is_dir() and not climbs(info.filename)
                      for u in [classify(info.filename, b"")] if u is not None]
-            total = sum(info.file_size for info, _ in found)
-            if total > MAX_DOWNLOAD:
-                raise CourseError(f"{source}: its notebooks unpack to {total / 2**30:.1f} GB, more than the "
-                                  f"{MAX_DOWNLOAD >> 30} GB a download may hold; nothing was read (download the "
-                                  "submissions in parts, or check the zip)")
+            at_most(sum(info.file_size for info, _ in found))
             for info, u in found:
                 if too_big(u.entry, info.file_size):
                     continue
@@ -373,7 +384,7 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
                 _keep(folder / "timestamp.txt", attempts, "previously-collected")
         dest.write_bytes(u.data)
         if Path(u.file).name != dest.name:
-            notes.append(f"{u.file} saved as {dest.name}")
+            notes.append(f"{excerpt(u.file, quote=False)} saved as {dest.name}")
     older = [u for u, nb in ours if nb is None or newest.get(nb) is not u]
     for u in older:
         attempts.mkdir(exist_ok=True)

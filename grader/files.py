@@ -58,7 +58,10 @@ def one_line(message, limit: int = MESSAGE) -> str:
     return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
-def _mb(n: int) -> str:
+def size_text(n: int) -> str:
+    """``n`` bytes as a message says it (MB or GB)."""
+    if n >= 10 << 30:
+        return f"{n / 2**30:.0f} GB"
     return f"{n / 2**20:.1f} MB" if n < 10 << 20 else f"{n / 2**20:.0f} MB"
 
 
@@ -218,7 +221,7 @@ def read_table(path: Path, what: str, *, need: tuple[str, ...] = (), fix: str = 
         if not path.is_file():
             raise CourseError(f"{said} is not a file")
         if size > limit:
-            raise CourseError(f"{said} is {_mb(size)}, more than the {_mb(limit)} a {what} may be; is it the "
+            raise CourseError(f"{said} is {size_text(size)}, more than the {size_text(limit)} a {what} may be; is it the "
                               f"right file?{fix}")
         text = _text(path.read_bytes(), said)
     except OSError as e:

@@ -197,3 +197,123 @@ def test_an_output_in_a_missing_folder_is_one_line(course, command, capsys, tmp_
     suffix = ".zip" if command == "return" else ".csv"
     r = run(capsys, *WRITERS[command](course), tmp_path / "no" / f"out{suffix}")
     one_line_error(r, f"the folder {tmp_path / 'no'} does not exist")
+
+
+# --- a hostile roster or download through snakekit collect ---------------------------------------
+
+
+def notebook(course: Path, note: str = "") -> bytes:
+    """The assignment's released notebook as a student hands it in (``note`` makes it differ)."""
+    import nbformat
+
+    from grader_helpers import release_notebook
+
+    nb = release_notebook(course)
+    nb.metadata["note"] = note
+    return nbformat.writes(nb).encode()
+
+
+def roster_file(path: Path, rows: list[list[str]]) -> Path:
+    import csv
+
+    with open(path, "w", newline="") as f:
+        csv.writer(f).writerows([["student", "canvas_id"], *rows])
+    return path
+
+
+#: Student ids that are no folder name: climbing, absolute, a slash, hidden, control characters, too long.
+HOSTILE_IDS = ["../source", "../../outside", "/etc/x", "a/b", "a\\b", "..", ".hidden", "a\nb", "a\x00b", "-rf",
+               "x" * 101, " "]
+
+
+def test_a_roster_id_that_climbs_is_refused_as_the_ta_runs_collect(course, tmp_path):
+    roster = roster_file(tmp_path / "elsewhere" / "class.csv", [["ann", "101"], ["../source", "102"]])
+    dl = tmp_path / "elsewhere" / "dl.zip"
+    with zipfile.ZipFile(dl, "w") as z:
+        z.writestr(f"leeann_101_5001_{A}.ipynb", notebook(course, "ann"))
+        z.writestr(f"evil_102_5002_{A}.ipynb", notebook(course, "evil"))
+    before = tree(tmp_path)
+    r = snakekit("collect", A, "--course", course, "--from", dl, "--roster", roster)
+    one_line_error(r, f"roster {roster}, row 3: the student id '../source' cannot be a folder name",
+                   "letters, digits and . _ @ + -")
+    assert tree(tmp_path) == before  # the source notebook above all: nothing was written
+
+
+@pytest.mark.parametrize("bad", HOSTILE_IDS, ids=repr)
+def test_every_roster_id_that_is_no_folder_name_is_refused(course, bad, tmp_path, capsys):
+    from grader.files import excerpt
+
+    roster = roster_file(tmp_path / "elsewhere" / "class.csv", [["ann", "101"], [bad, "102"]])
+    dl = tmp_path / "elsewhere" / "dl.zip"
+    with zipfile.ZipFile(dl, "w") as z:
+        z.writestr(f"evil_102_5002_{A}.ipynb", notebook(course, "evil"))
+    before = tree(tmp_path)
+    r = run(capsys, "collect", A, "--course", course, "--from", dl, "--roster", roster)
+    if bad.strip() == "":  # a blank id is a row without a student: skipped, and its upload kept aside
+        assert r.returncode == 1 and "Canvas user 102 (evil) is not in the roster" in r.stdout
+        return
+    if "\x00" in bad:  # no spreadsheet writes a NUL: not read as a table at all
+        one_line_error(r, f"roster {roster} is not text (it has NUL bytes", "save it from the spreadsheet as")
+    else:
+        one_line_error(r, f"roster {roster}, row 3: the student id {excerpt(bad)} cannot be a folder name")
+    assert tree(tmp_path) == before
+
+
+def test_a_hostile_download_stays_in_its_folders_and_keeps_every_file(course, tmp_path):
+    """Climbing and absolute names, a newline in a name, and two unknown files of one name in two folders."""
+    entries = {
+        f"leeann_101_5001_{A}.ipynb": notebook(course, "ann 1"),
+        f"leeann_101_5003_my\nwork.ipynb": notebook(course, "ann 2"),  # newer, a newline in its name
+        f"../../source/{A}/{A}.ipynb": notebook(course, "climbs"),
+        f"sub/../../../{A}.ipynb": notebook(course, "climbs too"),
+        f"/etc/{A}.ipynb": notebook(course, "absolute"),
+        f"bob\nx/{A}.ipynb": notebook(course, "newline folder"),
+        f"a/nobody_999_5006_{A}.ipynb": notebook(course, "first nobody"),
+        f"b/nobody_999_5006_{A}.ipynb": notebook(course, "second nobody"),
+    }
+    dl = tmp_path / "elsewhere" / "dl.zip"
+    with zipfile.ZipFile(dl, "w") as z:
+        for name, data in entries.items():
+            z.writestr(name, data)
+    before = tree(tmp_path)
+    r = snakekit("collect", A, "--course", course, "--from", dl)  # the course's roster: ann only
+    assert r.returncode == 1, r.stderr
+    after = tree(tmp_path)
+    changed = {p for p in set(before) | set(after) if before.get(p) != after.get(p)}
+    assert all(p.startswith(("course/submitted/ann/", "course/collected/")) for p in changed), sorted(changed)
+    assert not any("\n" in p for p in after)
+    ann = course / "submitted" / "ann" / A
+    assert (ann / f"{A}.ipynb").read_bytes() == entries[f"leeann_101_5003_my\nwork.ipynb"]
+    assert [p.read_bytes() for p in (ann / "attempts").iterdir()] == [entries[f"leeann_101_5001_{A}.ipynb"]]
+    # every unmatched file is kept, under a name of its own, and reported with that name
+    aside = course / "collected" / f"{A}-unmatched"
+    kept = {p.name: p.read_bytes() for p in aside.iterdir()}
+    unmatched = [f"/etc/{A}.ipynb", f"bob\nx/{A}.ipynb", f"a/nobody_999_5006_{A}.ipynb", f"b/nobody_999_5006_{A}.ipynb"]
+    assert sorted(kept.values()) == sorted(entries[e] for e in unmatched)
+    reported = [line for line in r.stdout.splitlines() if line.startswith("not collected:")]
+    assert len(reported) == 6, r.stdout  # the four kept aside and the two that climb
+    for name in kept:
+        assert sum(f"(kept as {name})" in line for line in reported) == 1, (name, reported)
+    assert sum("climbs out of the download" in line for line in reported) == 2
+    assert "'bob\\nx' is not in the roster" in r.stdout and "'my\\nwork.ipynb' saved as t1_sweep.ipynb" in r.stdout
+
+
+def test_the_same_download_collected_twice_keeps_no_second_copy(course, tmp_path, capsys):
+    dl = tmp_path / "elsewhere" / "dl.zip"
+    with zipfile.ZipFile(dl, "w") as z:
+        z.writestr(f"a/nobody_999_5006_{A}.ipynb", notebook(course, "1"))
+        z.writestr(f"b/nobody_999_5006_{A}.ipynb", notebook(course, "2"))
+    for _ in range(2):
+        assert run(capsys, "collect", A, "--course", course, "--from", dl).returncode == 1
+    assert len(list((course / "collected" / f"{A}-unmatched").iterdir())) == 2
+
+
+@pytest.mark.parametrize("name, safe", [
+    ("../../x.ipynb", "x.ipynb"), ("/etc/passwd", "passwd"), ("a\\..\\b.ipynb", "b.ipynb"), ("..", "file"),
+    (".bashrc", "bashrc"), ("a\nb\x00c.ipynb", "a_b_c.ipynb"), ("my work (2).ipynb", "my work (2).ipynb"),
+    ("Übung 1.ipynb", "Übung 1.ipynb"), ("x" * 300 + ".ipynb", "x" * 114 + ".ipynb"),
+])
+def test_file_names_are_made_safe(name, safe):
+    from grader.files import file_name
+
+    assert file_name(name) == safe
