@@ -440,8 +440,8 @@ def read_manifest(course: Path, assignment: str) -> dict[str, dict]:
     path = Path(course) / "collected" / f"{assignment}.csv"
     if not path.exists():
         return {}
-    _, rows = read_table(path, "manifest", need=("student", "lms", "file"),
-                         fix=f"snakekit collect writes it: move it away and collect {assignment} again")
+    again = f"snakekit collect writes it: move it away and collect {assignment} again"
+    _, rows = read_table(path, "manifest", need=("student", "lms", "file"), fix=again, unreadable=again)
     return {r["student"]: r for r in rows if r.get("student")}
 
 

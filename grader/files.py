@@ -183,47 +183,49 @@ def check_output(path: Path, course: Path, *, suffix: str, what: str, command: s
 # --- tables as spreadsheets save them ----------------------------------------------------------------
 
 
-def _text(raw: bytes, said: str) -> str:
+SAVE_AS = "save it from the spreadsheet as 'CSV UTF-8 (comma delimited)'"
+
+
+def _text(raw: bytes, said: str, fix: str = SAVE_AS) -> str:
     if raw.startswith(codecs.BOM_UTF8):
         encoding = "utf-8-sig"
     elif raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
         encoding = "utf-16"
     elif b"\0" in raw[:4096]:
         raise CourseError(f"{said} is not text (it has NUL bytes: UTF-16 without a byte order mark, or not a "
-                          "table at all); save it from the spreadsheet as 'CSV UTF-8 (comma delimited)'")
+                          f"table at all); {fix}")
     else:
         encoding = "utf-8"
     try:
         return raw.decode(encoding)
     except UnicodeDecodeError:
         if encoding != "utf-8":
-            raise CourseError(f"{said} is not valid {encoding.upper()} text; save it from the spreadsheet as "
-                              "'CSV UTF-8 (comma delimited)'") from None
+            raise CourseError(f"{said} is not valid {encoding.upper()} text; {fix}") from None
     try:  # Excel's plain "CSV" on Windows; Latin-1 where a byte is not Windows-1252
         return raw.decode("cp1252")
     except UnicodeDecodeError:
         return raw.decode("latin-1")
 
 
-def read_table(path: Path, what: str, *, need: tuple[str, ...] = (), fix: str = "",
+def read_table(path: Path, what: str, *, need: tuple[str, ...] = (), fix: str = "", unreadable: str = SAVE_AS,
                limit: int = MAX_TABLE) -> tuple[list[str], list[dict]]:
     """``(columns, rows)`` of a CSV table (each row a dict of stripped strings).
 
     Raises :class:`CourseError` (one line: which file, what is wrong, what to do) for a file
     over ``limit`` bytes (not read), text that is no table, or a column of ``need`` missing;
-    ``fix`` is added to the message.
+    ``fix`` is added to the message, ``unreadable`` replaces its advice for text in no encoding
+    a spreadsheet writes.
     """
     path = Path(path)
     said = f"{what} {path}"
-    fix = f"; {fix}" if fix else ""
     try:
         size = path.stat().st_size
         if not path.is_file():
             raise CourseError(f"{said} is not a file")
         if size > limit:
             raise CourseError(f"{said} is {size_text(size)}, more than the {size_text(limit)} a {what} may be; is it the "
-                              f"right file?{fix}")
-        text = _text(path.read_bytes(), said)
+                              f"right file?{'; ' + fix if fix else ''}")
+        text = _text(path.read_bytes(), said, unreadable)
     except OSError as e:
         raise CourseError(f"cannot read {said}: {e.strerror or e}") from None
     first = text.split("\n", 1)[0]
@@ -234,11 +236,11 @@ def read_table(path: Path, what: str, *, need: tuple[str, ...] = (), fix: str = 
         rows = [dict(zip(header, (v.strip() for v in r))) for r in reader if any(v.strip() for v in r)]
     except csv.Error as e:
         raise CourseError(f"{said}, line {reader.line_num}: not a CSV table ({excerpt(e, 80)}; it starts "
-                          f"{excerpt(text, 60)}){fix}") from None
+                          f"{excerpt(text, 60)}){'; ' + fix if fix else ''}") from None
     missing = [c for c in need if c not in header]
     if missing:
         raise CourseError(f"{said} has no column {', '.join(missing)} (its columns: "
-                          f"{excerpt(', '.join(header) or 'none')}){fix}")
+                          f"{excerpt(', '.join(header) or 'none')}){'; ' + fix if fix else ''}")
     for r in rows:
         r.pop("", None)
     return header, rows

@@ -317,3 +317,187 @@ def test_file_names_are_made_safe(name, safe):
     from grader.files import file_name
 
     assert file_name(name) == safe
+
+
+# --- rosters and times files as spreadsheets save them ------------------------------------------------
+
+ROSTER = "student,name,canvas_id\njose,José Müller,101\nann,Ann Lee,102\n"
+#: How Excel (and LibreOffice) save a table: the bytes of ROSTER in each.
+SAVED_AS = {
+    "UTF-8": lambda t: t.encode("utf-8"),
+    "CSV UTF-8 (with BOM)": lambda t: codecs.BOM_UTF8 + t.encode("utf-8"),
+    "UTF-16 LE with BOM": lambda t: codecs.BOM_UTF16_LE + t.encode("utf-16-le"),
+    "UTF-16 BE with BOM": lambda t: codecs.BOM_UTF16_BE + t.encode("utf-16-be"),
+    "Unicode Text (UTF-16, tabs)": lambda t: codecs.BOM_UTF16_LE + t.replace(",", "\t").encode("utf-16-le"),
+    "Windows-1252": lambda t: t.replace("Müller", "Müller’s").encode("cp1252"),
+    "Latin-1": lambda t: t.encode("latin-1"),
+    "semicolons, CRLF": lambda t: t.replace(",", ";").replace("\n", "\r\n").encode("cp1252"),
+}
+
+
+@pytest.mark.parametrize("saved_as", sorted(SAVED_AS))
+def test_a_roster_is_read_in_every_encoding_a_spreadsheet_saves(saved_as, tmp_path):
+    from grader.collect import Roster
+
+    path = tmp_path / "roster.csv"
+    path.write_bytes(SAVED_AS[saved_as](ROSTER))
+    rows = Roster.load(path).rows
+    name = "José Müller’s" if saved_as == "Windows-1252" else "José Müller"
+    assert rows == [{"student": "jose", "name": name, "canvas_id": "101"},
+                    {"student": "ann", "name": "Ann Lee", "canvas_id": "102"}]
+
+
+@pytest.mark.parametrize("saved_as", sorted(SAVED_AS))
+def test_a_times_file_is_read_in_every_encoding_a_spreadsheet_saves(saved_as, tmp_path):
+    import datetime as dt
+
+    from grader.collect import read_times
+
+    path = tmp_path / "times.csv"
+    path.write_bytes(SAVED_AS[saved_as]("Full name,Last modified (submission)\nJosé Müller,2026-03-02 10:30\n"))
+    name = "José Müller’s" if saved_as == "Windows-1252" else "José Müller"
+    assert read_times(path, dt.timezone.utc) == [
+        ("Full name", name, dt.datetime(2026, 3, 2, 10, 30, tzinfo=dt.timezone.utc))]
+
+
+def test_utf16_without_a_byte_order_mark_says_how_to_save_it(course, tmp_path, capsys):
+    path = tmp_path / "roster.csv"
+    path.write_bytes(ROSTER.encode("utf-16-le"))
+    r = run(capsys, "collect", A, "--course", course, "--from", tmp_path, "--roster", path)
+    one_line_error(r, f"roster {path} is not text", "save it from the spreadsheet as 'CSV UTF-8 (comma delimited)'")
+
+
+# --- files too large, or not what they should be: one line each -----------------------------------------
+
+
+def test_a_100_mb_roster_is_refused_before_it_is_read(course, tmp_path):
+    path = tmp_path / "roster.csv"
+    with open(path, "wb") as f:  # 100 MB without a newline (sparse: the size is what counts)
+        f.write(b"student,")
+        f.truncate(100 << 20)
+    r = snakekit("collect", A, "--course", course, "--from", tmp_path, "--roster", path)
+    one_line_error(r, f"roster {path} is 100 MB, more than the 32 MB a roster may be; is it the right file?")
+
+
+@pytest.mark.parametrize("what, content", [
+    ("roster", "student," + "x" * 1_000_000),                  # one field of a million characters
+    ("roster", ",".join(["name"] * 1_000_000) + "\n"),         # a million columns, none of them student
+    ("times file", "student,submitted_at\nann," + "9" * 100_000 + "\n"),  # a time of 100,000 digits
+    ("times file", "student\tname\n" + "x" * 1_000_000),       # no time column, a huge row
+])
+def test_a_message_quotes_only_an_excerpt_of_a_huge_input(course, what, content, tmp_path, capsys):
+    path = tmp_path / "input.csv"
+    path.write_text(content)
+    option = "--roster" if what == "roster" else "--times"
+    r = run(capsys, "collect", A, "--course", course, "--from", tmp_path, option, path)
+    line = one_line_error(r, f"{what} {path}")
+    assert len(line) < 600 and "…" in line + "no column" + "needs a time column", line
+
+
+def test_excerpt_and_one_line_cap_a_150_million_character_input():
+    from grader.files import EXCERPT, MESSAGE, excerpt, one_line
+
+    huge = "ab\n" * 50_000_000
+    shown = excerpt(huge)
+    assert len(shown) == EXCERPT and shown.startswith("'ab\\nab\\n") and shown.endswith("…")
+    line = one_line(f"bad input: {huge}")
+    assert len(line) == MESSAGE and "\n" not in line and line.startswith("bad input: ab ab") and line.endswith("…")
+    assert excerpt("ann", quote=False) == "ann" and excerpt("a\nb", quote=False) == "'a\\nb'"
+
+
+def _damage(course: Path, how: str) -> None:
+    db = course / "gradebook.db"
+    if how == "not a database":
+        db.write_bytes(b"this is not SQLite\n" * 500)
+    else:  # truncated: the first pages of a real gradebook only
+        data = db.read_bytes()
+        db.write_bytes(data[: len(data) // 3])
+
+
+@pytest.mark.parametrize("how", ["not a database", "truncated"])
+@pytest.mark.parametrize("command", ["grade", "export", "collect", "return"])
+def test_a_damaged_gradebook_is_one_line_saying_how_to_restore_it(course, command, how, tmp_path, capsys):
+    from grader.course import backup_gradebook
+
+    backup = backup_gradebook(course)
+    _damage(course, how)
+    args = {"grade": ["grade", A, "--course", course, "--references", REFERENCES],
+            "export": ["export", "--course", course, "-o", tmp_path / "g.csv"],
+            "collect": ["collect", A, "--course", course, "--from", tmp_path / "elsewhere"],
+            "return": ["return", A, "--course", course]}[command]
+    before = tree(course)
+    r = run(capsys, *args)
+    one_line_error(r, f"the gradebook {course / 'gradebook.db'} cannot be read (",
+                   f"restore the newest backup: cp {backup} {course / 'gradebook.db'}")
+    assert tree(course) == before
+
+
+def test_a_damaged_gradebook_without_backups_says_so(course, tmp_path, capsys):
+    _damage(course, "not a database")
+    r = run(capsys, "export", "--course", course, "-o", tmp_path / "g.csv")
+    one_line_error(r, "file is not a database", f"restore it from a copy (no backups in {course / 'backups'})")
+
+
+@pytest.mark.parametrize("damage", [b"\x00\xff" * 400, b"student,lms\n", b"\xff\xfe\x00"])
+@pytest.mark.parametrize("command", ["collect", "return"])
+def test_a_damaged_manifest_is_one_line(course, command, damage, tmp_path, capsys):
+    manifest = course / "collected" / f"{A}.csv"
+    manifest.write_bytes(damage)
+    (course / "feedback" / "ann" / A).mkdir(parents=True)
+    (course / "feedback" / "ann" / A / f"{A}.html").write_text("<html/>")
+    dl = tmp_path / "elsewhere" / "dl"
+    (dl / "ann").mkdir(parents=True)
+    (dl / "ann" / f"{A}.ipynb").write_bytes(notebook(course))
+    before = tree(course)
+    args = ["collect", A, "--from", dl] if command == "collect" else ["return", A]
+    r = run(capsys, *args, "--course", course)
+    line = one_line_error(r, f"manifest {manifest}", f"move it away and collect {A} again")
+    assert len(line) < 600
+    assert tree(course) == before  # collect places nothing before it knows it can write the manifest
+
+
+def test_a_damaged_zip_entry_is_reported_and_the_others_collected(course, tmp_path):
+    dl = tmp_path / "elsewhere" / "dl.zip"
+    good, bad = notebook(course, "good"), notebook(course, "bad")
+    with zipfile.ZipFile(dl, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr(f"leeann_101_5001_{A}.ipynb", good)
+        z.writestr(f"leeann_101_5002_{A}-1.ipynb", bad)
+    with zipfile.ZipFile(dl) as z:
+        info = z.getinfo(f"leeann_101_5002_{A}-1.ipynb")
+        start = info.header_offset + 30 + len(info.filename) + len(info.extra)
+    data = bytearray(dl.read_bytes())
+    data[start + 100: start + 140] = bytes(40)  # the deflated stream of the second entry, damaged
+    dl.write_bytes(bytes(data))
+    r = snakekit("collect", A, "--course", course, "--from", dl)
+    assert r.returncode == 1, r.stderr
+    assert f"not collected: leeann_101_5002_{A}-1.ipynb: cannot be unpacked (" in r.stdout
+    assert (course / "submitted" / "ann" / A / f"{A}.ipynb").read_bytes() == good
+
+
+def test_a_zip_bomb_is_not_unpacked(course, tmp_path):
+    """Three notebooks of 100 MB of spaces each (300 KB zipped): over the 64 MB a notebook may have."""
+    dl = tmp_path / "elsewhere" / "bomb.zip"
+    with zipfile.ZipFile(dl, "w", zipfile.ZIP_DEFLATED) as z:
+        for k in range(3):
+            with z.open(f"student{k}/{A}.ipynb", "w") as f:
+                for _ in range(100):
+                    f.write(b" " * (1 << 20))
+    assert dl.stat().st_size < 1 << 20
+    r = snakekit("collect", A, "--course", course, "--from", dl)
+    assert r.returncode == 1, r.stderr
+    refused = [line for line in r.stdout.splitlines() if "100 MB uncompressed, more than the 64 MB" in line]
+    assert len(refused) == 3, r.stdout
+    assert not (course / "submitted").exists()
+
+
+def test_a_download_over_its_bound_is_refused_before_anything_is_read(course, tmp_path, capsys, monkeypatch):
+    import grader.collect
+
+    monkeypatch.setattr(grader.collect, "MAX_DOWNLOAD", 3 << 20)
+    dl = tmp_path / "elsewhere" / "big.zip"
+    with zipfile.ZipFile(dl, "w", zipfile.ZIP_DEFLATED) as z:
+        for k in range(4):
+            z.writestr(f"student{k}/{A}.ipynb", b" " * (1 << 20))
+    r = run(capsys, "collect", A, "--course", course, "--from", dl)
+    one_line_error(r, f"{dl}: its notebooks hold 4.0 MB, more than the 3.0 MB a download may hold; nothing was read")
+    assert not (course / "submitted").exists()
