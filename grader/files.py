@@ -60,8 +60,8 @@ def one_line(message, limit: int = MESSAGE) -> str:
 
 def size_text(n: int) -> str:
     """``n`` bytes as a message says it (MB or GB)."""
-    if n >= 10 << 30:
-        return f"{n / 2**30:.0f} GB"
+    if n >= 1 << 30:
+        return f"{n / 2**30:.1f} GB"
     return f"{n / 2**20:.1f} MB" if n < 10 << 20 else f"{n / 2**20:.0f} MB"
 
 
