@@ -391,7 +391,7 @@ def test_a_message_quotes_only_an_excerpt_of_a_huge_input(course, what, content,
     option = "--roster" if what == "roster" else "--times"
     r = run(capsys, "collect", A, "--course", course, "--from", tmp_path, option, path)
     line = one_line_error(r, f"{what} {path}")
-    assert len(line) < 600 and "…" in line + "no column" + "needs a time column", line
+    assert len(line) < 600 and "…" in line, line  # the input is quoted, cut short
 
 
 def test_excerpt_and_one_line_cap_a_150_million_character_input():
@@ -501,3 +501,15 @@ def test_a_download_over_its_bound_is_refused_before_anything_is_read(course, tm
     r = run(capsys, "collect", A, "--course", course, "--from", dl)
     one_line_error(r, f"{dl}: its notebooks hold 4.0 MB, more than the 3.0 MB a download may hold; nothing was read")
     assert not (course / "submitted").exists()
+
+
+@pytest.mark.parametrize("lms_name, entry", [
+    ("Jane O'Neil", "Jane O'Neil_9001_assignfeedback_file_/t1_sweep-feedback.html"),
+    ("../../etc", None), ("a/b", None), ("a\\b", None), ("a\nb", None), (".hidden", None),
+])
+def test_a_feedback_zip_entry_never_climbs_out_of_its_folder(lms_name, entry):
+    """``return`` names a Moodle page by the manifest's name; a name that is no folder name is refused."""
+    from grader.lms import lms_name as feedback_entry
+
+    row = {"lms": "moodle", "lms_name": lms_name, "lms_id": "9001"}
+    assert feedback_entry(row, Path(f"/feedback/ann/{A}/{A}.html")) == entry
