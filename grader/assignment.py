@@ -14,9 +14,8 @@ from snakekit.errors import SnakekitError
 
 from . import feedback
 from .course import CourseError, course_id, db_url, generate
+from .files import MAX_FILE  # the largest notebook or hand-in the grader reads back [bytes]
 from .references import Reference
-
-MAX_FILE = 64 << 20  # the largest notebook or hand-in the grader reads back [bytes]
 
 
 class GradingError(SnakekitError):

@@ -112,7 +112,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
     args = build_parser().parse_args(argv)
     course = args.course
     problems = []
-    from .course import CourseError, check_assignment, check_output
+    from .course import CourseError, check_assignment
+    from .files import check_output, one_line
 
     if not course.is_dir():
         problems.append(f"no course folder {course} (give --course DIR, the folder with nbgrader_config.py)")
@@ -138,12 +139,12 @@ def main(argv: list[str] | None = None, out=None) -> int:
     csv_path = args.csv or course / f"grades-{args.assignment}.csv"
     if course.is_dir():
         try:
-            check_output(csv_path, course, suffix=".csv", what="--csv", header="student,assignment")
+            check_output(csv_path, course, suffix=".csv", what="--csv", command="snakekit grade")
         except CourseError as e:
             problems.append(str(e))
     if problems:
         for p in problems:
-            print(f"snakekit grade: {p}", file=sys.stderr)
+            print(f"snakekit grade: {one_line(p)}", file=sys.stderr)
         return 2
     from .batch import Grader, class_rows, read_class_csv, write_csv
     from .course import backup_gradebook

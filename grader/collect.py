@@ -43,16 +43,20 @@ import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from snakekit.errors import SnakekitError
+
 from .course import CourseError, default_roster, gradebook, require
+from .files import (ALLOWED_ID, MAX_DOWNLOAD, MAX_FILE, STUDENT_ID, excerpt, file_name, one_line, read_table, size_text,
+                    student_id, unique_in)
 
 COURSE = Path("course")
 MANIFEST_COLUMNS = ["student", "lms", "lms_id", "lms_name", "file", "notebook", "submitted_at", "late", "attempts", "note"]
 ROSTER_IDS = ("canvas_id", "moodle_id", "name", "email", "sis_id", "login_id")
 
 CANVAS = re.compile(r"^(?:(?P<name>.*?)_)??(?:(?P<late>late)_)?(?P<uid>\d+|anon_[A-Za-z0-9]+)_(?P<fid>\d+)_(?P<file>.+)$",
-                    re.I)
+                    re.I | re.S)
 MOODLE_DIR = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_[a-z]+_?$")
-MOODLE_FLAT = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_file_(?P<file>.+)$")
+MOODLE_FLAT = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_file_(?P<file>.+)$", re.S)
 RESUBMISSION = re.compile(r"^(?P<stem>.*?)-(?P<n>\d+)$")
 
 
@@ -96,26 +100,65 @@ def classify(entry: str, data: bytes) -> Upload | None:
     return Upload("folder", who, who, base, entry, data, order=(0, _name_order(base)))
 
 
-def read_download(source: Path) -> list[Upload]:
-    """Every notebook in a zip or a folder, classified."""
-    out = []
+def read_download(source: Path) -> tuple[list[Upload], list[str]]:
+    """Every notebook in a zip or a folder, classified; and the problems of those not read.
+
+    Sizes are checked before anything is read: a notebook over :data:`MAX_FILE` bytes (as the
+    zip declares it, and as it really unpacks) is not read, nor a download whose notebooks
+    declare more than :data:`MAX_DOWNLOAD` bytes together; an entry that does not unpack (a
+    damaged or encrypted one) is a problem of its own and the others are read.
+    """
+    out, problems = [], []
+
+    def too_big(entry: str, size: int) -> bool:
+        if size > MAX_FILE:
+            problems.append(f"{excerpt(entry, quote=False)}: {size_text(size)} uncompressed, more than the "
+                            f"{size_text(MAX_FILE)} a notebook may have; not read (ask the student for the notebook "
+                            "without its outputs)")
+        return size > MAX_FILE
+
+    def climbs(entry: str) -> bool:
+        parts = entry.replace("\\", "/").split("/")
+        if ".." in parts and parts[-1].lower().endswith(".ipynb"):
+            problems.append(f"{excerpt(entry, quote=False)}: a name that climbs out of the download (..); not read")
+        return ".." in parts
+
+    def at_most(total: int) -> None:
+        if total > MAX_DOWNLOAD:
+            raise CourseError(f"{source}: its notebooks hold {size_text(total)}, more than the "
+                              f"{size_text(MAX_DOWNLOAD)} a download may hold; nothing was read (download the "
+                              "submissions in parts, or check the download)")
+
     if source.is_dir():
-        for p in sorted(source.rglob("*")):
-            if p.is_file() and not p.is_symlink():
-                u = classify(str(p.relative_to(source)), b"")
-                if u is not None:
-                    out.append(replace(u, data=p.read_bytes()))
-        return out
+        found = [(p, u) for p in sorted(source.rglob("*")) if p.is_file() and not p.is_symlink()
+                 for u in [classify(str(p.relative_to(source)), b"")] if u is not None]
+        at_most(sum(p.stat().st_size for p, _ in found))
+        for p, u in found:
+            if not too_big(u.entry, p.stat().st_size):
+                out.append(replace(u, data=p.read_bytes()))
+        return out, problems
     try:
         with zipfile.ZipFile(source) as z:
-            for info in z.infolist():
-                if not info.is_dir():
-                    u = classify(info.filename, b"")
-                    if u is not None:
-                        out.append(replace(u, data=z.read(info)))
+            found = [(info, u) for info in z.infolist() if not info.is_dir() and not climbs(info.filename)
+                     for u in [classify(info.filename, b"")] if u is not None]
+            at_most(sum(info.file_size for info, _ in found))
+            for info, u in found:
+                if too_big(u.entry, info.file_size):
+                    continue
+                try:
+                    with z.open(info) as f:
+                        data = f.read(MAX_FILE + 1)
+                except Exception as e:  # noqa: BLE001 - BadZipFile, zlib.error, EOFError, an encrypted entry...
+                    problems.append(f"{excerpt(u.entry, quote=False)}: cannot be unpacked ({type(e).__name__}: "
+                                    f"{excerpt(e, 100)}); not read (download it again, or ask the student to upload "
+                                    "it again)")
+                    continue
+                if not too_big(u.entry, len(data)):
+                    out.append(replace(u, data=data))
     except zipfile.BadZipFile as e:
-        raise CourseError(f"{source} is not a zip file ({e}); give the LMS's download or the folder it unpacked into") from e
-    return out
+        raise CourseError(f"{source} is not a zip file ({excerpt(e, 100)}); give the LMS's download or the folder it "
+                          "unpacked into") from None
+    return out, problems
 
 
 # --- the roster -------------------------------------------------------------------------------
@@ -138,17 +181,16 @@ class Roster:
 
     @classmethod
     def load(cls, path: Path | None) -> "Roster | None":
+        """The roster at ``path``; :class:`CourseError` naming the row of a student id that is not
+        a folder name (``../source``, ``/etc``, a name with ``/`` or a newline)."""
         if path is None:
             return None
-        with open(path, newline="", encoding="utf-8-sig") as f:
-            reader = csv.DictReader(f)
-            cols = [c.strip() for c in reader.fieldnames or []]
-            if "student" not in cols:
-                raise CourseError(f"roster {path} has no 'student' column (its columns: {', '.join(cols) or 'none'}); "
-                                  f"give student and any of {', '.join(ROSTER_IDS)}")
-            rows = [{k.strip(): (v or "").strip() for k, v in r.items() if k} for r in reader]
-        rows = [r for r in rows if r.get("student")]
-        return cls(rows, path)
+        _, rows = read_table(path, "roster", need=("student",),
+                             fix=f"give student and any of {', '.join(ROSTER_IDS)}")
+        for line, r in enumerate(rows, start=2):
+            if r.get("student"):
+                student_id(r["student"], f"roster {path}, row {line}")
+        return cls([r for r in rows if r.get("student")], path)
 
     def find(self, column: str, value: str, *, norm=_norm) -> list[str]:
         return sorted({r["student"] for r in self.rows if r.get(column) and norm(r[column]) == norm(value)})
@@ -165,24 +207,27 @@ class Roster:
                 if not found:  # Canvas writes "last, first" as lastfirst: the roster's "First Last" reversed
                     found = sorted({r["student"] for r in self.rows if r.get("name") and
                                     _canvas_name(" ".join(r["name"].split()[-1:] + r["name"].split()[:-1])) == _canvas_name(u.lms_name)})
-            what = f"Canvas user {u.lms_id} ({u.lms_name or 'anonymous'})"
+            what = f"Canvas user {u.lms_id} ({excerpt(u.lms_name, quote=False) if u.lms_name else 'anonymous'})"
         elif u.lms == "moodle":
             found = self.find("moodle_id", u.lms_id) or self.find("name", u.lms_name)
-            what = f"Moodle participant {u.lms_id} ({u.lms_name})"
+            what = f"Moodle participant {u.lms_id} ({excerpt(u.lms_name, quote=False)})"
         else:
             found = [u.lms_id] if u.lms_id in self.students else self.find("login_id", u.lms_id) or self.find("email", u.lms_id)
-            what = f"'{u.lms_id}'"
+            what = excerpt(u.lms_id)
         if len(found) == 1:
             return found[0], ""
         if not found:
             return None, f"{what} is not in the roster {self.path}"
-        return None, f"{what} matches {len(found)} students of the roster ({', '.join(found)}); not guessed"
+        return None, f"{what} matches {len(found)} students of the roster ({excerpt(', '.join(found), quote=False)}); not guessed"
 
 
 def no_roster_who(u: Upload) -> tuple[str | None, str]:
-    if u.lms == "folder" and re.fullmatch(r"[A-Za-z0-9][\w.@-]*", u.lms_id):
+    if u.lms == "folder" and STUDENT_ID.fullmatch(u.lms_id):
         return u.lms_id, ""
-    what = {"canvas": f"Canvas user {u.lms_id}", "moodle": f"Moodle participant {u.lms_id} ({u.lms_name})"}.get(u.lms, repr(u.lms_id))
+    what = {"canvas": f"Canvas user {u.lms_id}", "moodle": f"Moodle participant {u.lms_id} ({excerpt(u.lms_name, quote=False)})"}.get(
+        u.lms, excerpt(u.lms_id))
+    if u.lms == "folder":
+        return None, f"{what} cannot be a student's folder name (a student id is {ALLOWED_ID})"
     return None, f"{what}: no roster to map it to a student (give --roster, or write {COURSE}/roster.csv)"
 
 
@@ -196,31 +241,29 @@ def read_times(path: Path, zone: dt.tzinfo) -> list[tuple[str, str, dt.datetime]
     """``(column, value, time)`` rows of a times CSV (Moodle's grading worksheet reads as is)."""
     import dateutil.parser
 
-    with open(path, newline="", encoding="utf-8-sig") as f:
-        reader = csv.DictReader(f)
-        cols = [c.strip() for c in reader.fieldnames or []]
-        tcol = next((c for c in TIME_COLUMNS if c in cols), None)
-        icol = next((c for c in ID_COLUMNS if c in cols), None)
-        if tcol is None or icol is None:
-            raise CourseError(f"times file {path} needs a time column ({', '.join(TIME_COLUMNS)}) and an id column "
-                              f"({', '.join(ID_COLUMNS)}); it has {', '.join(cols)}")
-        out = []
-        for r in reader:
-            r = {(k or "").strip(): (v or "").strip() for k, v in r.items()}
-            raw = r.get(tcol, "")
-            if not raw or raw in ("-", "No submission"):
-                continue
-            try:
-                t = dateutil.parser.parse(raw)
-            except (ValueError, OverflowError) as e:
-                raise CourseError(f"times file {path}: cannot read the time {raw!r} ({e})") from e
-            if t.tzinfo is None:
-                t = t.replace(tzinfo=zone)
-            value = r.get(icol, "")
-            if icol == "Identifier":  # Moodle: "Participant 12345"
-                value = value.split()[-1] if value else value
-            out.append((icol, value, t.astimezone(dt.timezone.utc)))
-        return out
+    cols, rows = read_table(path, "times file")
+    tcol = next((c for c in TIME_COLUMNS if c in cols), None)
+    icol = next((c for c in ID_COLUMNS if c in cols), None)
+    if tcol is None or icol is None:
+        raise CourseError(f"times file {path} needs a time column ({', '.join(TIME_COLUMNS)}) and an id column "
+                          f"({', '.join(ID_COLUMNS)}); it has {excerpt(', '.join(cols))}")
+    out = []
+    for line, r in enumerate(rows, start=2):
+        raw = r.get(tcol, "")
+        if not raw or raw in ("-", "No submission"):
+            continue
+        try:
+            t = dateutil.parser.parse(raw[:100])
+        except (ValueError, OverflowError) as e:
+            raise CourseError(f"times file {path}, row {line}: cannot read the time {excerpt(raw)} "
+                              f"({excerpt(e, 100)})") from None
+        if t.tzinfo is None:
+            t = t.replace(tzinfo=zone)
+        value = r.get(icol, "")
+        if icol == "Identifier":  # Moodle: "Participant 12345"
+            value = value.split()[-1] if value else value
+        out.append((icol, value, t.astimezone(dt.timezone.utc)))
+    return out
 
 
 def _time_for(student: str, uploads: list[Upload], roster: Roster | None, times) -> dt.datetime | None:
@@ -289,27 +332,27 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
     cells = assignment_cells(course, assignment)
     with gradebook(course) as gb:
         due = gb.find_assignment(assignment).duedate
-    uploads = read_download(source)
-    if not uploads:
+    uploads, problems = read_download(source)
+    if not uploads and not problems:
         raise CourseError(f"{source} holds no notebook (.ipynb)")
+    old = read_manifest(course, assignment)  # a damaged one stops collect before anything is placed
     by_student: dict[str, list[Upload]] = {}
-    problems, unmatched = [], []
+    unmatched = []
+    aside = course / "collected" / f"{assignment}-unmatched"
     for u in uploads:
         student, why = roster.who(u) if roster else no_roster_who(u)
         if student is None:
-            problems.append(f"{u.entry}: {why}")
+            aside.mkdir(parents=True, exist_ok=True)
+            kept = unique_in(aside, Path(u.entry.replace("\\", "/")).name, u.data)
+            kept.write_bytes(u.data)
+            problems.append(f"{excerpt(u.entry, quote=False)}: {why} (kept as {kept.name})")
             unmatched.append(u)
         else:
             by_student.setdefault(student, []).append(u)
     rows = []
     for student, ups in sorted(by_student.items()):
         rows.append(_place(course, assignment, student, ups, cells, due, _time_for(student, ups, roster, times)))
-    if unmatched:
-        aside = course / "collected" / f"{assignment}-unmatched"
-        aside.mkdir(parents=True, exist_ok=True)
-        for u in unmatched:
-            (aside / Path(u.entry).name).write_bytes(u.data)
-    _write_manifest(course, assignment, rows)
+    _write_manifest(course, assignment, rows, old)
     width = max([len(r["student"]) for r in rows] + [7])
     for r in rows:
         print(f"{r['student']:<{width}}  {r['notebook'] or 'missing notebook':<24} "
@@ -323,7 +366,7 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
 
 
 def _place(course, assignment, student, ups, cells, due, when) -> dict:
-    folder = course / "submitted" / student / assignment
+    folder = course / "submitted" / student_id(student, "collect") / assignment
     attempts = folder / "attempts"
     ours = [(u, which_notebook(u, cells)) for u in ups]
     ours.sort(key=lambda x: x[0].order)
@@ -341,11 +384,11 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
                 _keep(folder / "timestamp.txt", attempts, "previously-collected")
         dest.write_bytes(u.data)
         if Path(u.file).name != dest.name:
-            notes.append(f"{u.file} saved as {dest.name}")
+            notes.append(f"{excerpt(u.file, quote=False)} saved as {dest.name}")
     older = [u for u, nb in ours if nb is None or newest.get(nb) is not u]
     for u in older:
         attempts.mkdir(exist_ok=True)
-        (attempts / Path(u.entry).name).write_bytes(u.data)
+        unique_in(attempts, Path(u.entry.replace("\\", "/")).name, u.data).write_bytes(u.data)
     if older:
         notes.append(f"{len(older)} earlier or other file(s) kept in attempts/, not graded")
     late = any(u.late for u in newest.values())
@@ -363,7 +406,8 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
         _keep(folder / "timestamp.txt", attempts, "previously-collected")
     u0 = next(iter(newest.values()), ups[-1])
     is_late = late or (stamp is not None and due is not None and stamp > due.replace(tzinfo=dt.timezone.utc))
-    return {"student": student, "lms": u0.lms, "lms_id": u0.lms_id, "lms_name": u0.lms_name, "file": Path(u0.entry).name,
+    return {"student": student, "lms": u0.lms, "lms_id": u0.lms_id, "lms_name": u0.lms_name,
+            "file": file_name(u0.entry),
             "notebook": ", ".join(f"{nb}.ipynb" for nb in newest), "submitted_at": _stamp(stamp) if stamp else "",
             "late": "yes" if is_late else "", "attempts": str(len(older)),
             "note": "; ".join(notes) if newest else "missing notebook: no notebook of the assignment (kept in attempts/)"}
@@ -377,13 +421,11 @@ def _keep(path: Path, attempts: Path, tag: str) -> None:
     shutil.move(str(path), attempts / f"{tag}-{n}-{path.name}")
 
 
-def _write_manifest(course: Path, assignment: str, rows: list[dict]) -> Path:
+def _write_manifest(course: Path, assignment: str, rows: list[dict], old: dict[str, dict]) -> Path:
+    """The manifest: ``rows`` over ``old`` (a later download of a few students keeps the others' rows)."""
     path = course / "collected" / f"{assignment}.csv"
     path.parent.mkdir(exist_ok=True)
-    old = {}
-    if path.exists():  # a later download of a few students keeps the others' rows
-        with open(path, newline="") as f:
-            old = {r["student"]: r for r in csv.DictReader(f)}
+    old = dict(old)
     old.update({r["student"]: r for r in rows})
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, MANIFEST_COLUMNS)
@@ -394,11 +436,13 @@ def _write_manifest(course: Path, assignment: str, rows: list[dict]) -> Path:
 
 
 def read_manifest(course: Path, assignment: str) -> dict[str, dict]:
+    """``collected/<a>.csv`` by student (empty if there is none); a damaged one is a :class:`CourseError`."""
     path = Path(course) / "collected" / f"{assignment}.csv"
     if not path.exists():
         return {}
-    with open(path, newline="") as f:
-        return {r["student"]: r for r in csv.DictReader(f)}
+    again = f"snakekit collect writes it: move it away and collect {assignment} again"
+    _, rows = read_table(path, "manifest", need=("student", "lms", "file"), fix=again, unreadable=again)
+    return {r["student"]: r for r in rows if r.get("student")}
 
 
 # --- the command ----------------------------------------------------------------------------------
@@ -433,15 +477,15 @@ def main(argv: list[str] | None = None, out=None) -> int:
         roster = Roster.load(default_roster(course, args.roster))
         zone = dateutil.tz.gettz(args.timezone)
         if zone is None:
-            raise CourseError(f"--timezone {args.timezone} is not a time zone (e.g. UTC, Europe/Zurich)")
+            raise CourseError(f"--timezone {excerpt(args.timezone)} is not a time zone (e.g. UTC, Europe/Zurich)")
         times = read_times(args.times, zone) if args.times else []
-    except (CourseError, OSError) as e:
-        print(f"snakekit collect: {e}", file=sys.stderr)
+    except (SnakekitError, OSError) as e:
+        print(f"snakekit collect: {one_line(e)}", file=sys.stderr)
         return 2
     try:
         _, problems = collect(course.resolve(), args.assignment, args.source, roster=roster, times=times, out=out)
-    except CourseError as e:
-        print(f"snakekit collect: {e}", file=sys.stderr)
+    except (SnakekitError, OSError) as e:
+        print(f"snakekit collect: {one_line(e)}", file=sys.stderr)
         return 2
     return 1 if problems else 0
 

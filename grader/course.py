@@ -1,6 +1,7 @@
 """The course folder as the TA's commands share it: its configuration, its gradebook (backed
-up before a batch writes it), the paths no command may write over, and whether the release
-and the references still match the source.
+up before a batch writes it; a damaged one is a :class:`CourseError` saying how to restore it),
+and whether the release and the references still match the source. The paths a command may
+write are checked in :mod:`grader.files`.
 """
 
 from __future__ import annotations
@@ -20,11 +21,6 @@ from snakekit.errors import SnakekitError
 
 #: Backups of the gradebook kept in ``<course>/backups/`` (the oldest are removed).
 BACKUPS_KEPT = 20
-
-#: Folders of the course that hold what no command may write over (the output of a command
-#: never goes there): the instructor's sources, the release, the students' submissions.
-PROTECTED = ("source", "release", "submitted", "autograded", "feedback", "exchange", "backups")
-
 
 class CourseError(SnakekitError, ValueError):
     """A command's arguments name something the course does not have, or a path it must not write."""
@@ -69,11 +65,28 @@ def db_url(course: Path) -> str:
 def gradebook(course: Path):
     """nbgrader's Gradebook of the course (its SQLAlchemy session warnings silenced)."""
     from nbgrader.api import Gradebook
+    from sqlalchemy.exc import DatabaseError
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        with Gradebook(db_url(course), course_id(course)) as gb:
-            yield gb
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Gradebook(db_url(course), course_id(course)) as gb:
+                yield gb
+    except (DatabaseError, sqlite3.DatabaseError) as e:
+        raise gradebook_error(course, e) from None
+
+
+def gradebook_error(course: Path, e: Exception) -> CourseError:
+    """What to do about an SQLite error of the course's gradebook."""
+    why = str(getattr(e, "orig", None) or e).splitlines()[0][:200]
+    path = Path(course) / "gradebook.db"
+    if "locked" in why or "busy" in why:
+        return CourseError(f"the gradebook {path} is in use ({why}); wait for the other command (or formgrader's "
+                           "save) to end and run this again")
+    backups = sorted((Path(course) / "backups").glob("gradebook-*.db"))
+    restore = (f"restore the newest backup: cp {backups[-1]} {path}" if backups else
+               f"restore it from a copy (no backups in {Path(course) / 'backups'})")
+    return CourseError(f"the gradebook {path} cannot be read ({why}): it is damaged or not a gradebook; {restore}")
 
 
 def assignments(course: Path) -> list[str]:
@@ -82,7 +95,7 @@ def assignments(course: Path) -> list[str]:
     names = {p.name for p in (course / "source").iterdir() if p.is_dir() and not p.name.startswith(".")} \
         if (course / "source").is_dir() else set()
     if (course / "gradebook.db").exists():
-        with contextlib.suppress(Exception), gradebook(course) as gb:
+        with gradebook(course) as gb:  # a damaged one: CourseError, saying how to restore it
             names |= {a.name for a in gb.assignments if a.notebooks}
     return sorted(names)
 
@@ -110,41 +123,6 @@ def default_roster(course: Path, given: Path | None) -> Path | None:
     return given or (Path(course) / "roster.csv" if (Path(course) / "roster.csv").is_file() else None)
 
 
-# --- paths a command may write ------------------------------------------------------------------
-
-
-def check_output(path: Path, course: Path, *, suffix: str, what: str, header: str | None = None) -> Path:
-    """Refuse an output path that would write over something of the course's.
-
-    ``path`` must end in ``suffix``, lie in an existing folder, not be a folder, not be the
-    gradebook or inside a folder of :data:`PROTECTED`, and if it exists it must be a file this
-    command wrote before (its first line starts with ``header``).
-    """
-    path = Path(path)
-    resolved = path.resolve()
-    root = Path(course).resolve()
-    if resolved.is_dir():
-        raise CourseError(f"{what} {path} is a folder; give a file name ending in {suffix}")
-    if resolved == root / "gradebook.db" or resolved.name.endswith((".db", ".sqlite", ".ipynb")):
-        raise CourseError(f"{what} {path} would write over a {'gradebook' if resolved.suffix != '.ipynb' else 'notebook'}; "
-                          f"give a file name ending in {suffix}")
-    if resolved.suffix.lower() != suffix:
-        raise CourseError(f"{what} {path} must end in {suffix}")
-    for name in PROTECTED:
-        if resolved.is_relative_to(root / name):
-            raise CourseError(f"{what} {path} is inside {course}/{name}/, which no command writes; "
-                              "write it elsewhere (the course folder itself is fine)")
-    if not resolved.parent.is_dir():
-        raise CourseError(f"cannot write {what} {path}: folder {resolved.parent} does not exist")
-    if resolved.exists() and header is not None:
-        with open(resolved, "rb") as f:
-            first = f.readline(4096).decode("utf-8", "replace").lstrip("\ufeff")
-        if not first.startswith(header):
-            raise CourseError(f"{what} {path} exists and is not one this command wrote (its first line is "
-                              f"{first.strip()[:80]!r}); give another file name")
-    return path
-
-
 # --- the gradebook's backups ------------------------------------------------------------------
 
 
@@ -158,8 +136,12 @@ def backup_gradebook(course: Path, keep: int = BACKUPS_KEPT) -> Path | None:
     folder.mkdir(exist_ok=True)
     stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%d-%H%M%S-%f")
     dest = folder / f"gradebook-{stamp}.db"
-    with contextlib.closing(sqlite3.connect(src)) as s, contextlib.closing(sqlite3.connect(dest)) as d:
-        s.backup(d)
+    try:
+        with contextlib.closing(sqlite3.connect(src)) as s, contextlib.closing(sqlite3.connect(dest)) as d:
+            s.backup(d)
+    except sqlite3.DatabaseError as e:
+        dest.unlink(missing_ok=True)
+        raise gradebook_error(course, e) from None
     for old in sorted(folder.glob("gradebook-*.db"))[:-keep]:
         old.unlink()
     return dest

@@ -43,7 +43,10 @@ import zipfile
 from pathlib import Path
 
 from .collect import Roster, _Parser, read_manifest
-from .course import CourseError, check_output, config, course_id, default_roster, gradebook, require
+from snakekit.errors import SnakekitError
+
+from .course import CourseError, config, course_id, default_roster, gradebook, require
+from .files import check_output, excerpt, one_line
 
 COURSE = Path("course")
 CANVAS_PREFIX = re.compile(r"^(?P<prefix>.*?_(?:\d+|anon_[A-Za-z0-9]+)_\d+_)")
@@ -112,18 +115,17 @@ def export_main(argv: list[str] | None = None, out=None) -> int:
     args = p.parse_args(argv)
     course = args.course
     path = args.out or course / f"grades-{args.lms or 'all'}.csv"
-    header = {"canvas": "Student,ID", "moodle": "Full name,", None: "student,"}[args.lms]
     try:
         if not (course / "gradebook.db").is_file():
             raise CourseError(f"no gradebook in {course} (give --course DIR; grade an assignment first)")
-        check_output(path, course, suffix=".csv", what="-o", header=header)
+        check_output(path, course, suffix=".csv", what="-o", command="snakekit export", reads={args.roster: "the roster"})
         roster = Roster.load(default_roster(course, args.roster))
         if args.lms == "canvas" and roster is not None and not any(r.get("canvas_id") for r in roster.rows):
             print("snakekit export: the roster has no canvas_id column: Canvas will match students by name",
                   file=sys.stderr)
         n = export(course, args.lms, path, roster, args.assignment)
-    except (CourseError, OSError) as e:
-        print(f"snakekit export: {e}", file=sys.stderr)
+    except (SnakekitError, OSError) as e:
+        print(f"snakekit export: {one_line(e)}", file=sys.stderr)
         return 2
     print(f"exported {n} student(s) to {path}" + (f" ({args.lms} import format)" if args.lms else ""), file=out)
     return 0
@@ -178,8 +180,10 @@ def lms_name(row: dict, page: Path) -> str | None:
     if row.get("lms") == "canvas":
         m = CANVAS_PREFIX.match(row.get("file", ""))
         return f"{m['prefix']}{page.stem}-feedback.html" if m else None
-    if row.get("lms") == "moodle":
-        return f"{row['lms_name']}_{row['lms_id']}_assignfeedback_file_/{page.stem}-feedback.html"
+    if row.get("lms") == "moodle":  # the name and id as Moodle's own folder names them, or None
+        folder = f"{row['lms_name']}_{row['lms_id']}_assignfeedback_file_"
+        return None if re.search(r"[/\\\x00-\x1f]", folder) or folder.startswith(".") else \
+            f"{folder}/{page.stem}-feedback.html"
     return None
 
 
@@ -197,7 +201,8 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
         if row and row.get("lms") in ("canvas", "moodle"):
             names = {lms_name(row, p): p for p in files}
             if None in names:
-                problems.append(f"{student}: the collected file name {row.get('file')!r} does not carry the LMS's ids")
+                problems.append(f"{student}: the collected file name {excerpt(row.get('file'))} does not carry the "
+                                "LMS's ids")
                 continue
             entries.setdefault(row["lms"], {}).update(names)
             done["zip"] += 1
@@ -215,6 +220,7 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
         path = zip_path or course / f"feedback-{assignment}-{lms}.zip"
         if len(entries) > 1 and zip_path is not None:
             path = zip_path.with_name(f"{zip_path.stem}-{lms}{zip_path.suffix}")
+        check_output(path, course, suffix=".zip", what="the feedback zip", command="snakekit return")
         with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
             for name, page in sorted(names.items()):
                 z.write(page, name)
@@ -244,15 +250,13 @@ def return_main(argv: list[str] | None = None, out=None) -> int:
     try:
         require(course, args.assignment)
         if args.out is not None:
-            check_output(args.out, course, suffix=".zip", what="-o")
-            if args.out.exists():
-                raise CourseError(f"-o {args.out} exists; give a new file name")
+            check_output(args.out, course, suffix=".zip", what="-o", command="snakekit return")
         if args.exchange is not None and not args.exchange.is_dir():
             raise CourseError(f"--exchange {args.exchange} is not a folder")
         n, problems = return_feedback(course.resolve(), args.assignment, exchange=args.exchange,
                                       zip_path=args.out, out=out)
-    except CourseError as e:
-        print(f"snakekit return: {e}", file=sys.stderr)
+    except (SnakekitError, OSError) as e:
+        print(f"snakekit return: {one_line(e)}", file=sys.stderr)
         return 2
     print(f"returned {n} student(s)' feedback of {args.assignment}" + (f"; {len(problems)} not" if problems else ""),
           file=out)

@@ -118,10 +118,12 @@ def class_rows(course: Path, assignment: str, results: list[SubmissionResult] = 
 
 
 def read_class_csv(path: Path) -> dict[str, dict]:
+    """The rows of an earlier class CSV by student (empty if there is none)."""
+    from .files import read_table
+
     if not Path(path).is_file():
         return {}
-    with open(path, newline="", encoding="utf-8-sig") as f:
-        return {r["student"]: r for r in csv.DictReader(f) if r.get("student")}
+    return {r["student"]: r for r in read_table(path, "class CSV", need=("student",))[1] if r.get("student")}
 
 
 def write_csv(rows: list[dict], path: Path) -> Path:

@@ -320,7 +320,7 @@ def small(released, tmp_path_factory):
     ("submitted", "is a folder"),
     (f"source/{ASSIGNMENT}/{ASSIGNMENT}.ipynb", "would write over a notebook"),
     (f"release/{ASSIGNMENT}/grades.csv", "is inside"),
-    ("roster.csv", "exists and is not one this command wrote"),
+    ("roster.csv", "is the roster"),
 ])
 def test_csv_that_would_write_over_the_course_is_refused(small, target, says, capsys):
     (small / "roster.csv").write_text("student\nann\n")

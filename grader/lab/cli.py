@@ -14,14 +14,15 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import signal
 import sys
 from pathlib import Path
 
 from snakekit.errors import SnakekitError
 
-from .jobs import STATES, LabError, Queue, graded_students, lab_dir, ordered, settings
+from ..course import CourseError
+from ..files import check_output, one_line
+from .jobs import STATES, LabError, Queue, graded_students, lab_dir, ordered, settings, write_atomic
 
 
 def parser(calibrating: bool) -> argparse.ArgumentParser:
@@ -74,7 +75,7 @@ def status(course: Path, assignment: str, csv_path: Path | None, out) -> int:
         print(f"{j['student']:<{width}}  {j['state']:<9}{pts}  {j['reason']}", file=out)
     print(", ".join(f"{n} {s}" for s, n in counts.items() if n), file=out)
     if csv_path is not None:
-        shutil.copyfile(q.path.with_name("status.csv"), csv_path)
+        write_atomic(csv_path, q.path.with_name("status.csv").read_bytes())
         print(f"written {csv_path}", file=out)
     return 0
 
@@ -96,6 +97,8 @@ def main(argv=None, out=None) -> int:
     try:
         if not course.is_dir():
             raise LabError(f"no course folder {course} (give --course DIR)")
+        if not calibrating and args.csv is not None:
+            check_output(args.csv, course, suffix=".csv", what="--csv", command="snakekit lab")
         s = settings(course, args.assignment)
         if not calibrating and args.status:
             return status(course, args.assignment, args.csv, out)
@@ -132,8 +135,8 @@ def main(argv=None, out=None) -> int:
         print(f"snakekit lab: results in {lab_dir(course, args.assignment)}/results, the list in "
               f"{q.path.with_name('status.csv')}", file=out)
         return code
-    except LabError as e:
-        print(f"snakekit lab: {e}", file=sys.stderr)
+    except (LabError, CourseError) as e:
+        print(f"snakekit lab: {one_line(e)}", file=sys.stderr)
         return 2
     except SnakekitError as e:
         print(f"snakekit lab: {e}", file=sys.stderr)

@@ -121,11 +121,10 @@ def ordered(course: Path, assignment: str, students: list[str], order: str) -> l
     if order == "student":
         return sorted(students)
     rank: dict[str, float] = {}
-    listed = Path(course) / "collected" / f"{assignment}.csv"
-    if listed.is_file():
-        with open(listed, newline="") as f:
-            for k, row in enumerate(csv.DictReader(f)):
-                rank.setdefault(row.get("student", ""), k)
+    from ..collect import read_manifest
+
+    for k, listed in enumerate(read_manifest(course, assignment)):
+        rank.setdefault(listed, k)
     for s in students:
         if s not in rank:
             stamp = Path(course) / "submitted" / s / assignment / "timestamp.txt"
