@@ -77,12 +77,12 @@ class Clearance:
     def __post_init__(self):
         object.__setattr__(self, "q", frozen(self.q))
 
-    def describe(self) -> str:
-        """``"link1 and link4 are 3.2 mm apart"`` (or overlap by ...)."""
+    def describe(self, digits: int = 1) -> str:
+        """``"link1 and link4 are 3.2 mm apart"`` (or overlap by ...), in mm with ``digits`` decimals."""
         a, b = self.links
         if self.distance < 0:
-            return f"{a} and {b} overlap by {-1000 * self.distance:.1f} mm"
-        return f"{a} and {b} are {1000 * self.distance:.1f} mm apart"
+            return f"{a} and {b} overlap by {-1000 * self.distance:.{digits}f} mm"
+        return f"{a} and {b} are {1000 * self.distance:.{digits}f} mm apart"
 
 
 class _Checker:
@@ -202,17 +202,18 @@ def first_collision(times, positions, *, spec: SnakeSpec = SPEC) -> Clearance | 
     return first_collision_on(StraightPath(times, positions), spec=spec)
 
 
-def first_collision_on(path, *, spec: SnakeSpec = SPEC) -> Clearance | None:
+def first_collision_on(path, *, spec: SnakeSpec = SPEC, margin: float | None = None) -> Clearance | None:
     """The first pose, in time, on ``path`` (a :class:`StraightPath` or the servos'
     :class:`snakekit.profile_planner.ReferencePath`) that brings two non-neighbouring links
     closer than ``spec.collision_margin``; None when the whole path keeps them apart.
 
     The path is looked at its checkpoints (its goals), and each stretch between two is proven
     safe by the bound of the module doc, with the joints' travel along the path (back and
-    forth counted alike) in place of their change, or split in time until it is.
+    forth counted alike) in place of their change, or split in time until it is. ``margin``
+    [m]: the least distance allowed (default ``spec.collision_margin``).
     """
     c = _checker(spec)
-    margin = spec.collision_margin
+    margin = spec.collision_margin if margin is None else margin
     times = path.checkpoints
     positions, travel = path.positions(times), path.variation(times)
     D = np.array([c.distances(q) for q in positions])
@@ -273,6 +274,11 @@ def _split(c: _Checker, path, a, b, margin) -> Clearance | None:
     return _split(c, path, (tm, dm, vm), b, margin)
 
 
+#: How much closer [m] than where it stands an arm already inside the margin may come on a
+#: way out (the check's own resolution, and the servos' tracking, with room to spare).
+FOLDED_START_ALLOWANCE = 0.0005
+
+
 def check_path(times, positions, *, what: str = "trajectory", spec: SnakeSpec = SPEC, path=None) -> None:
     """Raise :class:`~snakekit.errors.CollisionError` if the path through the goals
     ``positions`` (N, n_joints) [rad] at ``times`` (N,) [s] brings two non-neighbouring links
@@ -285,20 +291,20 @@ def check_path(times, positions, *, what: str = "trajectory", spec: SnakeSpec = 
 
     The message names when (the time; for ``what="command"``, from when the goal is sent, or
     with times ``[0, 1]`` and no ``path``, how far along the move from the last goal), the two
-    links, and the closest they come on that stretch. For a command whose start is already too
-    close (a robot started folded), only the goal is judged, so the arm can move out.
+    links, and the closest they come on that stretch. An arm that already stands closer than
+    the margin (started folded, or bent by hand with torque off) may move out: its path is
+    refused only where it brings two links closer than they are at the start (less
+    :data:`FOLDED_START_ALLOWANCE`).
     """
     times, positions = np.asarray(times, dtype=float), np.asarray(positions, dtype=float)
     straight = StraightPath(times, positions)
     profiled, path = path is not None, straight if path is None else path
-    hit = first_collision_on(path, spec=spec)
-    if hit is not None and what == "command" and hit.time == path.start:
-        hit = first_collision(times[-1:], positions[-1:], spec=spec)  # only the goal
-        if hit is not None:
-            hit = Clearance(hit.distance, hit.links, hit.q, path.end)
+    margin = spec.collision_margin
+    start = clearance(path.positions([path.start])[0], spec=spec)
+    allowed = min(margin, start.distance - FOLDED_START_ALLOWANCE)
+    hit = first_collision_on(path, spec=spec, margin=allowed)
     if hit is None:
         return
-    margin = spec.collision_margin
     cps = path.checkpoints
     k = min(max(int(np.searchsorted(cps, hit.time, side="right")), 1), len(cps) - 1)  # the checkpoint after the hit
     worst = worst_between(None, None, cps[k - 1], cps[k], spec=spec, path=path)
@@ -317,15 +323,20 @@ def check_path(times, positions, *, what: str = "trajectory", spec: SnakeSpec = 
         if profiled:
             where += " on the way the servos take between the goals (each joint at its profile's speed)"
         deepest = f"at t = {worst.time:.3f} s"
+    if allowed < margin:
+        rule = (f"the arm already stands inside the {1000 * margin:.0f} mm margin ({start.describe(digits=2)}): it "
+                f"may move out, but not bring two links closer than that. Here, {where}, {hit.links[0]} and "
+                f"{hit.links[1]} would come closer")
+    else:
+        rule = (f"{where}, {hit.links[0]} and {hit.links[1]} come closer than the {1000 * margin:.0f} mm margin")
     advice = ("Choose goals that keep the links apart (snakekit.clearance(q) says how far apart they are), "
               "or go around through a more open pose.")
-    if profiled and not at_goal and first_collision_on(straight, spec=spec) is None:
+    if profiled and not at_goal and first_collision_on(straight, spec=spec, margin=allowed) is None:
         advice = ("The straight path between the goals is clear: " + (
             "robot.move_to(q) keeps the joints together along it." if what == "command" else
             "send goals closer together in time (snakekit.joint_trajectory samples a move at 100 Hz) so "
             "the joints keep together along it.") + " " + advice)
     raise CollisionError(
-        f"the {what} would fold the arm onto itself: {where}, {hit.links[0]} and {hit.links[1]} come "
-        f"closer than the {1000 * margin:.0f} mm margin, and {deepest} {worst.describe()} "
+        f"the {what} would fold the arm onto itself: {rule}, and {deepest} {worst.describe(digits=2)} "
         f"(q = {np.round(worst.q, 3).tolist()} rad). Nothing was sent. " + advice,
         when, hit.links, hit.distance, hit.q, margin)

@@ -356,14 +356,14 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
     what = f"({_fmt(target_xy[0])}, {_fmt(target_xy[1])}) m" + (
         f" with heading {heading:.4f} rad" if use_heading else "")
     if folded is not None:
-        safe_q = _closest_configuration(k, target, use_heading, [best_q], rng)  # never a folded pose
+        safe_q = _closest_configuration(k, target, use_heading, [None], np.random.default_rng(seed))  # as closest_reachable_point
         closest = tool_pose_2d(safe_q, spec=spec)
         raise UnreachableTargetError(
             f"target {what} is reached only with the arm folded onto itself: in the solutions found "
             f"from {len(starts)} starts, {folded.describe()} (they must stay "
             f"{1000 * spec.collision_margin:.0f} mm apart). The closest tool point found with the links apart "
-            f"is ({closest[0]:.4f}, {closest[1]:.4f}) m. Pick a target the arm reaches more openly, "
-            "or try another q0 or more restarts.",
+            f"is ({closest[0]:.4f}, {closest[1]:.4f}) m (snakekit.closest_reachable_point). Pick a target the arm "
+            "reaches more openly, or try another q0 or more restarts.",
             target=(*target_xy.tolist(), *([heading] if use_heading else [])),
             closest=tuple(closest[:2]), q_closest=safe_q)
     best_q = _closest_configuration(k, target, use_heading, [best_q], rng)

@@ -193,6 +193,9 @@ class Robot(ABC):
     late_goal = 0.03
     late_shifts = 0
     _checked = None  # the servos' way of the goals last checked (snakekit.profile_planner.ReferencePath)
+    #: how much later [s] than its check assumed a goal may leave (a later one is checked again)
+    send_slack = 0.005
+    _lead = 0.0  # how long a check takes on this robot's clock [s] (learnt): goals are checked as sent then
     #: The longest trajectory :meth:`run` accepts [s]; longer is refused as probably given in
     #: milliseconds. Raise it on a robot to run a longer one on purpose.
     max_duration = MAX_DURATION
@@ -257,30 +260,53 @@ class Robot(ABC):
         None for a backend that has none: its paths are checked as straight lines."""
         return None
 
-    def _goal_times(self, times: np.ndarray) -> np.ndarray:
-        """When goals due ``times`` [s] from now reach the servos, on the robot clock [s]."""
-        return self._now() + times
+    def _goal_times(self, times: np.ndarray, start: float) -> np.ndarray:
+        """When goals due ``times`` [s] after ``start`` (robot clock [s]) reach the servos [s]."""
+        return start + times
 
     def _check_path(self, times: np.ndarray, positions: np.ndarray, what: str) -> None:
         """Refuse goals whose path folds the arm onto itself (:func:`snakekit.collision.check_path`):
-        the path the servos' profiles make of them, sent from now on, when the backend has
-        profiles; for a command (``times`` ``[0, 1]``: from the last goal to the new one) only
-        the new goal is sent."""
+        the path the servos' profiles make of them, when the backend has profiles; for a
+        command (``times`` ``[0, 1]``: from the last goal to the new one) only the new goal is
+        sent, and its way starts where the servos are then.
+
+        On a robot whose clock runs while the kit checks (the real arm, the emulated bus), the
+        goals are checked as sent :attr:`_lead` later than now, and this returns at that time:
+        a goal then leaves when its check said, not later on a way that was never checked. A
+        check that outlasts its lead is made again with a longer one.
+        """
         from .collision import check_path  # Pinocchio only when a goal is checked: runs load without it
         from .profile_planner import ReferencePath
 
         planner = self._profiles()
         if planner is None:
             return check_path(times, positions, what=what, spec=self.spec)
-        now = self._now()
         if what == "command":
             times, positions = times[1:] - times[1], positions[1:]
-        sent = self._goal_times(times - times[0])
-        self._checked = ReferencePath.of_goals(planner, sent, positions)  # a backend may reuse its planning
-        path = self._checked.shifted(times[0] - now)
-        if what == "command":  # judged from where the servos are now, not from the last goal
-            times, positions = np.array([0.0, path.end]), np.array([path.positions([0.0])[0], positions[-1]])
-        check_path(times, positions, what=what, spec=self.spec, path=path)
+        for _ in range(8):
+            begun = self._now()
+            sent = self._goal_times(times - times[0], begun + self._lead)
+            self._checked = ReferencePath.of_goals(planner, sent, positions)  # a backend may reuse its planning
+            path = self._checked.shifted(times[0] - sent[0])
+            if what == "command":  # judged from where the servos are when it leaves, not from the last goal
+                check_path([0.0, path.end], [path.positions([0.0])[0], positions[-1]], what=what, spec=self.spec,
+                           path=path)
+            else:
+                check_path(times, positions, what=what, spec=self.spec, path=path)
+            took = self._now() - begun
+            in_time = self._now() <= sent[0]
+            if took > 0:  # a clock that runs while checking: the lead follows what checks take
+                self._lead = max(1.5 * took + 0.002, 0.8 * self._lead) if in_time else min(1.5 * took + 0.002, 1.0)
+            if in_time:
+                self._advance(sent[0] - 0.004)
+                while self._now() < sent[0]:  # the last few ms without sleep's lateness
+                    pass
+            # Late by more than the slack matters only while a joint moves: from rest, the way is the same whenever.
+            if self._now() <= sent[0] + self.send_slack or not planner.moving(sent[0]):
+                return
+        raise BackendError(f"the {what} was checked 8 times, but each check took longer than the time it was "
+                           "checked for, so its goals would leave later, on a way that was not checked; nothing was "
+                           "sent. The computer is too busy: close other programs and try again.")
 
     def run(self, trajectory: Trajectory, *, record_rate: float = 100.0, settle: float = 0.5,
             progress: bool | None = None) -> Run:
@@ -364,15 +390,20 @@ class Robot(ABC):
                            f"nothing was sent. To run one this long on purpose, set robot.max_duration = "
                            f"{np.ceil(trajectory.duration):.0f} first")
         trajectory.check_limits(self.spec)
-        self._check_path(trajectory.times, trajectory.positions, "trajectory")
-        present = self.read().positions
+        state = self.read()
+        present = state.positions
         gap = np.abs(trajectory.positions[0] - present)
         if gap.max() > self.start_tolerance:
             j = int(gap.argmax())
+            moving = np.abs(state.velocities)
+            todo = (f"The arm is still moving (joint {int(moving.argmax()) + 1} at {moving.max():.2f} rad/s): wait "
+                    "until it stops, then try again." if moving.max() > 0.05 else
+                    "Move there first with robot.move_to(trajectory.positions[0]).")
             raise LimitError(
                 f"the trajectory starts {gap[j]:.3f} rad away from the arm's present position "
                 f"(joint {j + 1}: {present[j]:+.3f} -> {trajectory.positions[0, j]:+.3f} rad); nothing was sent. "
-                "Move there first with robot.move_to(trajectory.positions[0]).")
+                + todo)
+        self._check_path(trajectory.times, trajectory.positions, "trajectory")  # last: it returns when the run starts
 
     @staticmethod
     def _record_times(trajectory: Trajectory, record_rate: float, settle: float) -> np.ndarray:

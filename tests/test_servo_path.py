@@ -159,3 +159,52 @@ def test_the_emulated_servos_never_bring_two_links_within_the_margin(pairs):
     assert d.min() >= MARGIN, d.min()
     # the polygons in the plane never see more room than the hulls in space
     assert all(p <= m + 1e-6 for m, p, _ in seen)
+
+
+def test_a_goal_leaves_when_its_check_said_however_long_the_check_takes(monkeypatch):
+    """On the emulated bus the clock runs while the kit checks: a goal sent when the check ends
+    would take a way nobody checked (the servos moved on meanwhile). With every check slowed by
+    0.3 s, a goal sent while the arm moves is checked for the time it will leave, and leaves
+    then: never before, and far less than a check's time after (a busy machine may still
+    hold the program up for a few ms between the check and the packet)."""
+    slow = collision.first_collision_on
+
+    def slowed(*args, **kwargs):
+        time.sleep(0.3)
+        return slow(*args, **kwargs)
+
+    monkeypatch.setattr(collision, "first_collision_on", slowed)
+    with snakekit.make_robot("emulator") as robot:
+        robot.command([0.6, 0.3, 0.0, 0.0, 0.0])  # from rest: its way is the same whenever it leaves
+        for q in ([0.1, -0.3, 0.2, 0.0, 0.1], [-0.4, 0.0, 0.0, 0.3, 0.0]):
+            time.sleep(0.05)  # the next goal comes while the arm still moves
+            assert robot._profiles().moving(robot._now())
+            robot.command(q)
+            sent_at = robot._goals_since[-1][0]
+            checked_at = robot._checked.checkpoints[0]
+            assert checked_at - 1e-9 <= sent_at < checked_at + 0.3, (sent_at, checked_at)
+        assert robot._lead >= 0.3  # learnt from the checks
+
+
+def test_an_arm_already_inside_the_margin_may_move_out_but_not_deeper():
+    start = [0.0, 0.5, 1.5, 1.5, 0.5]  # base and link 5 about 4 mm apart: started so, or bent by hand
+    clearance = MujocoClearance()
+    d0 = collision.clearance(start).distance
+    assert 0 < d0 < MARGIN
+    with SimRobot(q0=start) as robot:
+        with pytest.raises(CollisionError) as e:
+            robot.command([0.0, 0.5, 1.5, 1.5, 1.5])  # swings link 5 further over the base
+        assert (f"the arm already stands inside the 5 mm margin (base_link and link5 are {1000 * d0:.2f} mm "
+                "apart): it may move out, but not bring two links closer than that") in str(e.value)
+        robot.step(0.3)
+        assert robot.read().positions == pytest.approx(start, abs=2e-3)
+        robot.command(np.zeros(5))  # the way out
+        closest = np.inf
+        for _ in range(250):
+            robot.step(0.01)
+            closest = min(closest, clearance(robot.read().positions))
+        assert closest >= d0 - collision.FOLDED_START_ALLOWANCE
+        assert robot.read().positions == pytest.approx(np.zeros(5), abs=2e-3)
+    with SimRobot(q0=start) as robot:
+        robot.home()  # a run out of it too
+        assert robot.read().positions == pytest.approx(np.zeros(5), abs=5e-3)
