@@ -138,6 +138,22 @@ def test_each_end_of_a_setting_s_range_is_accepted(bare_course, key):
         assert getattr(settings(bare_course, A), key) == v
 
 
+def test_grading_stops_before_it_starts_on_a_bad_lab_json_and_goes_on_without_one(bare_course):
+    """The grader keeps the hand-ins for the lab as lab.json says: a bad value is said, not passed over."""
+    from types import SimpleNamespace
+
+    from grader.lab.keep import with_lab_case
+
+    batch = SimpleNamespace(assignment=A, cases={})
+    (bare_course / "lab" / A / "lab.json").write_text('{"max_duration_ratio": "abc"}')
+    with pytest.raises(LabError, match=r'lab.json: "max_duration_ratio" must be a finite number from 1 to 4, '
+                                       r"got 'abc' \(str\)"):
+        with_lab_case(batch, bare_course)
+    (bare_course / "lab" / A / "lab.json").unlink()
+    assert with_lab_case(batch, bare_course) is batch  # the lab's exercise is not among this batch's
+    assert with_lab_case(SimpleNamespace(assignment="07_other", cases={}), bare_course).assignment == "07_other"
+
+
 def test_sim_tolerance_nan_no_longer_lets_a_sweep_of_40_sweeps_onto_the_arm(bare_course):
     """The probe's case: NaN compared false with every gap, so the simulator gate passed everything."""
     from grader.lab import gate

@@ -6,8 +6,8 @@
     snakekit lab ASSIGNMENT --status [--csv FILE]
 
 Exit codes: 0 done; 1 a lab fault stopped the session (the job runs again at the next start);
-2 bad arguments or a course not ready (nothing moved); 130/143 Ctrl-C / SIGTERM (arm stopped,
-queue kept).
+2 bad arguments, a bad value in lab.json, a course not ready, or the course or the arm in use by
+another session (nothing moved); 130/143 Ctrl-C / SIGTERM (arm stopped, queue kept).
 """
 
 from __future__ import annotations

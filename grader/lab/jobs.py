@@ -2,7 +2,8 @@
 
 The queue is ``<course>/lab/<assignment>/queue.json``, written atomically (a temporary file,
 then ``os.replace``) after every change of state, so a session stopped at any moment leaves
-it whole and the next start goes on from there.
+it whole and the next start goes on from there; each change is a read-modify-write under the
+queue's own lock, so no copy of it writes another's job away.
 """
 
 from __future__ import annotations
@@ -35,6 +36,10 @@ DEFAULTS = {"06_coded_sweep": {"exercise": "ex06_3_task2_test",
 
 class LabError(ConfigurationError):
     """Bad arguments or a course the lab cannot work on yet (exit 2: nothing moved)."""
+
+
+class NoLab(LabError):
+    """The lab does not run this assignment (unknown, or its hand-in is not a trajectory)."""
 
 
 #: Each number of the settings: its unit and range (:func:`snakekit.validate.number`'s keywords).
@@ -150,12 +155,13 @@ def settings(course: Path, assignment: str) -> LabSettings:
     """The lab settings: ``<course>/lab/<a>/lab.json`` over :data:`DEFAULTS`.
 
     Raises:
-        LabError: the assignment is unknown, or not one whose hand-in is a trajectory.
+        NoLab: the assignment is unknown, or not one whose hand-in is a trajectory.
+        LabError: ``lab.json`` is not readable, or a value in it is out of range or of the wrong type.
     """
     course = Path(course)
     known = sorted(p.name for p in (course / "source").iterdir() if p.is_dir()) if (course / "source").is_dir() else []
     if assignment not in known:
-        raise LabError(f"unknown assignment '{assignment}': the course {course} has "
+        raise NoLab(f"unknown assignment '{assignment}': the course {course} has "
                        f"{', '.join(known) or 'no assignments in source/'}")
     values = dict(DEFAULTS.get(assignment, {}))
     path = lab_dir(course, assignment) / "lab.json"
@@ -169,7 +175,7 @@ def settings(course: Path, assignment: str) -> LabSettings:
                            f"{type(given).__name__}; see docs/lab.md for its fields")
         values.update(given)
     if "exercise" not in values or "case" not in values:
-        raise LabError(f"{assignment} has no exercise the lab runs (its hand-in is not a trajectory); name one in "
+        raise NoLab(f"{assignment} has no exercise the lab runs (its hand-in is not a trajectory); name one in "
                        f"{path} as {{\"exercise\": GRADE_ID, \"case\": {{\"points\": ..., \"rate\": ..., "
                        "\"sweeps\": ..., \"amplitude\": ...}}")
     fields = set(LabSettings.__dataclass_fields__) - {"assignment"}
