@@ -329,7 +329,6 @@ class Queue:
                     else:
                         mine[name] = theirs
                 merged.append(mine.pop(name))
-                ours.discard(name)
             merged += [j for j in self.jobs if j["student"] in mine]  # new here, not yet in the file
             self.jobs[:] = merged
             write_atomic(self.path, json.dumps({"assignment": self.assignment, "jobs": self.jobs}, indent=1))

@@ -132,7 +132,10 @@ def _take(path: Path, what: str, holder: dict, shared_folder: bool) -> int:
         raise LabError(f"cannot make the lock folder {path.parent} ({e.strerror or e}): set SNAKEKIT_LOCK_DIR to a "
                        "folder every TA can write to") from e
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fd, writable = os.open(path, os.O_RDWR | os.O_CREAT, 0o666), True
+        except PermissionError:  # another TA's lock file, not open to all: a lock all the same
+            fd, writable = os.open(path, os.O_RDONLY), False
     except OSError as e:
         raise LabError(f"cannot open the lock {path} ({e.strerror or e}): make it writable by every TA "
                        "(chmod 666) or set SNAKEKIT_LOCK_DIR") from e
@@ -146,13 +149,14 @@ def _take(path: Path, what: str, holder: dict, shared_folder: bool) -> int:
     except BaseException:
         os.close(fd)
         raise
-    if shared_folder:
-        try:
-            os.fchmod(fd, 0o666)
-        except OSError:
-            pass
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, json.dumps(holder).encode(), 0)
+    if writable:
+        if shared_folder:
+            try:
+                os.fchmod(fd, 0o666)
+            except OSError:
+                pass
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps(holder).encode(), 0)
     return fd
 
 
