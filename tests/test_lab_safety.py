@@ -430,3 +430,26 @@ def test_the_arms_locks_are_in_one_folder_for_every_user(monkeypatch):
     assert where in (Path("/run/lock/snakekit"), Path("/tmp/snakekit-locks"))
     mode = os.stat("/run/lock").st_mode if os.path.isdir("/run/lock") else 0
     assert (where == Path("/run/lock/snakekit")) == bool(mode & 0o002 and mode & 0o1000)
+
+
+def test_a_calibration_whose_runs_differ_too_much_for_the_bands_to_mean_anything_keeps_nothing(
+        bare_course, monkeypatch):
+    """Runs 0.2 rad apart at joint 3 (a slipping servo): bands of 10 x 0.2 rad would pass any sweep."""
+    from types import SimpleNamespace
+
+    (bare_course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE, "band_factor": 10}))
+    s = settings(bare_course, A)
+    offsets = iter([0.0, 0.2])
+
+    def fake_run(robot, trajectory, stall_delay, say):
+        q = trajectory.positions.copy()
+        q[:, 2] += next(offsets)
+        t = trajectory.times
+        return SimpleNamespace(commanded=SimpleNamespace(times=t), measured=SimpleNamespace(times=t, positions=q)), {}
+
+    monkeypatch.setattr(lab, "run_unstalled", fake_run)
+    with pytest.raises(LabError, match=r"the 2 runs of the reference differ by up to 11.5 deg at joint 3: bands of "
+                                       r"2.00 rad \(more than 1\) would pass any sweep; check the arm"):
+        lab.calibrate(None, bare_course, s, runs=2, out=io.StringIO())
+    assert not (bare_course / "lab" / A / "calibration.json").exists()
+    assert not (bare_course / "lab" / A / "reference.npz").exists()

@@ -30,6 +30,8 @@ from .feedback import update_pages
 from .jobs import LabError, LabSettings, Queue, handin_path, lab_dir, load_handin, write_atomic
 
 RECORD_RATE = 100.0  # [Hz]
+#: The widest band a calibration may set [rad]: wider, any sweep would pass (the arm is not repeatable).
+MAX_BAND = 1.0
 #: How many times a run the lab computer stalled in is run again before it counts as a lab fault.
 STALL_TRIES = 5
 
@@ -114,6 +116,11 @@ def calibrate(robot, course: Path, s: LabSettings, runs: int, out=sys.stdout) ->
     # the arm's repeatability: the most two runs of the same trajectory differ, per joint
     spread = np.abs(stack[:, None] - stack[None, :]).max(axis=(0, 1, 2))
     bands = np.maximum(s.band_factor * spread, s.band_floor)
+    if bands.max() > MAX_BAND:
+        j = int(np.argmax(bands))
+        raise LabError(f"the {runs} runs of the reference differ by up to {np.degrees(spread[j]):.1f} deg at joint "
+                       f"{j + 1}: bands of {bands[j]:.2f} rad (more than {MAX_BAND:g}) would pass any sweep; check the "
+                       "arm (a loose horn, a slipping servo, the power supply) and calibrate again; nothing was kept")
     d = lab_dir(course, s.assignment)
     d.mkdir(parents=True, exist_ok=True)
     np.savez(d / "reference.npz", times=times, positions=mean, runs=stack)
@@ -142,7 +149,7 @@ def load_calibration(course: Path, s: LabSettings):
         if not isinstance(bands, list) or len(bands) != SPEC.n_joints:
             raise ValueError(f"bands_rad is not one band per joint: {str(bands)[:80]}")
         for j, b in enumerate(bands):
-            validate.number(b, f"bands_rad[{j}]", "rad", above=0.0, at_most=1.0)
+            validate.number(b, f"bands_rad[{j}]", "rad", above=0.0, at_most=MAX_BAND)
         validate.check_count(cal.get("runs"), "runs", 2, 1000)
     except (OSError, ValueError, SnakekitError) as e:
         raise LabError(f"{d}/calibration.json is not a calibration the lab can use ({str(e)[:200]}): {again}") from e
@@ -158,7 +165,6 @@ def load_calibration(course: Path, s: LabSettings):
     except (KeyError, ValueError) as e:
         raise LabError(f"{d}/reference.npz is not a reference run ({str(e)[:200]}): {again}") from e
     return cal, t, q
-
 
 
 def grade(run, trajectory, cal: dict, ref_t, ref_q, s: LabSettings) -> dict:
