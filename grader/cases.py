@@ -87,6 +87,25 @@ class Draw:
         return {gid: encode_cases(c) for gid, c in self.cases.items()}
 
 
+def checked_tolerances(table: dict, where: str) -> dict:
+    """A grade id's tolerances, each a finite number >= 0 (``rtol`` at most 1), booleans refused: a NaN
+    or negative tolerance would judge every case the same (a NaN bound compares false), whatever the hand-in.
+
+    Raises:
+        CasesError: a bad value; the message names ``where``, the key, the value and the range.
+    """
+    from snakekit.validate import number
+
+    out = {}
+    for key, value in table.items():
+        shown = value[:40] + "..." if isinstance(value, str) and len(value) > 40 else value
+        try:
+            out[key] = number(shown, f"{where}: tolerance {key!r}", at_least=0, at_most=1.0 if key == "rtol" else None)
+        except SnakekitError as e:
+            raise CasesError(str(e)) from None
+    return out
+
+
 def cases_path(course: Path, assignment: str) -> Path:
     return Path(course) / "cases" / f"{assignment}.py"
 
@@ -149,7 +168,7 @@ def draw(course: Path, assignment: str, seed: int | None = None, spec=None) -> D
                 raise CasesError(f"{path}: {key} must map grade ids to dicts of tolerances, e.g. "
                                  f'{{"{gid}": {{"atol": 1e-9}}}}')
             if gid in table:
-                own[key.lower()] = dict(table[gid])
+                own[key.lower()] = checked_tolerances(table[gid], f"{path}: {key}[{gid!r}]")
         settings[gid] = own
     depends = getattr(module, "DEPENDS", {})
     if not isinstance(depends, dict) or not all(

@@ -25,7 +25,7 @@ from snakekit.errors import FileFormatError, SnakekitError
 from snakekit.model import SPEC, SnakeSpec
 
 from . import compare
-from .cases import CasesError, Draw, cases_path, draw, execute
+from .cases import CasesError, Draw, cases_path, checked_tolerances, draw, execute
 from .exercises import RULES
 from .score import DEFAULT_TOLERANCES, Expected, handed_in_function, kind_of, score_exercise
 
@@ -181,8 +181,11 @@ def expected(ref: Reference, batch: Draw, handins: dict[str, list], *, where: st
             raise ReferenceError(f"{where}: {gid} handed in {kind} {names}, the reference describes {ex['kind']} "
                                  f"{ex['outputs']}; record it again (`python -m grader.references "
                                  f"{batch.assignment}`)")
-        e = Expected(gid, kind, list(cases), results, dict(ex["tolerances"]),
-                     handed_in_function(gid, (sources or {}).get(gid, "")))
+        try:
+            tol = checked_tolerances(ex["tolerances"], f"{batch.assignment}'s reference: {gid}")
+        except CasesError as bad:
+            raise ReferenceError(f"{bad}; record it again (`python -m grader.references {batch.assignment}`)") from None
+        e = Expected(gid, kind, list(cases), results, tol, handed_in_function(gid, (sources or {}).get(gid, "")))
         own = score_exercise(gid, results, e, 1.0)
         if own.score < 1.0:
             raise ReferenceError(f"{where}: {gid} scores {own.score:g} of 1 against itself at the cases of seed "

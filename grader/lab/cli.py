@@ -6,8 +6,8 @@
     snakekit lab ASSIGNMENT --status [--csv FILE]
 
 Exit codes: 0 done; 1 a lab fault stopped the session (the job runs again at the next start);
-2 bad arguments or a course not ready (nothing moved); 130/143 Ctrl-C / SIGTERM (arm stopped,
-queue kept).
+2 bad arguments, a bad value in lab.json, a course not ready, or the course or the arm in use by
+another session (nothing moved); 130/143 Ctrl-C / SIGTERM (arm stopped, queue kept).
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from snakekit.errors import SnakekitError
 
 from ..course import CourseError
 from ..files import check_output, one_line
+from . import lock
 from .jobs import STATES, LabError, Queue, graded_students, lab_dir, ordered, settings, write_atomic
 
 
@@ -48,11 +49,12 @@ def parser(calibrating: bool) -> argparse.ArgumentParser:
 
 
 def robot_opener(args):
-    """A function opening the arm (the check that the port is there is made before anything runs)."""
+    """A function opening the arm, and its port (None: the session's own emulator). The check that
+    the port is there is made before anything runs."""
     import snakekit
 
     if args.emulator:
-        return lambda: snakekit.make_robot("emulator")
+        return (lambda: snakekit.make_robot("emulator")), None
     port = args.port or os.environ.get("SNAKEKIT_PORT")
     if not port:
         raise LabError("no arm named: give --port (e.g. /dev/ttyUSB0, or socket://HOST:7800 for a bridge), set "
@@ -60,7 +62,7 @@ def robot_opener(args):
     if "://" not in port and not Path(port).exists():
         raise LabError(f"the port {port} is not there: is the arm's USB adapter plugged in? (ls /dev/ttyUSB* "
                        "/dev/ttyACM*; docs/hardware.md)")
-    return lambda: snakekit.make_robot("hardware", port=port)
+    return (lambda: snakekit.make_robot("hardware", port=port)), port
 
 
 def status(course: Path, assignment: str, csv_path: Path | None, out) -> int:
@@ -102,39 +104,9 @@ def main(argv=None, out=None) -> int:
         s = settings(course, args.assignment)
         if not calibrating and args.status:
             return status(course, args.assignment, args.csv, out)
-        opener = robot_opener(args)
-        from . import session
-
-        if calibrating:
-            robot = opener()
-            try:
-                session.calibrate(robot, course, s, args.runs, out)
-            finally:
-                robot.close()
-            return 0
-        students = graded_students(course, args.assignment)
-        if not students:
-            raise LabError(f"no graded submissions of {args.assignment} in {course}/autograded: run "
-                           f"`snakekit grade {args.assignment}` first")
-        if args.student:
-            unknown = sorted(set(args.student) - set(students))
-            if unknown:
-                raise LabError(f"no graded submission of {args.assignment} for {', '.join(unknown)} (graded: "
-                               f"{', '.join(students)})")
-            students = [st for st in args.student]
-        students = ordered(course, args.assignment, students, args.order)
-        session.load_calibration(course, s)
-        q = Queue.load(course, args.assignment)
-        for st in students:
-            q.add(st)
-        for st in args.retry:
-            q.retry(st)
-        q.save()
-        code = session.session(opener, course, s, students, q, out)
-        status(course, args.assignment, None, out)
-        print(f"snakekit lab: results in {lab_dir(course, args.assignment)}/results, the list in "
-              f"{q.path.with_name('status.csv')}", file=out)
-        return code
+        opener, port = robot_opener(args)
+        with lock.held(course, args.assignment, port):
+            return _locked(args, course, s, opener, calibrating, out)
     except (LabError, CourseError) as e:
         print(f"snakekit lab: {one_line(e)}", file=sys.stderr)
         return 2
@@ -149,6 +121,44 @@ def main(argv=None, out=None) -> int:
     finally:
         if in_main:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _locked(args, course: Path, s, opener, calibrating: bool, out) -> int:
+    """The session proper, run while it holds the course's and the arm's locks."""
+    from . import session
+
+    if calibrating:
+        if args.runs < 2:
+            raise LabError(f"--runs {args.runs}: the spread needs at least 2 runs of the reference (5 is usual)")
+        robot = opener()
+        try:
+            session.calibrate(robot, course, s, args.runs, out)
+        finally:
+            robot.close()
+        return 0
+    students = graded_students(course, args.assignment)
+    if not students:
+        raise LabError(f"no graded submissions of {args.assignment} in {course}/autograded: run "
+                       f"`snakekit grade {args.assignment}` first")
+    if args.student:
+        unknown = sorted(set(args.student) - set(students))
+        if unknown:
+            raise LabError(f"no graded submission of {args.assignment} for {', '.join(unknown)} (graded: "
+                           f"{', '.join(students)})")
+        students = [st for st in args.student]
+    students = ordered(course, args.assignment, students, args.order)
+    session.load_calibration(course, s)
+    q = Queue.load(course, args.assignment)
+    for st in students:
+        q.add(st)
+    for st in args.retry:
+        q.retry(st)
+    q.save()
+    code = session.session(opener, course, s, students, q, out)
+    status(course, args.assignment, None, out)
+    print(f"snakekit lab: results in {lab_dir(course, args.assignment)}/results, the list in "
+          f"{q.path.with_name('status.csv')}", file=out)
+    return code
 
 
 def _main_thread() -> bool:

@@ -19,16 +19,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .jobs import LabError, handin_path, settings
+from .jobs import NoLab, handin_path, settings
 
 KEPT = ("times", "positions", "measured_times", "measured_positions")
 
 
 def lab_case(course: Path, assignment: str):
-    """``(settings, the spec's case as a tuple of arguments)``, or None when the lab does not run the assignment."""
+    """``(settings, the spec's case as a tuple of arguments)``, or None when the lab does not run the assignment.
+
+    Raises:
+        LabError: the course's ``lab.json`` has a bad value (grading stops before it starts, saying which).
+    """
     try:
         s = settings(course, assignment)
-    except LabError:
+    except NoLab:
         return None
     return s, tuple(s.case.values())
 

@@ -21,13 +21,17 @@ from pathlib import Path
 import numpy as np
 
 import snakekit
-from snakekit.errors import BackendError
+from snakekit import validate
+from snakekit.errors import BackendError, FileFormatError, SnakekitError
+from snakekit.model import SPEC
 
 from . import gate
 from .feedback import update_pages
 from .jobs import LabError, LabSettings, Queue, handin_path, lab_dir, load_handin, write_atomic
 
 RECORD_RATE = 100.0  # [Hz]
+#: The widest band a calibration may set [rad]: wider, any sweep would pass (the arm is not repeatable).
+MAX_BAND = 1.0
 #: How many times a run the lab computer stalled in is run again before it counts as a lab fault.
 STALL_TRIES = 5
 
@@ -112,6 +116,11 @@ def calibrate(robot, course: Path, s: LabSettings, runs: int, out=sys.stdout) ->
     # the arm's repeatability: the most two runs of the same trajectory differ, per joint
     spread = np.abs(stack[:, None] - stack[None, :]).max(axis=(0, 1, 2))
     bands = np.maximum(s.band_factor * spread, s.band_floor)
+    if bands.max() > MAX_BAND:
+        j = int(np.argmax(bands))
+        raise LabError(f"the {runs} runs of the reference differ by up to {np.degrees(spread[j]):.1f} deg at joint "
+                       f"{j + 1}: bands of {bands[j]:.2f} rad (more than {MAX_BAND:g}) would pass any sweep; check the "
+                       "arm (a loose horn, a slipping servo, the power supply) and calibrate again; nothing was kept")
     d = lab_dir(course, s.assignment)
     d.mkdir(parents=True, exist_ok=True)
     np.savez(d / "reference.npz", times=times, positions=mean, runs=stack)
@@ -131,12 +140,31 @@ def load_calibration(course: Path, s: LabSettings):
     if not (d / "calibration.json").is_file() or not (d / "reference.npz").is_file():
         raise LabError(f"the arm is not calibrated for {s.assignment}: run `snakekit lab calibrate {s.assignment}` "
                        "first (it runs the reference several times to set the bands)")
-    cal = json.loads((d / "calibration.json").read_text())
+    again = f"run `snakekit lab calibrate {s.assignment}` again"
+    try:
+        cal = json.loads((d / "calibration.json").read_text(encoding="utf-8"))
+        if not isinstance(cal, dict):
+            raise ValueError("not a JSON object")
+        bands = cal.get("bands_rad")
+        if not isinstance(bands, list) or len(bands) != SPEC.n_joints:
+            raise ValueError(f"bands_rad is not one band per joint: {str(bands)[:80]}")
+        for j, b in enumerate(bands):
+            validate.number(b, f"bands_rad[{j}]", "rad", above=0.0, at_most=MAX_BAND)
+        validate.check_count(cal.get("runs"), "runs", 2, 1000)
+    except (OSError, ValueError, SnakekitError) as e:
+        raise LabError(f"{d}/calibration.json is not a calibration the lab can use ({str(e)[:200]}): {again}") from e
     if cal.get("case") != s.case:
         raise LabError(f"{d}/calibration.json was recorded for {cal.get('case')}, not the lab's {s.case}: "
                        f"run `snakekit lab calibrate {s.assignment}` again")
-    with np.load(d / "reference.npz", allow_pickle=False) as z:
-        return cal, z["times"], z["positions"]
+    try:
+        ref = load_handin(d / "reference.npz")
+        t, q = np.asarray(ref["times"], dtype=float), np.asarray(ref["positions"], dtype=float)
+        if t.ndim != 1 or len(t) < 2 or q.shape != (len(t), SPEC.n_joints) or not (
+                np.isfinite(t).all() and np.isfinite(q).all() and (np.diff(t) > 0).all()):
+            raise ValueError(f"times {t.shape} and positions {q.shape} are not a run of the arm")
+    except (KeyError, ValueError) as e:
+        raise LabError(f"{d}/reference.npz is not a reference run ({str(e)[:200]}): {again}") from e
+    return cal, t, q
 
 
 def grade(run, trajectory, cal: dict, ref_t, ref_q, s: LabSettings) -> dict:
@@ -263,8 +291,11 @@ def session(open_robot, course: Path, s: LabSettings, students: list[str], queue
             else:
                 try:
                     checked = gate.check(load_handin(path), s)
-                except (OSError, ValueError) as e:
-                    checked = gate.Checked(f"your hand-in cannot be read as arrays ({e})")
+                except FileFormatError as e:
+                    checked = gate.Checked(f"{e}: grade it again (snakekit grade {s.assignment} --student "
+                                           f"{job['student']}) to keep your sweep anew")
+                except SnakekitError as e:  # this hand-in only: the session goes on with the others
+                    checked = gate.Checked(f"your sweep could not be checked: {str(e).splitlines()[0][:300]}")
             if checked.reason:
                 queue.set(job, "refused", checked.reason)
                 update_pages(course, s.assignment, job["student"])

@@ -1,0 +1,60 @@
+"""The grader's tolerances (a course's cases module, ``TOLERANCES``, and the recorded reference) are
+checked like every other setting: a NaN or negative one would judge every case the same, whatever the hand-in."""
+
+import math
+
+import pytest
+
+from grader.cases import CasesError, Draw, draw
+from grader.references import Reference, ReferenceError, expected
+from grader.score import score_exercise
+
+A = "t1_values"
+GID = "ex_t1_double_test"
+BAD = [("nan", math.nan, "nan"), ("inf", math.inf, "inf"), ("-inf", -math.inf, "-inf"), ("negative", -1e-9, "-1e-09"),
+       ("text", "abc", "'abc'"), ("true", True, "True"), ("null", None, "None"), ("a list", [1e-9], "[1e-09]")]
+KEYS = ["rtol", "atol", "max", "rms", "commanded_max", "commanded_rms"]
+CASES = [(k, *b) for k in KEYS for b in BAD] + [("rtol", "above 1", 1.5, "1.5")]
+
+
+def cases_module(course, tolerance_text: str):
+    (course / "cases").mkdir(parents=True, exist_ok=True)
+    (course / "cases" / f"{A}.py").write_text(
+        f"TOLERANCES = {{{GID!r}: {tolerance_text}}}\n\n"
+        f"def {GID}(rng, spec):\n    return [(float(x),) for x in rng.uniform(-1, 1, 3)]\n")
+
+
+@pytest.mark.parametrize("key, kind, value, shown", CASES, ids=[f"{c[0]}-{c[1]}" for c in CASES])
+def test_a_bad_tolerance_in_a_cases_module_stops_the_draw_naming_it(tmp_path, key, kind, value, shown):
+    cases_module(tmp_path, repr({key: value}).replace("nan", "float('nan')").replace("inf", "float('inf')"))
+    with pytest.raises(CasesError) as e:
+        draw(tmp_path, A, seed=1)
+    rng = "from 0 to 1" if key == "rtol" else ">= 0"
+    assert str(e.value).startswith(f"{tmp_path / 'cases' / (A + '.py')}: TOLERANCES[{GID!r}]: tolerance {key!r} "
+                                   f"must be a finite number {rng}, got {shown}")
+
+
+def test_good_tolerances_are_kept_as_numbers(tmp_path):
+    cases_module(tmp_path, "{'atol': 0, 'rtol': 1e-6}")
+    assert draw(tmp_path, A, seed=1).settings[GID]["tolerances"] == {"atol": 0.0, "rtol": 1e-6}
+
+
+@pytest.mark.parametrize("key, kind, value, shown", CASES, ids=[f"{c[0]}-{c[1]}" for c in CASES])
+def test_a_bad_tolerance_in_a_reference_is_refused_before_grading(key, kind, value, shown):
+    ref = Reference(A, {"exercises": {GID: {"kind": "values", "outputs": ["value"], "tolerances": {key: value}}}})
+    batch = Draw(A, 1, {GID: [(0.5,), (0.25,)]})
+    with pytest.raises(ReferenceError, match=r"record it again \(`python -m grader.references t1_values`\)") as e:
+        expected(ref, batch, {GID: [{"value": 1.0}, {"value": 0.5}]})
+    assert str(e.value).startswith(f"{A}'s reference: {GID}: tolerance {key!r} must be a finite number")
+    assert f"got {shown}" in str(e.value)
+
+
+def test_the_nan_tolerance_the_check_refuses_would_have_failed_a_right_answer():
+    """Why the check is there: with atol NaN the instructor's own answer scores nothing."""
+    good = Reference(A, {"exercises": {GID: {"kind": "values", "outputs": ["value"], "tolerances": {"atol": 1e-9}}}})
+    batch = Draw(A, 1, {GID: [(0.5,)]})
+    e = expected(good, batch, {GID: [{"value": 1.0}]})[GID]
+    assert score_exercise(GID, [{"value": 1.0}], e, 1.0).score == 1.0
+    assert score_exercise(GID, [{"value": 7.0}], e, 1.0).score == 0.0
+    e_nan = type(e)(e.grade_id, e.kind, e.cases, e.results, {"atol": math.nan, "rtol": math.nan}, e.function)
+    assert score_exercise(GID, [{"value": 1.0}], e_nan, 1.0).score == 0.0
