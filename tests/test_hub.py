@@ -2,7 +2,11 @@
 class on a real hub (docker/hub/test.sh, on the private engine of docker/engine.sh)."""
 
 import re
+import shutil
+import subprocess
 from pathlib import Path
+
+import pytest
 
 from tests._engine import run_on_engine
 
@@ -42,3 +46,67 @@ def test_hub_week_of_a_class(capsys):
     assert re.search(r"the 3D view /user/s01/proxy/\d+/static/ \(through the lab's port\) draws the arm", out), out[-3000:]
     assert "browser: the motion cell moved the arm" in out, out[-3000:]
     assert "went to the lab's port 127.0.0.1:18000" in out, out[-3000:]
+
+
+# --- docker/hub/up finds a compose that works -------------------------------------------------------
+# A stand-in for the Docker client: the engine answers, no image is built yet (so up builds), and
+# `docker compose` is the plugin (PLUGIN=1) or, as Debian's docker.io answers, no such command.
+FAKE_DOCKER = """#!/bin/bash
+echo "docker $*" >> "$LOG"
+case "$1" in
+  version) exit 0 ;;
+  image) exit 1 ;;
+  compose)
+    if [ -n "${PLUGIN:-}" ]; then [ "$2" = version ] && echo "Docker Compose version v2.29.7" && exit 0; exit 3; fi
+    if [ "$2" = version ]; then echo "docker: 'compose' is not a docker command." >&2; else echo "unknown shorthand flag: 'f' in -f" >&2; fi
+    exit 1 ;;
+esac
+exit 0
+"""
+# A stand-in docker-compose: answers `version` (or fails it: BROKEN), records the build and stops
+# the start there (exit 3), so nothing further runs.
+FAKE_COMPOSE = """#!/bin/bash
+echo "$0 $*" >> "$LOG"
+if [ "$1" = version ]; then [ -z "${BROKEN:-}" ]; exit; fi
+exit 3
+"""
+BUILD = "-f docker/compose.yaml --profile grader build lab grader"
+
+
+@pytest.mark.parametrize("plugin, on_path, in_venv, used", [
+    (True, "works", True, "docker compose"),
+    (False, "works", True, "PATH/docker-compose"),
+    (False, None, True, "VENV/bin/docker-compose"),
+    (False, "broken", True, "VENV/bin/docker-compose"),
+    (False, None, False, None),
+], ids=["the plugin", "docker-compose on PATH", "the kit's own", "a broken one on PATH: the kit's own", "none"])
+def test_up_builds_with_the_first_compose_that_works(tmp_path, plugin, on_path, in_venv, used):
+    bin_, venv, log = tmp_path / "bin", tmp_path / "venv", tmp_path / "log"
+    (venv / "bin").mkdir(parents=True)
+    bin_.mkdir()
+    for tool in ("bash", "dirname"):
+        (bin_ / tool).symlink_to(shutil.which(tool))
+    (bin_ / "docker").write_text(FAKE_DOCKER)
+    env = {"PATH": str(bin_), "LOG": str(log), "HOME": str(tmp_path), "SNAKEKIT_VENV": str(venv)}
+    if plugin:
+        env["PLUGIN"] = "1"
+    if on_path:
+        (bin_ / "docker-compose").write_text(FAKE_COMPOSE.replace("${BROKEN:-}", "broken" if on_path == "broken" else ""))
+    if in_venv:
+        (venv / "bin/docker-compose").write_text(FAKE_COMPOSE)
+    for f in [*bin_.iterdir(), *(venv / "bin").iterdir()]:
+        f.chmod(0o755)
+    proc = subprocess.run([str(ROOT / "docker/hub/up")], env=env, capture_output=True, text=True, timeout=60)
+    calls = log.read_text().splitlines()
+    builds = [c for c in calls if c.endswith(BUILD)]
+    if used is None:
+        assert proc.returncode != 0 and builds == [], (proc.returncode, calls)
+        assert proc.stderr.splitlines() == [
+            f"hub: no Docker Compose works here (docker compose, docker-compose, {venv}/bin/docker-compose): run make "
+            "setup (the kit's own docker-compose) or install Docker's compose plugin (docker-compose-plugin), then "
+            "docker/hub/up again"], proc.stderr
+        return
+    who = used.replace("PATH", str(bin_)).replace("VENV", str(venv))
+    assert builds == [f"{who} {BUILD}"], calls
+    assert proc.returncode == 3, (proc.returncode, proc.stderr)  # the stand-in's build failing stops the start
+    assert f"hub: building snakekit-lab:latest and snakekit-grader:latest ({who} {BUILD})" in proc.stdout, proc.stdout
