@@ -23,7 +23,7 @@ def test_the_hub_and_the_image_pin_one_jupyterhub_of_the_same_major_version():
     wanted = pins((ROOT / "docker/hub/requirements.in").read_text(), "jupyterhub")
     assert len(image) == 1 and image == hub == wanted, (image, hub, wanted)
     assert next(iter(image)).startswith("5."), image  # Zero to JupyterHub 4.x's major version
-    for name in ("dockerspawner", "jupyterhub-idle-culler", "jupyterhub-ltiauthenticator"):
+    for name in ("dockerspawner", "jupyterhub-idle-culler", "jupyterhub-ltiauthenticator", "jupyterhub-nativeauthenticator"):
         assert len(pins((ROOT / "docker/hub/requirements.txt").read_text(), name)) == 1, name
 
 
@@ -32,6 +32,13 @@ def test_hub_week_of_a_class(capsys):
     out = run_on_engine("docker/hub/test.sh", capsys, what="the hub test", timeout_min=30,
                         show=("figure:", "hub-test:", "hub:", "check-config:"))
     assert "hub-test: passed" in out
+    # identity: accounts made by the teacher, a password each; what a student could try is refused
+    assert "accounts: teacher and ta made by docker/hub/up, 20 students' by docker/hub/accounts" in out, out[-3000:]
+    assert re.search(r"refused log-ins \(9\): s02 with s01's password; teacher with a student's password; "
+                     r"teacher with the TA's password; teacher with no password; s01 with no password; "
+                     r"a name without an account; teacher with the old shared password; s01 with the old shared "
+                     r"password; mallory with the old shared password: each the form again", out), out[-3000:]
+    assert "no sign-up page (404)" in out
     assert "all known and valid" in out and "LTI13Authenticator" in out
     assert re.search(r"20 students fetched, filled and submitted", out), out[-3000:]
     assert "every student fetched their feedback page" in out

@@ -1,9 +1,13 @@
 #!/usr/bin/env python3
 """A week of the class on the hub, as its users do it (docker/hub/test.sh runs this).
 
-    loop.py HUB_URL --students 20 [--password PW] [--artifacts DIR]
+    loop.py HUB_URL --passwords CSV --students 20 [--old-shared-password PW] [--browser DIR]
 
-Everyone logs in through the hub (its log-in form, then a token from the hub's REST API) and
+First the log-ins the hub refuses: a student's name with another's password, the teacher's name
+with a student's password or none, the old shared password, a name without an account, and
+the sign-up page. Then everyone logs in through the hub (its log-in form, with their own
+password from CSV, ``username,password`` as docker/hub/accounts prints it, then a token from
+the hub's REST API) and
 works through their own server behind the hub's proxy: the instructor releases lesson 06;
 the students fetch it (the Assignments tab's API), fill the exercises (the instructor's
 answers, or for every third student a slip in one of them), save (the contents API) and
@@ -32,6 +36,7 @@ from pathlib import Path
 
 import nbformat
 import requests
+from checks import fail, log_in, refused_log_ins, say
 
 REPO = Path(__file__).resolve().parents[2]
 LESSON = "06_coded_sweep"
@@ -39,12 +44,9 @@ COURSE = "snakekit"
 DOCKER = os.environ.get("DOCKER", "docker")
 
 
-def say(msg: str) -> None:
-    print(f"hub-test: {msg}", flush=True)
-
-
-def fail(msg: str) -> None:
-    raise SystemExit(f"hub-test: FAILED: {msg}")
+def read_passwords(path: str) -> dict[str, str]:
+    with open(path, encoding="utf-8") as f:
+        return {row["username"]: row["password"] for row in csv.DictReader(f)}
 
 
 class User:
@@ -52,12 +54,10 @@ class User:
 
     def __init__(self, hub: str, name: str, password: str):
         self.hub, self.name = hub.rstrip("/"), name
-        s = requests.Session()
-        s.get(f"{self.hub}/hub/login", timeout=30)  # the form's page sets its _xsrf cookie
-        r = s.post(f"{self.hub}/hub/login", data={"username": name, "password": password,
-                                                   "_xsrf": s.cookies.get("_xsrf")}, allow_redirects=False, timeout=60)
+        s, r = log_in(self.hub, name, password)
         if r.status_code != 302:
-            fail(f"{name} could not log in: {r.status_code}")
+            fail(f"{name} could not log in with their own password: {r.status_code}")
+        self.web = s  # the browser's session: the hub's log-in cookie
         r = s.post(f"{self.hub}/hub/api/users/{name}/tokens", json={"note": "class week", "expires_in": 7200},
                    headers={"X-XSRFToken": s.cookies.get("_xsrf")}, timeout=30)
         if r.status_code != 201:
@@ -164,7 +164,9 @@ def main() -> int:
     p = argparse.ArgumentParser()
     p.add_argument("hub")
     p.add_argument("--students", type=int, default=20)
-    p.add_argument("--password", default=os.environ.get("SNAKEKIT_DUMMY_PASSWORD", ""))
+    p.add_argument("--passwords", required=True, metavar="CSV",
+                   help="username,password for everyone (docker/hub/accounts' output, the instructors' from docker/hub/up)")
+    p.add_argument("--old-shared-password", default="", help="the old dummy log-in's shared password, to be refused")
     p.add_argument("--submit-limit-mb", type=float, default=float(os.environ.get("SNAKEKIT_SUBMIT_LIMIT_MB", "20")))
     p.add_argument("--grade", default=str(REPO / "docker/hub/grade"))
     p.add_argument("--browser", metavar="OUT_DIR", help="open lesson 00 in headless Chromium through the hub's "
@@ -173,10 +175,15 @@ def main() -> int:
                    "the hub and proxy under 50 users' requests")
     args = p.parse_args()
     t0 = time.monotonic()
-    teacher, ta = User(args.hub, "teacher", args.password), User(args.hub, "ta", args.password)
+    pw = read_passwords(args.passwords)
     names = [f"s{i:02d}" for i in range(1, args.students + 1)]
+    missing = [n for n in ["teacher", "ta", *names] if n not in pw]
+    if missing:
+        fail(f"no password in {args.passwords} for {', '.join(missing)}")
+    refused_log_ins(args.hub, pw, args.old_shared_password)
+    teacher, ta = User(args.hub, "teacher", pw["teacher"]), User(args.hub, "ta", pw["ta"])
     with ThreadPoolExecutor(8) as pool:
-        students = list(pool.map(lambda n: User(args.hub, n, args.password), names))
+        students = list(pool.map(lambda n: User(args.hub, n, pw[n]), names))
     say(f"{2 + len(students)} users logged in through the hub's form and REST API")
 
     # --- the servers: the instructor's and TA's first (they share the course volume) ------------
@@ -374,7 +381,7 @@ def main() -> int:
         t = time.monotonic()
         r = subprocess.run([sys.executable, str(REPO / "docker/browser-check"), f"{args.hub}/user/{a.name}", args.browser,
                             "--hub-user", a.name], capture_output=True, text=True,
-                           env=dict(os.environ, SNAKEKIT_HUB_PASSWORD=args.password))
+                           env=dict(os.environ, SNAKEKIT_HUB_PASSWORD=pw[a.name]))
         for line in r.stdout.splitlines():
             if line.startswith("browser:"):
                 say(line)
