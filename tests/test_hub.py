@@ -39,6 +39,11 @@ def test_hub_week_of_a_class(capsys):
                      r"a name without an account; teacher with the old shared password; s01 with the old shared "
                      r"password; mallory with the old shared password: each the form again", out), out[-3000:]
     assert "no sign-up page (404)" in out
+    # the 3D view: on the container's loopback, refused to another student on the network and through the hub
+    assert re.search(r"refused: s01's 3D view to s02: on the hub's network snakekit-lab-s01:70\d\d "
+                     r"(ConnectionRefusedError|TimeoutError|timeout) \(its server listens on 127.0.0.1 only; "
+                     r"snakekit-lab-s01:8888 open\), through the hub /user/s01/proxy/70\d\d/static/ 40[34] with s02's "
+                     r"token and 403 with s02's log-in; s01's own: 200", out), out[-3000:]
     assert "all known and valid" in out and "LTI13Authenticator" in out
     assert re.search(r"20 students fetched, filled and submitted", out), out[-3000:]
     assert "every student fetched their feedback page" in out

@@ -16,6 +16,10 @@
 - Login: ``SNAKEKIT_AUTH=native`` (the default: NativeAuthenticator, a password per person, in
   accounts that only the teacher makes: docker/hub/accounts; no sign-up page), or ``lti`` (an
   LMS course: lti_config.py). Roles come by name: ``SNAKEKIT_INSTRUCTORS``.
+- The 3D view: each server's viewers listen on its container's loopback only
+  (``SNAKEKIT_VIEWER_HOST=127.0.0.1``, over the image's 0.0.0.0), so the browser reaches them
+  through the owner's Jupyter server (jupyter-server-proxy, ``/user/<name>/proxy/<port>/``)
+  behind the hub's log-in, and no other container on the network reaches them.
 """
 
 import os
@@ -83,6 +87,9 @@ c.DockerSpawner.start_timeout = int(env("SNAKEKIT_START_TIMEOUT", "300"))
 c.DockerSpawner.http_timeout = 180
 c.DockerSpawner.environment = {
     "SNAKEKIT_EXCHANGE_URL": f"http://{HUB_HOST}:{EXCHANGE_PORT}/services/exchange/",
+    # the 3D view's servers on the container's loopback: reached only through the owner's Jupyter
+    # server (its proxy, behind the hub's log-in), never by another container on the network
+    "SNAKEKIT_VIEWER_HOST": "127.0.0.1",
 }
 # What a server's own token ($JUPYTERHUB_API_TOKEN) may do: its activity, its own server, and
 # tell the exchange who it is (name and groups); nothing of anyone else.

@@ -15,7 +15,9 @@ submit; the TA collects, grades (`snakekit grade`, in the grader container on th
 volume: docker/hub/grade) and returns the feedback; every student fetches it. Then the
 refusals: a student submitting as another, reading another's submission or feedback,
 collecting, reaching another's server or the hub's secrets; a submission over the size limit
-and a full exchange get their messages; a stopped (culled) server loses nothing saved.
+and a full exchange get their messages; a stopped (culled) server loses nothing saved. After
+lesson 00 in Chromium: that student's 3D view is refused to another student, on the hub's
+network (its server listens on the container's loopback) and through the hub's proxy.
 Instructor and TA commands run in their own servers' containers (`docker exec`, as at their
 terminal). Prints lines "figure: ..." and exits non-zero at the first wrong result.
 """
@@ -36,7 +38,7 @@ from pathlib import Path
 
 import nbformat
 import requests
-from checks import fail, log_in, refused_log_ins, say
+from checks import fail, log_in, refused_log_ins, say, view_is_the_owners
 
 REPO = Path(__file__).resolve().parents[2]
 LESSON = "06_coded_sweep"
@@ -389,6 +391,7 @@ def main() -> int:
             fail(f"lesson 00 in Chromium through the hub: {r.stdout[-1500:]}\n{r.stderr[-1500:]}")
         print(f"figure: lesson 00 in headless Chromium through the hub's proxy, the arm drawn and moved: "
               f"{time.monotonic() - t:.0f} s", flush=True)
+        view_is_the_owners(args.hub, a, b)
     print(f"figure: the whole loop on the hub ({len(students)} students): {time.monotonic() - t0:.0f} s", flush=True)
     if args.bench:
         bench(args.hub, students)

@@ -11,8 +11,9 @@
 # (NativeAuthenticator) and for LTI 1.3 (check-config); the start command as docker/hub/README.md
 # writes it (a single-node swarm, SwarmSpawner; it makes the instructor's and TA's accounts);
 # the students' accounts from a roster (docker/hub/accounts); then loop.py: the refused log-ins,
-# 20 students, the instructor, the TA, the refusals and limits, and one student's lesson 00 in
-# headless Chromium through the hub's proxy (docker/browser-check). On exit the engine stops and
+# 20 students, the instructor, the TA, the refusals and limits, one student's lesson 00 in
+# headless Chromium through the hub's proxy (docker/browser-check), and that student's 3D view
+# refused to another student (on the network and through the hub). On exit the engine stops and
 # the host is checked and restored (engine_stop), as after docker/test.sh.
 # Figures are printed on lines starting with "figure:". SNAKEKIT_HUB_BENCH=1 (bench/hub.py)
 # adds the benchmark's: a cold start (the images out of the engine and loaded again from a
