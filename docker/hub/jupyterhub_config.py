@@ -13,8 +13,13 @@
   it); students' servers never do.
 - Idle servers are stopped by jupyterhub-idle-culler (``SNAKEKIT_CULL_TIMEOUT`` s); the
   student's volume stays, so nothing saved is lost.
-- Login: ``SNAKEKIT_AUTH=dummy`` (any user name, the shared password ``SNAKEKIT_DUMMY_PASSWORD``:
-  for trying out and the test), or ``lti`` (an LMS course: lti_config.py).
+- Login: ``SNAKEKIT_AUTH=native`` (the default: NativeAuthenticator, a password per person, in
+  accounts that only the teacher makes: docker/hub/accounts; no sign-up page), or ``lti`` (an
+  LMS course: lti_config.py). Roles come by name: ``SNAKEKIT_INSTRUCTORS``.
+- The 3D view: each server's viewers listen on its container's loopback only
+  (``SNAKEKIT_VIEWER_HOST=127.0.0.1``, over the image's 0.0.0.0), so the browser reaches them
+  through the owner's Jupyter server (jupyter-server-proxy, ``/user/<name>/proxy/<port>/``)
+  behind the hub's log-in, and no other container on the network reaches them.
 """
 
 import os
@@ -82,6 +87,9 @@ c.DockerSpawner.start_timeout = int(env("SNAKEKIT_START_TIMEOUT", "300"))
 c.DockerSpawner.http_timeout = 180
 c.DockerSpawner.environment = {
     "SNAKEKIT_EXCHANGE_URL": f"http://{HUB_HOST}:{EXCHANGE_PORT}/services/exchange/",
+    # the 3D view's servers on the container's loopback: reached only through the owner's Jupyter
+    # server (its proxy, behind the hub's log-in), never by another container on the network
+    "SNAKEKIT_VIEWER_HOST": "127.0.0.1",
 }
 # What a server's own token ($JUPYTERHUB_API_TOKEN) may do: its activity, its own server, and
 # tell the exchange who it is (name and groups); nothing of anyone else.
@@ -100,13 +108,26 @@ def course_for_instructors(spawner):
 c.Spawner.pre_spawn_hook = course_for_instructors
 
 # --- who may log in -------------------------------------------------------------------------------
-if env("SNAKEKIT_AUTH", "dummy") == "lti":
+AUTH = env("SNAKEKIT_AUTH", "native")
+if AUTH == "lti":
     exec(open(os.path.join(os.path.dirname(__file__), "lti_config.py")).read())  # noqa: S102 (our own file)
-else:
-    c.JupyterHub.authenticator_class = "dummy"
-    if env("SNAKEKIT_DUMMY_PASSWORD"):
-        c.DummyAuthenticator.password = env("SNAKEKIT_DUMMY_PASSWORD")
+elif AUTH == "native":
+    c.JupyterHub.authenticator_class = "native"
+    # Accounts are made by the teacher only (docker/hub/accounts: a first password each): no
+    # sign-up page, so no name can be claimed by whoever comes first.
+    c.NativeAuthenticator.enable_signup = False
+    # a password a student chooses at /hub/change-password: not short, not a common one
+    c.NativeAuthenticator.minimum_password_length = 10
+    c.NativeAuthenticator.check_common_password = True
+    # guessing: ten wrong passwords for a name, then a minute's wait for it
+    c.NativeAuthenticator.allowed_failed_logins = 10
+    c.NativeAuthenticator.seconds_before_next_try = 60
+    # NativeAuthenticator lets in only its own authorized accounts with their password: every
+    # account may log in (JupyterHub 5 lets no one in unless told)
     c.Authenticator.allow_all = True
+else:
+    raise SystemExit(f"hub: SNAKEKIT_AUTH={AUTH!r} is not a log-in this hub has: native (the default: a password "
+                     "per person, docker/hub/accounts) or lti (an LMS course)")
 c.Authenticator.admin_users = set(INSTRUCTORS[:1])  # the first instructor administers the hub
 c.JupyterHub.load_groups = {"instructors": {"users": INSTRUCTORS}}
 

@@ -1,9 +1,13 @@
 #!/usr/bin/env python3
 """A week of the class on the hub, as its users do it (docker/hub/test.sh runs this).
 
-    loop.py HUB_URL --students 20 [--password PW] [--artifacts DIR]
+    loop.py HUB_URL --passwords CSV --students 20 [--old-shared-password PW] [--browser DIR]
 
-Everyone logs in through the hub (its log-in form, then a token from the hub's REST API) and
+First the log-ins the hub refuses: a student's name with another's password, the teacher's name
+with a student's password or none, the old shared password, a name without an account, and
+the sign-up page. Then everyone logs in through the hub (its log-in form, with their own
+password from CSV, ``username,password`` as docker/hub/accounts prints it, then a token from
+the hub's REST API) and
 works through their own server behind the hub's proxy: the instructor releases lesson 06;
 the students fetch it (the Assignments tab's API), fill the exercises (the instructor's
 answers, or for every third student a slip in one of them), save (the contents API) and
@@ -11,7 +15,9 @@ submit; the TA collects, grades (`snakekit grade`, in the grader container on th
 volume: docker/hub/grade) and returns the feedback; every student fetches it. Then the
 refusals: a student submitting as another, reading another's submission or feedback,
 collecting, reaching another's server or the hub's secrets; a submission over the size limit
-and a full exchange get their messages; a stopped (culled) server loses nothing saved.
+and a full exchange get their messages; a stopped (culled) server loses nothing saved. After
+lesson 00 in Chromium: that student's 3D view is refused to another student, on the hub's
+network (its server listens on the container's loopback) and through the hub's proxy.
 Instructor and TA commands run in their own servers' containers (`docker exec`, as at their
 terminal). Prints lines "figure: ..." and exits non-zero at the first wrong result.
 """
@@ -32,6 +38,7 @@ from pathlib import Path
 
 import nbformat
 import requests
+from checks import fail, log_in, refused_log_ins, say, view_is_the_owners
 
 REPO = Path(__file__).resolve().parents[2]
 LESSON = "06_coded_sweep"
@@ -39,12 +46,9 @@ COURSE = "snakekit"
 DOCKER = os.environ.get("DOCKER", "docker")
 
 
-def say(msg: str) -> None:
-    print(f"hub-test: {msg}", flush=True)
-
-
-def fail(msg: str) -> None:
-    raise SystemExit(f"hub-test: FAILED: {msg}")
+def read_passwords(path: str) -> dict[str, str]:
+    with open(path, encoding="utf-8") as f:
+        return {row["username"]: row["password"] for row in csv.DictReader(f)}
 
 
 class User:
@@ -52,12 +56,10 @@ class User:
 
     def __init__(self, hub: str, name: str, password: str):
         self.hub, self.name = hub.rstrip("/"), name
-        s = requests.Session()
-        s.get(f"{self.hub}/hub/login", timeout=30)  # the form's page sets its _xsrf cookie
-        r = s.post(f"{self.hub}/hub/login", data={"username": name, "password": password,
-                                                   "_xsrf": s.cookies.get("_xsrf")}, allow_redirects=False, timeout=60)
+        s, r = log_in(self.hub, name, password)
         if r.status_code != 302:
-            fail(f"{name} could not log in: {r.status_code}")
+            fail(f"{name} could not log in with their own password: {r.status_code}")
+        self.web = s  # the browser's session: the hub's log-in cookie
         r = s.post(f"{self.hub}/hub/api/users/{name}/tokens", json={"note": "class week", "expires_in": 7200},
                    headers={"X-XSRFToken": s.cookies.get("_xsrf")}, timeout=30)
         if r.status_code != 201:
@@ -164,7 +166,9 @@ def main() -> int:
     p = argparse.ArgumentParser()
     p.add_argument("hub")
     p.add_argument("--students", type=int, default=20)
-    p.add_argument("--password", default=os.environ.get("SNAKEKIT_DUMMY_PASSWORD", ""))
+    p.add_argument("--passwords", required=True, metavar="CSV",
+                   help="username,password for everyone (docker/hub/accounts' output, the instructors' from docker/hub/up)")
+    p.add_argument("--old-shared-password", default="", help="the old dummy log-in's shared password, to be refused")
     p.add_argument("--submit-limit-mb", type=float, default=float(os.environ.get("SNAKEKIT_SUBMIT_LIMIT_MB", "20")))
     p.add_argument("--grade", default=str(REPO / "docker/hub/grade"))
     p.add_argument("--browser", metavar="OUT_DIR", help="open lesson 00 in headless Chromium through the hub's "
@@ -173,10 +177,15 @@ def main() -> int:
                    "the hub and proxy under 50 users' requests")
     args = p.parse_args()
     t0 = time.monotonic()
-    teacher, ta = User(args.hub, "teacher", args.password), User(args.hub, "ta", args.password)
+    pw = read_passwords(args.passwords)
     names = [f"s{i:02d}" for i in range(1, args.students + 1)]
+    missing = [n for n in ["teacher", "ta", *names] if n not in pw]
+    if missing:
+        fail(f"no password in {args.passwords} for {', '.join(missing)}")
+    refused_log_ins(args.hub, pw, args.old_shared_password)
+    teacher, ta = User(args.hub, "teacher", pw["teacher"]), User(args.hub, "ta", pw["ta"])
     with ThreadPoolExecutor(8) as pool:
-        students = list(pool.map(lambda n: User(args.hub, n, args.password), names))
+        students = list(pool.map(lambda n: User(args.hub, n, pw[n]), names))
     say(f"{2 + len(students)} users logged in through the hub's form and REST API")
 
     # --- the servers: the instructor's and TA's first (they share the course volume) ------------
@@ -374,7 +383,7 @@ def main() -> int:
         t = time.monotonic()
         r = subprocess.run([sys.executable, str(REPO / "docker/browser-check"), f"{args.hub}/user/{a.name}", args.browser,
                             "--hub-user", a.name], capture_output=True, text=True,
-                           env=dict(os.environ, SNAKEKIT_HUB_PASSWORD=args.password))
+                           env=dict(os.environ, SNAKEKIT_HUB_PASSWORD=pw[a.name]))
         for line in r.stdout.splitlines():
             if line.startswith("browser:"):
                 say(line)
@@ -382,6 +391,7 @@ def main() -> int:
             fail(f"lesson 00 in Chromium through the hub: {r.stdout[-1500:]}\n{r.stderr[-1500:]}")
         print(f"figure: lesson 00 in headless Chromium through the hub's proxy, the arm drawn and moved: "
               f"{time.monotonic() - t:.0f} s", flush=True)
+        view_is_the_owners(args.hub, a, b)
     print(f"figure: the whole loop on the hub ({len(students)} students): {time.monotonic() - t0:.0f} s", flush=True)
     if args.bench:
         bench(args.hub, students)

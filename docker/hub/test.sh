@@ -7,10 +7,13 @@
 # Steps: the engine (its own data root, the same cache as docker/test.sh, so the image that
 # test built is reused); the base and snakekit's image (built only when missing or stale:
 # compose build is quick when nothing changed); the hub's configuration checked against
-# JupyterHub's, dockerspawner's and ltiauthenticator's classes, for the dummy log-in and for
-# LTI 1.3 (check-config); `docker/hub/up` (a single-node swarm, SwarmSpawner); then loop.py:
-# 20 students, the instructor, the TA, the refusals and limits, and one student's lesson 00 in
-# headless Chromium through the hub's proxy (docker/browser-check). On exit the engine stops and
+# JupyterHub's, dockerspawner's and the authenticators' classes, for the default log-in
+# (NativeAuthenticator) and for LTI 1.3 (check-config); the start command as docker/hub/README.md
+# writes it (a single-node swarm, SwarmSpawner; it makes the instructor's and TA's accounts);
+# the students' accounts from a roster (docker/hub/accounts); then loop.py: the refused log-ins,
+# 20 students, the instructor, the TA, the refusals and limits, one student's lesson 00 in
+# headless Chromium through the hub's proxy (docker/browser-check), and that student's 3D view
+# refused to another student (on the network and through the hub). On exit the engine stops and
 # the host is checked and restored (engine_stop), as after docker/test.sh.
 # Figures are printed on lines starting with "figure:". SNAKEKIT_HUB_BENCH=1 (bench/hub.py)
 # adds the benchmark's: a cold start (the images out of the engine and loaded again from a
@@ -83,14 +86,33 @@ if [ -n "${SNAKEKIT_HUB_BENCH:-}" ]; then
   rm -f "$RUN/images.tar.gz"
 fi
 
-export SNAKEKIT_INSTRUCTORS=teacher,ta SNAKEKIT_DUMMY_PASSWORD=week-of-class-$$ SNAKEKIT_HUB_BIND=127.0.0.1:18000
+# The old dummy log-in's shared password, left in the teacher's environment: the hub ignores it
+# (loop.py tries it as the teacher, a student and a new name).
+OLD_SHARED=week-of-class-$$
+export SNAKEKIT_DUMMY_PASSWORD=$OLD_SHARED SNAKEKIT_HUB_BIND=127.0.0.1:18000
 export SNAKEKIT_SUBMIT_LIMIT_MB=8 SNAKEKIT_EXCHANGE_QUOTA_MB=64 SNAKEKIT_MEM_LIMIT=768M SNAKEKIT_CPU_LIMIT=1
+# The start command exactly as docker/hub/README.md gives it (the settings above in the environment)
+start=$(awk '/^## Start it/ {f = 1} f && /^```sh$/ {getline; print; exit}' docker/hub/README.md)
+[ "$start" = "SNAKEKIT_INSTRUCTORS=teacher,ta docker/hub/up" ] \
+  || die "docker/hub/README.md's start command is '$start', not the instructors this test logs in as (teacher, ta)"
 t=$(now)
-docker/hub/up || die "docker/hub/up failed"
+bash -c "$start" 2>&1 | tee "$RUN/up.log"
+[ "${PIPESTATUS[0]}" = 0 ] || die "$start failed"
 figure "docker/hub/up to the hub answering: $(since "$t") s"
+{ echo "username,password"
+  sed -n 's/^hub: account \([^ ;]*\) made; first password: \([^ ]*\) .*/\1,\2/p' "$RUN/up.log"; } > "$RUN/passwords.csv"
+[ "$(tail -n +2 "$RUN/passwords.csv" | cut -d, -f1 | tr '\n' ' ')" = "teacher ta " ] \
+  || die "docker/hub/up did not make the instructor's and TA's accounts with a first password each: $(cat "$RUN/passwords.csv")"
+# The students' accounts as the teacher makes them: from the roster (its column student)
+{ echo "student,name"; for i in $(seq 1 "$STUDENTS"); do printf 's%02d,Student %d\n' "$i" "$i"; done; } > "$RUN/roster.csv"
+docker/hub/accounts "$RUN/roster.csv" > "$RUN/students.csv" || die "docker/hub/accounts failed"
+[ "$(tail -n +2 "$RUN/students.csv" | wc -l)" = "$STUDENTS" ] || die "docker/hub/accounts made $(tail -n +2 "$RUN/students.csv" | wc -l) accounts for $STUDENTS students"
+tail -n +2 "$RUN/students.csv" >> "$RUN/passwords.csv"
+say "accounts: teacher and ta made by docker/hub/up, $STUDENTS students' by docker/hub/accounts from the roster, a first password each"
 # Lesson 00 in headless Chromium through the hub's proxy (docker/browser-check --hub-user: the
 # student logs in on the hub's page), the 3D view drawn and moved; screenshots in artifacts/hub.
 DOCKER=$DOCKER "$VENV_BIN/python" docker/hub/loop.py http://127.0.0.1:18000 --students "$STUDENTS" --browser "$ROOT/artifacts/hub" \
+  --passwords "$RUN/passwords.csv" --old-shared-password "$OLD_SHARED" \
   --submit-limit-mb "$SNAKEKIT_SUBMIT_LIMIT_MB" ${SNAKEKIT_HUB_BENCH:+--bench} || die "the week on the hub failed"
 figure "hub memory after the week: $($DOCKER stats --no-stream --format '{{.MemUsage}}' snakekit-hub)"
 figure "the whole hub test: $(since "$t_all") s"
