@@ -69,6 +69,23 @@ def _save_run(run, path: Path, out) -> bool:
     return False
 
 
+def _save_interrupted(run, goals: int, path: Path, out) -> None:
+    """Save the part of an interrupted sweep that ran (``run``, or None if nothing did) to
+    ``path``, and say so; a second Ctrl-C while it is written is ignored."""
+    if run is None:
+        print(f"snakekit sweep: nothing had run yet, so nothing was saved to {path}", file=sys.stderr)
+        return
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
+    try:
+        if _save_run(run, path, out):
+            print(f"snakekit sweep: the partial run ({len(run.commanded)} of {goals} goals, "
+                  f"{run.robot_time:.1f} s recorded) was saved to {path}", file=sys.stderr)
+    finally:
+        if in_main:
+            signal.signal(signal.SIGINT, previous)
+
+
 def _sweep(args, out) -> int:
     from .collision import check_path
     from .robot import make_robot
@@ -99,8 +116,14 @@ def _sweep(args, out) -> int:
     print(f"Task 2: {len(trajectory)} goals at 10 Hz, 50 side-to-side sweeps, on the {args.backend} backend"
           + (" in real time" if args.realtime or args.backend != "sim" else ""), file=out, flush=True)
     wall0 = time.perf_counter()
-    with make_robot(args.backend, **options) as robot:
-        run = robot.run(trajectory)
+    robot = None
+    try:
+        with make_robot(args.backend, **options) as robot:
+            run = robot.run(trajectory)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the robot is closed; what ran is kept, then main says so
+        if args.out:
+            _save_interrupted(robot and robot.interrupted_run, len(trajectory), Path(args.out), out)
+        raise
     saved = _save_run(run, Path(args.out), out) if args.out else True  # first: a finished run is kept
     print(run.summary(), file=out)
     if args.plot:
