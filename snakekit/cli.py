@@ -149,9 +149,16 @@ def _check(args, out) -> int:
     from .errors import FileFormatError
     from .notebook_check import check_notebook
 
+    from .validate import excerpt
+
     path = Path(args.notebook)
-    if path.suffix != ".ipynb" or not path.is_file():
-        print(f"snakekit check: {path} is not a notebook file (give a lesson, e.g. "
+    try:
+        is_file = path.is_file()
+    except OSError as e:  # a name longer than the system allows...
+        print(f"snakekit check: {excerpt(path)} can't be opened: {e.strerror or e}", file=sys.stderr)
+        return 2
+    if path.suffix != ".ipynb" or not is_file:
+        print(f"snakekit check: {excerpt(path)} is not a notebook file (give a lesson, e.g. "
               "notebooks/03_inverse_kinematics.ipynb)", file=sys.stderr)
         return 2
     try:
@@ -163,17 +170,27 @@ def _check(args, out) -> int:
 
 def _seconds(text: str) -> float:
     """``--timeout``'s value: seconds > 0, at most a day (nbclient takes 0 as "no limit")."""
-    from .validate import number
+    from .validate import number, quote
 
     try:
         return number(float(text), "--timeout", "s", above=0, at_most=86400,
                       hint="It is how long one cell may run (default: 300)")
     except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e) if "--timeout" in str(e) else f"not a number of seconds: {text!r}")
+        raise argparse.ArgumentTypeError(str(e) if "--timeout" in str(e) else f"not a number of seconds: {quote(text)}")
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, saying a usage error in one line: what was wrong (a short excerpt of a long
+    argument) and where the help is; exit 2."""
+
+    def error(self, message: str):
+        from .validate import excerpt
+
+        self.exit(2, f"{self.prog}: {excerpt(message, 160)}; see {self.prog} --help\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="snakekit", description="snakekit: the 5-joint MX-28 snake arm kit")
+    parser = OneLineParser(prog="snakekit", description="snakekit: the 5-joint MX-28 snake arm kit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     p = sub.add_parser("sweep", help="run the coded sweep (Task 2) and report how it tracked")
     p.add_argument("--backend", default="sim", choices=list(BACKENDS), help="robot backend (default: sim)")

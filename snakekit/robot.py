@@ -27,8 +27,9 @@ from .errors import BackendError, FileFormatError, InputTypeError, LimitError, N
 from .model import SPEC, SnakeSpec
 from .progress import LONG_RUN, TextProgress
 from .trajectory import Trajectory, joint_trajectory
-from .validate import (MAX_DURATION, as_path, check_length, check_limits, check_rate, frozen, number, options_of, quote,
-                       read_npz, real_array, sample_count, too_long, write_failed, writable_file)
+from .validate import (MAX_DURATION, as_path, check_flag, check_length, check_limits, check_rate, finite_array, frozen,
+                       number, options_of, quote, read_npz, real_array, sample_count, too_long, write_failed,
+                       writable_file)
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,8 +49,12 @@ class JointState:
     efforts: np.ndarray
 
     def __post_init__(self):
+        object.__setattr__(self, "time", number(self.time, "time", "s"))
         for name in ("positions", "velocities", "efforts"):
-            object.__setattr__(self, name, frozen(getattr(self, name)))
+            a = finite_array(getattr(self, name), name, "(n_joints,)", "Give one value per joint")
+            if a.ndim != 1 or a.shape != np.shape(self.positions):
+                raise ShapeError(name, "(n_joints,), one value per joint", a.shape)
+            object.__setattr__(self, name, frozen(a))
 
 
 @dataclass(frozen=True, eq=False)
@@ -309,6 +314,7 @@ class Robot(ABC):
                 by the wall clock and longer than :data:`snakekit.progress.LONG_RUN`).
         """
         self._check_trajectory(trajectory)
+        progress = None if progress is None else check_flag(progress, "progress")
         self.interrupted_run = None
         times = trajectory.times - trajectory.times[0]
         goals = trajectory.positions
@@ -371,7 +377,8 @@ class Robot(ABC):
         if len(sent_t) and len(rec_t):
             n = self.spec.n_joints
             try:
-                self.interrupted_run = Run(Trajectory(sent_t, goals, n_joints=n), Trajectory(rec_t, rec_p, rec_v, n_joints=n),
+                self.interrupted_run = Run(Trajectory(sent_t, goals, n_joints=n),
+                                           Trajectory(rec_t, rec_p, rec_v, n_joints=n),
                                            rec_e, self.backend, wall, bool(self.realtime), self.spec)
             except SnakekitError:  # e.g. two goals stamped at one clock reading: nothing to keep
                 self.interrupted_run = None
@@ -459,7 +466,7 @@ def make_robot(backend: str = "sim", **options) -> Robot:
         raise InputTypeError(f"the backend is named by a string, one of {', '.join(map(repr, BACKENDS))}; got "
                              f"{backend!r} ({type(backend).__name__})")
     if backend not in BACKENDS:
-        raise BackendError(f"unknown backend '{backend}'; choose one of {', '.join(BACKENDS)}")
+        raise BackendError(f"unknown backend {quote(backend)}; choose one of {', '.join(BACKENDS)}")
     module, name = BACKENDS[backend]
     try:
         factory = getattr(importlib.import_module(module), name)

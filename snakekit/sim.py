@@ -21,7 +21,7 @@ from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf
 from .progress import LONG_RUN, TextProgress
 from .robot import JointState, Robot, Run
 from .trajectory import Trajectory
-from .validate import MAX_DURATION, as_configuration, check_flag, check_limits, check_spec, number
+from .validate import MAX_DURATION, as_configuration, check_flag, check_limits, check_spec, number, quote
 from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner, check_profile
 
 
@@ -144,6 +144,7 @@ class SimRobot(Robot):
         to the last goal sent, as the servos would.
         """
         self._check_trajectory(trajectory)
+        progress = None if progress is None else check_flag(progress, "progress")
         self.interrupted_run = None
         wall0 = time.perf_counter()
         dt, n = self.dt, self.spec.n_joints
@@ -302,6 +303,9 @@ class SimRobot(Robot):
             ConfigurationError: a size that is not a whole number from 1 to the buffer's size.
         """
         self._check_open()
+        cameras = [self.model.camera(i).name for i in range(self.model.ncam)]
+        if not isinstance(camera, str) or camera not in cameras:
+            raise ConfigurationError(f"camera {quote(camera)} does not exist; the cameras are {', '.join(cameras)}")
         vis = self.model.vis.global_
         width = number(width, "width", "pixels", at_least=1, at_most=vis.offwidth, integer=True,
                        hint=f"The offscreen buffer is {vis.offwidth} x {vis.offheight} pixels; render smaller "

@@ -16,9 +16,9 @@ import numpy as np
 from .errors import (ConfigurationError, FileFormatError, LimitError, NotFiniteError, ShapeError, SnakekitError,
                      TrajectoryError)
 from .model import SPEC, SnakeSpec
-from .validate import (MAX_DURATION, MAX_POINTS, as_path, check_count, check_duration, check_length, check_limits,
-                       check_rate, excerpt, finite_array, frozen, number, quote, read_npz, readable_file, real_array, sample_count,
-                       write_failed, writable_file)
+from .validate import (MAX_DURATION, MAX_POINTS, as_path, check_count, check_duration, check_flag, check_length,
+                       check_limits, check_rate, check_spec, excerpt, finite_array, frozen, number, quote, read_npz,
+                       readable_file, real_array, sample_count, write_failed, writable_file)
 
 
 @dataclass(frozen=True)
@@ -146,8 +146,7 @@ class Trajectory:
         t = finite_array(t, "t", "() or (M,)", "Give the time(s) [s] to sample at")
         if t.ndim > 1:
             raise ShapeError("t", "() or (M,)", t.shape, "Give one time [s], or a list of times")
-        out = np.stack([np.interp(t, self.times, self.positions[:, j]) for j in range(self.n_joints)], -1)
-        return out
+        return np.stack([np.interp(t, self.times, self.positions[:, j]) for j in range(self.n_joints)], -1)
 
     def resample(self, rate: float | None = None, *, times=None) -> "Trajectory":
         """A trajectory on a new time grid: every ``1/rate`` s, or at the given ``times``."""
@@ -177,6 +176,7 @@ class Trajectory:
         must do) and the stored ``velocities``, when given (``"stored velocity"``), against
         the velocity limit.
         """
+        spec, velocity = check_spec(spec), check_flag(velocity, "velocity", "True also checks the speeds")
         out = _stretches(self.positions, self.times, spec.lower, spec.upper, "position")
         if velocity:
             vmax = spec.velocity_limit * (1 + 1e-9)
@@ -310,8 +310,10 @@ def _csv_line_problem(path: Path, width: int) -> FileFormatError | None:
             next(reader, None)
             return _first_bad_row(path, reader, width)
         except csv.Error as e:  # a field longer than csv's limit (131072 characters): not a number either
-            return FileFormatError(f"{path}, line {reader.line_num}: {excerpt(str(e))}; a trajectory .csv holds only "
-                                   "numbers below its header")
+            what = (f"a value longer than {csv.field_size_limit()} characters" if "field limit" in str(e)
+                    else excerpt(str(e)))
+            return FileFormatError(f"{path}, line {reader.line_num}: {what}; a trajectory .csv holds only numbers "
+                                   "below its header")
 
 
 def _first_bad_row(path: Path, reader, width: int) -> FileFormatError | None:
@@ -332,18 +334,14 @@ def _first_bad_row(path: Path, reader, width: int) -> FileFormatError | None:
     return None
 
 
-#: The longest header line a trajectory .csv may have (characters): time,q1..q100,qd1..qd100 is under 1300.
-_LONGEST_HEADER = 4096
-
-
 def _read_csv(path: Path, n: int) -> dict:
     """The arrays of a trajectory .csv, read in one vectorised pass (``numpy.loadtxt``)."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
-            first = f.readline(_LONGEST_HEADER + 1)
-            if len(first) > _LONGEST_HEADER:
-                raise FileFormatError(f"{path}: its first line is longer than {_LONGEST_HEADER} characters "
-                                      f"({excerpt(first, 60)}), so it is not the header time,q1..q{n}; this is not a "
+            first = f.readline(4097)  # a header is shorter: time,q1..q100,qd1..qd100 is under 1300 characters
+            if len(first) > 4096:
+                raise FileFormatError(f"{path}: its first line is longer than 4096 characters (it starts "
+                                      f"{quote(first[:30])}), so it is not the header time,q1..q{n}; this is not a "
                                       "file Trajectory.save wrote")
             if not first.strip():
                 raise FileFormatError(f"{path} is empty; a trajectory .csv starts with the header "
@@ -381,7 +379,8 @@ def _read_csv(path: Path, n: int) -> dict:
 # --- time scaling (Modern Robotics, ch. 9) ----------------------------------------------
 
 
-_SCALING_T = "Give the time(s) [s] from the start of the move"
+def _times(t) -> np.ndarray:  # a time scaling's t [s]: finite (NaN would come back as NaN positions)
+    return finite_array(t, "t", "() or (M,)", "Give the time(s) [s] from the start of the move")
 
 
 def _move_time(T) -> float:
@@ -395,7 +394,7 @@ def cubic_time_scaling(T: float, t):
     >>> round(float(cubic_time_scaling(2.0, 1.0)), 6)
     0.5
     """
-    r = np.clip(finite_array(t, "t", "() or (M,)", _SCALING_T) / _move_time(T), 0, 1)
+    r = np.clip(_times(t) / _move_time(T), 0, 1)
     return 3 * r**2 - 2 * r**3
 
 
@@ -405,7 +404,7 @@ def quintic_time_scaling(T: float, t):
     >>> round(float(quintic_time_scaling(2.0, 1.0)), 6)
     0.5
     """
-    r = np.clip(finite_array(t, "t", "() or (M,)", _SCALING_T) / _move_time(T), 0, 1)
+    r = np.clip(_times(t) / _move_time(T), 0, 1)
     return 10 * r**3 - 15 * r**4 + 6 * r**5
 
 
@@ -421,7 +420,7 @@ def trapezoidal_time_scaling(T: float, t, *, accel_fraction: float = 0.25):
     ta = accel_fraction * T
     v = 1.0 / (T - ta)
     a = v / ta
-    t = np.clip(finite_array(t, "t", "() or (M,)", _SCALING_T), 0, T)
+    t = np.clip(_times(t), 0, T)
     return np.where(t < ta, 0.5 * a * t**2,
                     np.where(t <= T - ta, v * (t - ta / 2), 1 - 0.5 * a * (T - t) ** 2))
 
@@ -447,8 +446,8 @@ def joint_trajectory(q_start, q_end, duration: float | None = None, *, method: s
     >>> len(tr), float(tr.positions[-1, 0])
     (11, 0.5)
     """
-    if method not in _SCALINGS:
-        raise TrajectoryError(f"unknown time scaling '{method}'; choose one of {sorted(_SCALINGS)}")
+    if not isinstance(method, str) or method not in _SCALINGS:
+        raise TrajectoryError(f"unknown time scaling {quote(method)}; choose one of {sorted(_SCALINGS)}")
     scaling, peak = _SCALINGS[method]
     a = check_limits(q_start, spec, "q_start")
     b = check_limits(q_end, spec, "q_end")
@@ -484,6 +483,7 @@ def side_sweep(*, points: int = 500, rate: float = 10.0, sweeps: int = 50,
     >>> len(tr), round(tr.duration, 1), bool(abs(tr.positions[[0, -1]]).max() < 1e-12)
     (500, 49.9, True)
     """
+    spec = check_spec(spec)
     points = check_count(points, "points", 2, 100_000, hint="It is how many goals the sweep sends (the task: 500)")
     rate = check_rate(rate, hint="It is how many goals per second are sent (the task: 10)")
     sweeps = check_count(sweeps, "sweeps", 1, points, hint="It is how many side-to-side sweeps fill the run "

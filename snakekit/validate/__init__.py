@@ -95,6 +95,30 @@ def _first_bool(items):
     return None
 
 
+def _first_text(items):
+    """The first str or bytes in the (nested) lists or tuples ``items``, or None: found before
+    numpy would make an array of it (a list holding one string of 150 million characters
+    would become gigabytes of text)."""
+    kinds = set(map(type, items))
+    if kinds & {str, bytes, np.str_, np.bytes_}:
+        return next(x for x in items if isinstance(x, (str, bytes)))
+    if kinds and kinds <= {list, tuple}:
+        return _first_text(list(chain.from_iterable(items)))
+    return None
+
+
+def _reads_as_number(text) -> bool:
+    """Whether ``text`` (str or bytes) is a number written as text: at most 100 characters
+    (none is written longer), that ``float`` reads."""
+    if len(text) > 100:
+        return False
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _no_bools(a, arr: np.ndarray, name: str, hint: str) -> None:
     """Refuse booleans given as numbers: numpy reads True as 1 (1 rad, 1 s...) without a word."""
     if arr.dtype.kind == "b":
@@ -120,6 +144,10 @@ def real_array(a, name: str, expected: str, hint: str = "") -> np.ndarray:
     ...
     snakekit.errors.ShapeError: positions must have shape (N, 2), got rows of different lengths (2, 1). Give every row the same number of values
     """
+    text = _first_text(a) if isinstance(a, (list, tuple)) else None
+    if text is not None and not _reads_as_number(text):  # "0.5" is a number written as text: numpy reads it
+        raise InputTypeError(f"{name} holds {quote(text)}, which is not a number ({type(text).__name__}); every "
+                             "value must be a real number" + (f". {hint}" if hint else ""))
     try:
         arr = np.asarray(a)
     except ValueError as e:  # numpy's "inhomogeneous shape": ragged rows

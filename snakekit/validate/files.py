@@ -128,6 +128,8 @@ def read_npz(path, what: str, required: tuple, optional: tuple = (), *, fix: str
     import zlib
 
     path = readable_file(path, what)
+    if path.stat().st_size == 0:
+        raise FileFormatError(f"{path} is empty, not a {what}; {fix}")
     try:
         loaded = np.load(path, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):
@@ -150,5 +152,6 @@ def read_npz(path, what: str, required: tuple, optional: tuple = (), *, fix: str
     except FileFormatError:
         raise
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as e:
-        raise FileFormatError(f"{path} is not a readable .npz file ({excerpt(str(e), 160)}); it may be truncated or "
+        why = "it holds pickled Python objects" if "pickle" in str(e) else excerpt(str(e), 80)
+        raise FileFormatError(f"{path} is not a readable .npz file ({why}); it may be truncated or "
                               f"damaged. {fix[:1].upper()}{fix[1:]}") from None
