@@ -687,6 +687,10 @@ def _public_calls():
         sk.closest_reachable_point(target_xy, heading, q0, seed=seed, spec=spec),
         [("target_xy", "array", xy), ("heading", "real", 0.3), ("q0", "array", q5), ("seed", "seed", 0),
          ("spec", "spec", SPEC)])
+    add("SnakeSpec", lambda **kw: sk.forward_kinematics(np.zeros(5), spec=sk.SnakeSpec(**kw)),
+        [("n_joints", "count", 5), ("link_length", "bounded", 0.071), ("tool_offset", "bounded", 0.0475),
+         ("velocity_limit", "bounded", 1.5), ("link_mass", "bounded", 0.012), ("collision_margin", "bounded", 0.005),
+         ("lower", "real", -1.57), ("upper", "real", 1.57), ("servo_ids", "array", (1, 2, 3, 4, 5))])
     add("workspace_points", lambda n=3, seed=0, spec=SPEC: sk.workspace_points(n, seed=seed, spec=spec),
         [("n", "count", 3), ("seed", "seed", 0), ("spec", "spec", SPEC)])
     add("workspace_boundary", lambda **kw: sk.workspace_boundary(**kw),

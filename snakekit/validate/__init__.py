@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import operator
 import reprlib
+from functools import lru_cache
 from itertools import chain
 import numpy as np
 
@@ -300,11 +301,39 @@ def check_flag(x, name: str, hint: str = "") -> bool:
 
 
 def check_spec(spec) -> SnakeSpec:
-    """``spec`` if it is a :class:`~snakekit.model.SnakeSpec` (the arm's description)."""
+    """``spec`` if it is a :class:`~snakekit.model.SnakeSpec` (the arm's description) whose
+    numbers are usable: checked once per spec (:func:`_check_spec_fields`), the kit's own at once."""
+    if spec is SPEC:
+        return spec
     if not isinstance(spec, SnakeSpec):
         raise InputTypeError(f"spec must be a snakekit.SnakeSpec (the arm's description, e.g. snakekit.SPEC), got "
                              f"{quote(spec)} ({type(spec).__name__}); leave it out for the kit's arm")
+    try:
+        hash(spec)
+    except TypeError:  # a field holds a list...: checked each time
+        _check_spec_fields.__wrapped__(spec)
+    else:
+        _check_spec_fields(spec)
     return spec
+
+
+@lru_cache(maxsize=16)
+def _check_spec_fields(spec: SnakeSpec) -> None:
+    """Refuse a spec whose numbers the kinematics, simulator or driver can't use (NaN, a negative
+    length, limits the wrong way round, servo ids that are not one per joint...)."""
+    hint = "It is a field of the SnakeSpec"
+    n = check_count(spec.n_joints, "spec.n_joints", 1, 100, hint)
+    for name in ("link_length", "tool_offset", "velocity_limit"):
+        number(getattr(spec, name), f"spec.{name}", above=0, at_most=1e3, hint=hint)
+    for name in ("link_mass", "tool_mass", "collision_margin"):
+        number(getattr(spec, name), f"spec.{name}", at_least=0, at_most=1e3, hint=hint)
+    lower = number(spec.lower, "spec.lower", "rad", at_least=-np.pi, at_most=np.pi, hint=hint)
+    number(spec.upper, "spec.upper", "rad", above=lower, at_most=np.pi, hint=hint + "; upper > lower")
+    ids = spec.servo_ids
+    if not isinstance(ids, tuple) or len(ids) != n or len(set(ids)) != n or not all(
+            isinstance(i, int) and not isinstance(i, bool) and 0 <= i <= 252 for i in ids):
+        raise ConfigurationError(f"spec.servo_ids must be a tuple of {n} distinct servo ids in 0..252, one a joint, "
+                                 f"got {quote(ids)}")
 
 
 def check_rate(x, name: str = "rate", hint: str = "", *, high: float = MAX_RATE) -> float:
