@@ -124,6 +124,7 @@ def read_npz(path, what: str, required: tuple, optional: tuple = (), *, fix: str
         FileFormatError: missing, a folder, truncated, damaged (a bad checksum), not an .npz
             archive, lacking an array, or holding one larger than :data:`MAX_POINTS` rows.
     """
+    import tokenize
     import zipfile
     import zlib
 
@@ -151,7 +152,9 @@ def read_npz(path, what: str, required: tuple, optional: tuple = (), *, fix: str
             return out
     except FileFormatError:
         raise
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as e:
+    except (OSError, ValueError, EOFError, KeyError, RuntimeError, SyntaxError, tokenize.TokenError,
+            zipfile.BadZipFile, zlib.error) as e:  # a damaged archive (a flipped flag reads "encrypted": RuntimeError),
+        # or a damaged array header (numpy parses it as Python: SyntaxError, TokenError, NotImplementedError)
         why = "it holds pickled Python objects" if "pickle" in str(e) else excerpt(str(e), 80)
         raise FileFormatError(f"{path} is not a readable .npz file ({why}); it may be truncated or "
                               f"damaged. {fix[:1].upper()}{fix[1:]}") from None
