@@ -188,7 +188,8 @@ def parse_listen(text: str | None) -> tuple[str, int]:
     except ValueError:
         number = -1
     if not 0 <= number <= 65535:
-        raise BridgeError(f"--listen takes HOST:PORT or PORT (e.g. 127.0.0.1:7800), got '{text}'")
+        shown = f"{text[:80]!r}{'...' if len(text) > 80 else ''}"  # a short excerpt of a long argument
+        raise BridgeError(f"--listen takes HOST:PORT or PORT (e.g. 127.0.0.1:7800), got {shown}")
     return host or DEFAULT_LISTEN[0], number
 
 

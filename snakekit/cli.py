@@ -69,6 +69,23 @@ def _save_run(run, path: Path, out) -> bool:
     return False
 
 
+def _save_interrupted(run, goals: int, path: Path, out) -> None:
+    """Save the part of an interrupted sweep that ran (``run``, or None if nothing did) to
+    ``path``, and say so; a second Ctrl-C while it is written is ignored."""
+    if run is None:
+        print(f"snakekit sweep: nothing had run yet, so nothing was saved to {path}", file=sys.stderr)
+        return
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
+    try:
+        if _save_run(run, path, out):
+            print(f"snakekit sweep: the partial run ({len(run.commanded)} of {goals} goals, "
+                  f"{run.robot_time:.1f} s recorded) was saved to {path}", file=sys.stderr)
+    finally:
+        if in_main:
+            signal.signal(signal.SIGINT, previous)
+
+
 def _sweep(args, out) -> int:
     from .collision import check_path
     from .profile_planner import ReferencePath
@@ -101,8 +118,14 @@ def _sweep(args, out) -> int:
     print(f"Task 2: {len(trajectory)} goals at 10 Hz, 50 side-to-side sweeps, on the {args.backend} backend"
           + (" in real time" if args.realtime or args.backend != "sim" else ""), file=out, flush=True)
     wall0 = time.perf_counter()
-    with make_robot(args.backend, **options) as robot:
-        run = robot.run(trajectory)
+    robot = None
+    try:
+        with make_robot(args.backend, **options) as robot:
+            run = robot.run(trajectory)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the robot is closed; what ran is kept, then main says so
+        if args.out:
+            _save_interrupted(robot and robot.interrupted_run, len(trajectory), Path(args.out), out)
+        raise
     saved = _save_run(run, Path(args.out), out) if args.out else True  # first: a finished run is kept
     print(run.summary(), file=out)
     if args.plot:
@@ -128,9 +151,16 @@ def _check(args, out) -> int:
     from .errors import FileFormatError
     from .notebook_check import check_notebook
 
+    from .validate import excerpt
+
     path = Path(args.notebook)
-    if path.suffix != ".ipynb" or not path.is_file():
-        print(f"snakekit check: {path} is not a notebook file (give a lesson, e.g. "
+    try:
+        is_file = path.is_file()
+    except OSError as e:  # a name longer than the system allows...
+        print(f"snakekit check: {excerpt(path)} can't be opened: {e.strerror or e}", file=sys.stderr)
+        return 2
+    if path.suffix != ".ipynb" or not is_file:
+        print(f"snakekit check: {excerpt(path)} is not a notebook file (give a lesson, e.g. "
               "notebooks/03_inverse_kinematics.ipynb)", file=sys.stderr)
         return 2
     try:
@@ -142,17 +172,27 @@ def _check(args, out) -> int:
 
 def _seconds(text: str) -> float:
     """``--timeout``'s value: seconds > 0, at most a day (nbclient takes 0 as "no limit")."""
-    from .validate import number
+    from .validate import number, quote
 
     try:
         return number(float(text), "--timeout", "s", above=0, at_most=86400,
                       hint="It is how long one cell may run (default: 300)")
     except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e) if "--timeout" in str(e) else f"not a number of seconds: {text!r}")
+        raise argparse.ArgumentTypeError(str(e) if "--timeout" in str(e) else f"not a number of seconds: {quote(text)}")
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, saying a usage error in one line: what was wrong (a short excerpt of a long
+    argument) and where the help is; exit 2."""
+
+    def error(self, message: str):
+        from .validate import excerpt
+
+        self.exit(2, f"{self.prog}: {excerpt(message, 160)}; see {self.prog} --help\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="snakekit", description="snakekit: the 5-joint MX-28 snake arm kit")
+    parser = OneLineParser(prog="snakekit", description="snakekit: the 5-joint MX-28 snake arm kit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     p = sub.add_parser("sweep", help="run the coded sweep (Task 2) and report how it tracked")
     p.add_argument("--backend", default="sim", choices=list(BACKENDS), help="robot backend (default: sim)")

@@ -52,7 +52,7 @@ import pinocchio as pin
 
 from .errors import CollisionError
 from .model import SPEC, SnakeSpec, body_names, collision_points, urdf
-from .validate import as_configuration, frozen
+from .validate import as_configuration, check_spec, frozen, number
 
 #: A path piece whose links move less than this [m] is not split further (see the module doc).
 RESOLUTION = 1e-4
@@ -129,8 +129,13 @@ class _Checker:
         return k, self._results[k].min_distance
 
 
-@lru_cache(maxsize=4)
 def _checker(spec: SnakeSpec) -> _Checker:
+    """The checker of ``spec`` (built once per spec)."""
+    return _built_checker(check_spec(spec))
+
+
+@lru_cache(maxsize=4)
+def _built_checker(spec: SnakeSpec) -> _Checker:
     return _Checker(spec)
 
 
@@ -151,8 +156,10 @@ def clearance(q, *, spec: SnakeSpec = SPEC) -> Clearance:
 def collides(q, *, spec: SnakeSpec = SPEC, margin: float | None = None) -> bool:
     """Whether two non-neighbouring links at ``q`` [rad] are closer than ``margin`` [m]
     (default: ``spec.collision_margin``)."""
-    margin = spec.collision_margin if margin is None else margin
-    return _checker(spec).closest(as_configuration(q, spec))[1] < margin
+    c = _checker(spec)
+    margin = spec.collision_margin if margin is None else number(margin, "margin", "m", at_least=0, hint=(
+        "It is how close two links may come (default: spec.collision_margin)"))
+    return c.closest(as_configuration(q, spec))[1] < margin
 
 
 def collision_free(qs, *, spec: SnakeSpec = SPEC) -> np.ndarray:

@@ -17,7 +17,8 @@ import pinocchio as pin
 from .collision import clearance, collides, collision_free
 from .errors import NotFiniteError, ShapeError, UnreachableTargetError
 from .model import SPEC, SnakeSpec, urdf
-from .validate import as_configuration, check_count, check_limits, number, real_array  # noqa: F401  (lessons use them)
+from .validate import (as_configuration, check_count, check_limits, check_seed, check_spec, number,  # noqa: F401
+                       real_array)  # (lessons use them)
 
 
 @dataclass(frozen=True)
@@ -32,6 +33,7 @@ class _Kin:
 def _kin(spec: SnakeSpec = SPEC) -> _Kin:
     """The Pinocchio model of ``spec`` (built once; the default spec skips the cache lookup)."""
     global _DEFAULT
+    check_spec(spec)
     if spec is SPEC:
         if _DEFAULT is None:
             _DEFAULT = _build(SPEC)
@@ -122,12 +124,17 @@ def dls_step(q, target_xy, damping: float = 1e-3, *, spec: SnakeSpec = SPEC) -> 
     >>> np.round(dls_step(np.zeros(5), (0.25, 0.1)), 4).tolist()
     [0.1442, 0.1133, 0.0824, 0.0515, 0.0207]
     """
+    q = as_configuration(q, spec)
     target = real_array(target_xy, "target_xy", "(2,)")
     if target.shape != (2,):
         raise ShapeError("target_xy", "(2,): the tool point (x, y) [m]", target.shape)
+    if not np.isfinite(target).all():
+        raise NotFiniteError(f"target_xy holds NaN or infinity: {target.tolist()}; give finite (x, y) [m]")
+    damping = number(damping, "damping", "m", at_least=0, hint="It is lambda, how much the step is damped "
+                     "(default: 1e-3)")
     e = target - tool_pose_2d(q, spec=spec)[:2]
     J = planar_jacobian(q, spec=spec)[:2]
-    return np.asarray(q, dtype=float) + J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)
+    return q + J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)
 
 
 def _wrap(a: float) -> float:
@@ -265,6 +272,7 @@ def closest_reachable_point(target_xy, heading: float | None = None, q0=None, *,
     """
     k = _kin(spec)
     target_xy, heading = _target(target_xy, heading)
+    seed = check_seed(seed)
     target = np.array([*_solver_xy(target_xy, spec), 0.0 if heading is None else heading])
     start = None if q0 is None else np.clip(as_configuration(q0, spec, "q0"), spec.lower, spec.upper)
     q = _closest_configuration(k, target, heading is not None, [start], np.random.default_rng(seed))
@@ -328,6 +336,7 @@ def inverse_kinematics(target_xy, heading: float | None = None, q0=None, *, spec
     max_iter = check_count(max_iter, "max_iter", 1, 10_000,
                            hint="It is how many solver steps each start may take (default: 100)")
     restarts = check_count(restarts, "restarts", 0, 1000, hint="It is how many random starts follow q0 (default: 20)")
+    seed = check_seed(seed)
     use_heading = heading is not None
     target = np.array([*_solver_xy(target_xy, spec), heading if use_heading else 0.0])
     if q0 is None:
@@ -385,6 +394,7 @@ def workspace_points(n: int = 5000, *, seed: int = 0, spec: SnakeSpec = SPEC) ->
         ConfigurationError: ``n`` is not a whole number from 1 to 1,000,000.
     """
     n = check_count(n, "n", 1, 1_000_000, hint="It is how many random poses are drawn (default: 5000)")
+    seed = check_seed(seed)
     k = _kin(spec)
     rng = np.random.default_rng(seed)
     out = np.empty((n, 2))
@@ -411,9 +421,27 @@ def workspace_boundary(*, bins: int = 120, samples: int = 20000, refine: int = 6
     return boundary_configurations(bins=bins, samples=samples, refine=refine, seed=seed, spec=spec)[0].copy()
 
 
-@lru_cache(maxsize=8)
 def boundary_configurations(*, bins: int = 120, samples: int = 20000, refine: int = 60, seed: int = 0,
                             spec: SnakeSpec = SPEC) -> tuple[np.ndarray, np.ndarray]:
+    """Outer boundary of the tool's reachable points, and the joint angles reaching them:
+    :func:`_boundary_configurations`, with its options checked.
+
+    Raises:
+        ConfigurationError: ``bins`` not from 3 to 10,000, ``samples`` not from 1 to
+            1,000,000, ``refine`` not from 0 to 1000, or a ``seed`` that is not a whole number >= 0.
+    """
+    return _boundary_configurations(
+        bins=check_count(bins, "bins", 3, 10_000, hint="It is how many directions the boundary has (default: 120)"),
+        samples=check_count(samples, "samples", 1, 1_000_000, hint="It is how many random poses are drawn "
+                            "(default: 20000)"),
+        refine=check_count(refine, "refine", 0, 1000, hint="It is how many rounds of small steps push the boundary "
+                           "out (default: 60)"),
+        seed=check_seed(seed), spec=check_spec(spec))
+
+
+@lru_cache(maxsize=8)
+def _boundary_configurations(*, bins: int, samples: int, refine: int, seed: int,
+                             spec: SnakeSpec) -> tuple[np.ndarray, np.ndarray]:
     """Outer boundary of the tool's reachable points, as a closed polygon (bins, 2) [m].
 
     For each of ``bins`` directions around joint 1 it keeps the farthest tool point found

@@ -25,7 +25,8 @@ FRESH_COPY = "take a fresh copy of the lesson from the kit's notebooks/ folder a
 
 
 def read_lesson(path):
-    """The notebook at ``path`` (nbformat v4), with its graded cells' metadata checked.
+    """The notebook at ``path`` (nbformat v4; an nbformat 3 notebook is converted to it, as
+    ``nbformat.read(..., as_version=4)`` does), with its graded cells' metadata checked.
 
     Raises:
         FileFormatError: the file is empty, not UTF-8, not JSON, not a Jupyter notebook, or a
@@ -53,7 +54,9 @@ def read_lesson(path):
         start = text.strip().splitlines()[0][:40]
         raise FileFormatError(f"{path} is not a Jupyter notebook: it is not JSON (it starts with {start!r}), "
                               f"perhaps another file renamed to .ipynb; {FRESH_COPY}") from None
-    if not isinstance(raw, dict) or not isinstance(raw.get("cells"), list):
+    old_format = isinstance(raw, dict) and isinstance(raw.get("nbformat"), int) and raw["nbformat"] < 4 \
+        and isinstance(raw.get("worksheets"), list)  # nbformat 3 keeps its cells in worksheets: converted below
+    if not isinstance(raw, dict) or not (isinstance(raw.get("cells"), list) or old_format):
         raise FileFormatError(f"{path} is JSON but not a Jupyter notebook (a notebook is a JSON object with a list "
                               f"of cells; this has no 'cells' list); {FRESH_COPY}")
     try:

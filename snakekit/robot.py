@@ -23,12 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import BackendError, FileFormatError, InputTypeError, LimitError, ShapeError
+from .errors import BackendError, FileFormatError, InputTypeError, LimitError, NotFiniteError, ShapeError, SnakekitError
 from .model import SPEC, SnakeSpec
 from .progress import LONG_RUN, TextProgress
 from .trajectory import Trajectory, joint_trajectory
-from .validate import (MAX_DURATION, check_limits, check_rate, frozen, number, options_of, readable_file, sample_count,
-                       too_long, write_failed, writable_file)
+from .validate import (MAX_DURATION, as_path, check_flag, check_length, check_limits, check_rate, finite_array, frozen,
+                       number, options_of, quote, read_npz, real_array, sample_count, too_long, write_failed,
+                       writable_file)
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,8 +49,12 @@ class JointState:
     efforts: np.ndarray
 
     def __post_init__(self):
+        object.__setattr__(self, "time", number(self.time, "time", "s"))
         for name in ("positions", "velocities", "efforts"):
-            object.__setattr__(self, name, frozen(getattr(self, name)))
+            a = finite_array(getattr(self, name), name, "(n_joints,)", "Give one value per joint")
+            if a.ndim != 1 or a.shape != np.shape(self.positions):
+                raise ShapeError(name, "(n_joints,), one value per joint", a.shape)
+            object.__setattr__(self, name, frozen(a))
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,7 +79,26 @@ class Run:
     spec: SnakeSpec = field(default=SPEC, repr=False)
 
     def __post_init__(self):
-        object.__setattr__(self, "efforts", frozen(self.efforts))
+        for name in ("commanded", "measured"):
+            if not isinstance(getattr(self, name), Trajectory):
+                raise InputTypeError(f"a Run's {name} must be a snakekit.Trajectory, got "
+                                     f"{type(getattr(self, name)).__name__}")
+        shape = self.measured.positions.shape
+        check_length(self.efforts, "efforts")
+        efforts = real_array(self.efforts, "efforts", f"{shape} (one row per measured sample)")
+        if efforts.shape != shape:
+            raise ShapeError("efforts", f"{shape} (one row per measured sample, one column per joint)", efforts.shape)
+        if not np.isfinite(efforts).all():
+            raise NotFiniteError("efforts hold NaN or infinity; every recorded torque [N m] is finite")
+        if not isinstance(self.backend, str):
+            raise InputTypeError(f"a Run's backend is a name such as 'sim', got {quote(self.backend)} "
+                                 f"({type(self.backend).__name__})")
+        if not isinstance(self.realtime, (bool, np.bool_)):
+            raise InputTypeError(f"a Run's realtime is True or False, got {quote(self.realtime)} "
+                                 f"({type(self.realtime).__name__})")
+        object.__setattr__(self, "wall_time", number(self.wall_time, "wall_time", "s", at_least=0))
+        object.__setattr__(self, "realtime", bool(self.realtime))
+        object.__setattr__(self, "efforts", frozen(efforts))
 
     @property
     def robot_time(self) -> float:
@@ -143,7 +167,7 @@ class Run:
             FileFormatError: another suffix.
             FileWriteError: the folder is missing, the path is a folder, or writing failed.
         """
-        path = Path(path)
+        path = as_path(path, "run file")
         if path.suffix != ".npz":
             raise FileFormatError(f"a run is saved as .npz, not '{path.suffix}' ({path})")
         writable_file(path, "run file", probe=False)
@@ -158,17 +182,32 @@ class Run:
 
     @classmethod
     def load(cls, path) -> "Run":
-        """Read a run written by :meth:`save`."""
-        path = readable_file(path, "run file")
+        """Read a run written by :meth:`save`.
+
+        Raises:
+            FileFormatError: the file is missing, truncated, damaged, or its arrays are not a
+                run (a missing array, efforts of another shape than the measured positions...).
+        """
+        fix = "save runs with Run.save"
+        z = read_npz(path, "run file", _RUN_ARRAYS, fix=fix)
+        path = Path(path)
+        scalars = {}
+        for name in ("backend", "wall_time", "realtime"):
+            if z[name].shape != ():
+                raise FileFormatError(f"{path} is not a snakekit run file: '{name}' holds an array of shape "
+                                      f"{z[name].shape}, not one value; {fix}")
+            scalars[name] = z[name].item()
         try:
-            with np.load(path, allow_pickle=False) as z:
-                return cls(Trajectory(z["commanded_times"], z["commanded_positions"]),
-                           Trajectory(z["measured_times"], z["measured_positions"], z["measured_velocities"]),
-                           z["efforts"], str(z["backend"]), float(z["wall_time"]), bool(z["realtime"]))
-        except FileNotFoundError as e:
-            raise FileFormatError(f"run file {path} does not exist") from e
-        except (KeyError, OSError, ValueError, EOFError, InputTypeError) as e:
-            raise FileFormatError(f"{path} is not a snakekit run file ({e}); save runs with Run.save") from e
+            return cls(Trajectory(z["commanded_times"], z["commanded_positions"]),
+                       Trajectory(z["measured_times"], z["measured_positions"], z["measured_velocities"]),
+                       z["efforts"], scalars["backend"], scalars["wall_time"], scalars["realtime"])
+        except SnakekitError as e:
+            raise FileFormatError(f"{path} is not a snakekit run file ({e}); {fix}") from None
+
+
+#: The arrays of a run file, as :meth:`Run.save` writes them.
+_RUN_ARRAYS = ("commanded_times", "commanded_positions", "measured_times", "measured_positions",
+               "measured_velocities", "efforts", "backend", "wall_time", "realtime")
 
 
 class Robot(ABC):
@@ -199,6 +238,9 @@ class Robot(ABC):
     #: The longest trajectory :meth:`run` accepts [s]; longer is refused as probably given in
     #: milliseconds. Raise it on a robot to run a longer one on purpose.
     max_duration = MAX_DURATION
+    #: What the last run stopped part way (Ctrl-C, an error once goals went out) had sent and
+    #: recorded, as a :class:`Run`; None when the last run finished or nothing was recorded.
+    interrupted_run: Run | None = None
 
     def __init__(self, spec: SnakeSpec = SPEC):
         self.spec = spec
@@ -324,6 +366,8 @@ class Robot(ABC):
                 by the wall clock and longer than :data:`snakekit.progress.LONG_RUN`).
         """
         self._check_trajectory(trajectory)
+        progress = None if progress is None else check_flag(progress, "progress")
+        self.interrupted_run = None
         times = trajectory.times - trajectory.times[0]
         goals = trajectory.positions
         n_goals = len(times)
@@ -369,11 +413,27 @@ class Robot(ABC):
                 self.last_goal = goals[k - 1]
             if bar is not None:
                 bar.close(complete=complete)
+            if not complete:
+                o = trajectory.times[0]
+                self._keep_partial(sent_t[:k] + o, goals[:k], rec_t[:r] + o, rec_p[:r], rec_v[:r], rec_e[:r],
+                                   time.perf_counter() - wall0)
         wall = time.perf_counter() - wall0
         offset = trajectory.times[0]
         return Run(Trajectory(sent_t + offset, goals, n_joints=self.spec.n_joints),
                    Trajectory(rec_t + offset, rec_p, rec_v, n_joints=self.spec.n_joints),
                    rec_e, self.backend, wall, bool(self.realtime), self.spec)
+
+    def _keep_partial(self, sent_t, goals, rec_t, rec_p, rec_v, rec_e, wall: float) -> None:
+        """Keep what a run stopped part way had sent and recorded as :attr:`interrupted_run`
+        (none if no goal was sent or no state recorded)."""
+        if len(sent_t) and len(rec_t):
+            n = self.spec.n_joints
+            try:
+                self.interrupted_run = Run(Trajectory(sent_t, goals, n_joints=n),
+                                           Trajectory(rec_t, rec_p, rec_v, n_joints=n),
+                                           rec_e, self.backend, wall, bool(self.realtime), self.spec)
+            except SnakekitError:  # e.g. two goals stamped at one clock reading: nothing to keep
+                self.interrupted_run = None
 
     def _check_trajectory(self, trajectory: Trajectory) -> None:
         """Refuse, before anything moves, a trajectory this arm must not run."""
@@ -463,7 +523,7 @@ def make_robot(backend: str = "sim", **options) -> Robot:
         raise InputTypeError(f"the backend is named by a string, one of {', '.join(map(repr, BACKENDS))}; got "
                              f"{backend!r} ({type(backend).__name__})")
     if backend not in BACKENDS:
-        raise BackendError(f"unknown backend '{backend}'; choose one of {', '.join(BACKENDS)}")
+        raise BackendError(f"unknown backend {quote(backend)}; choose one of {', '.join(BACKENDS)}")
     module, name = BACKENDS[backend]
     try:
         factory = getattr(importlib.import_module(module), name)

@@ -21,7 +21,7 @@ from .model import MJCF_PATH, SPEC, SnakeSpec, mjcf
 from .progress import LONG_RUN, TextProgress
 from .robot import JointState, Robot, Run
 from .trajectory import Trajectory
-from .validate import MAX_DURATION, as_configuration, check_limits, number
+from .validate import MAX_DURATION, as_configuration, check_flag, check_limits, check_spec, number, quote
 from .profile_planner import DEFAULT_PROFILE_ACCELERATION, DEFAULT_PROFILE_VELOCITY, ProfilePlanner, check_profile
 
 
@@ -63,7 +63,9 @@ class SimRobot(Robot):
     def __init__(self, *, realtime: bool = False, q0=None, spec: SnakeSpec = SPEC,
                  profile_velocity: int = DEFAULT_PROFILE_VELOCITY,
                  profile_acceleration: int = DEFAULT_PROFILE_ACCELERATION, any_profile: bool = False):
-        super().__init__(spec)
+        super().__init__(check_spec(spec))
+        realtime = check_flag(realtime, "realtime", "It paces the simulation to the wall clock (default: False)")
+        any_profile = check_flag(any_profile, "any_profile")
         try:
             profile_velocity, profile_acceleration = check_profile(profile_velocity, profile_acceleration, spec,
                                                                    firmware_range=bool(any_profile))
@@ -149,6 +151,8 @@ class SimRobot(Robot):
         to the last goal sent, as the servos would.
         """
         self._check_trajectory(trajectory)
+        progress = None if progress is None else check_flag(progress, "progress")
+        self.interrupted_run = None
         wall0 = time.perf_counter()
         dt, n = self.dt, self.spec.n_joints
         k0 = self._steps
@@ -212,10 +216,13 @@ class SimRobot(Robot):
         bar = TextProgress(record_at[-1], f"running on the {self.backend} robot") if progress else None
         self._pace_from_now()
         complete = False
+        done = 0  # records taken
+        wall0 = time.perf_counter()
         try:
             for r, step in enumerate(rec_steps.tolist()):
                 self._advance((k0 + step) * dt)
                 rec_p[r], rec_v[r], rec_e[r] = d.qpos, d.qvel, d.actuator_force
+                done = r + 1
                 if bar is not None:
                     bar.update(record_at[r])
             complete = True
@@ -229,6 +236,9 @@ class SimRobot(Robot):
                 self.planner = before
                 self._ref = (k0, self.planner.step_velocities(k0, dt, k0 + goal_steps[:sent],
                                                               trajectory.positions[:sent]))
+                o = trajectory.times[0]
+                self._keep_partial(goal_steps[:sent] * dt + o, trajectory.positions[:sent], rec_steps[:done] * dt + o,
+                                   rec_p[:done], rec_v[:done], rec_e[:done], time.perf_counter() - wall0)
         return rec_p, rec_v, rec_e
 
     def step(self, duration: float) -> None:
@@ -301,6 +311,9 @@ class SimRobot(Robot):
             ConfigurationError: a size that is not a whole number from 1 to the buffer's size.
         """
         self._check_open()
+        cameras = [self.model.camera(i).name for i in range(self.model.ncam)]
+        if not isinstance(camera, str) or camera not in cameras:
+            raise ConfigurationError(f"camera {quote(camera)} does not exist; the cameras are {', '.join(cameras)}")
         vis = self.model.vis.global_
         width = number(width, "width", "pixels", at_least=1, at_most=vis.offwidth, integer=True,
                        hint=f"The offscreen buffer is {vis.offwidth} x {vis.offheight} pixels; render smaller "

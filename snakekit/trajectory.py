@@ -8,16 +8,16 @@ from __future__ import annotations
 
 import csv
 import warnings
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .errors import (ConfigurationError, FileFormatError, InputTypeError, LimitError, NotFiniteError, ShapeError,
+from .errors import (ConfigurationError, FileFormatError, LimitError, NotFiniteError, ShapeError, SnakekitError,
                      TrajectoryError)
 from .model import SPEC, SnakeSpec
-from .validate import (MAX_DURATION, check_count, check_duration, check_limits, check_rate, frozen, number,
+from .validate import (MAX_DURATION, MAX_POINTS, as_path, check_count, check_duration, check_flag, check_length,
+                       check_limits, check_rate, check_spec, excerpt, finite_array, frozen, number, quote, read_npz,
                        readable_file, real_array, sample_count, write_failed, writable_file)
 
 
@@ -89,7 +89,10 @@ class Trajectory:
     n_joints: int = SPEC.n_joints
 
     def __post_init__(self):
-        n = self.n_joints
+        n = check_count(self.n_joints, "n_joints", 1, 100, hint="It is how many joints the arm has (default: 5)")
+        object.__setattr__(self, "n_joints", n)
+        for name in ("times", "positions", "velocities"):  # before any memory is taken for them
+            check_length(getattr(self, name), f"trajectory {name}")
         t = real_array(self.times, "times", "(N,)", "Give one time [s] per point")
         p = real_array(self.positions, "positions", f"(N, {n})", f"Give {n} angles [rad] per time")
         if t.ndim != 1 or t.size == 0:
@@ -140,9 +143,10 @@ class Trajectory:
 
     def sample(self, t) -> np.ndarray:
         """Positions at time(s) ``t`` [s], linearly interpolated and held beyond the ends."""
-        t = real_array(t, "t", "() or (M,)", "Give the time(s) [s] to sample at")
-        out = np.stack([np.interp(t, self.times, self.positions[:, j]) for j in range(self.n_joints)], -1)
-        return out
+        t = finite_array(t, "t", "() or (M,)", "Give the time(s) [s] to sample at")
+        if t.ndim > 1:
+            raise ShapeError("t", "() or (M,)", t.shape, "Give one time [s], or a list of times")
+        return np.stack([np.interp(t, self.times, self.positions[:, j]) for j in range(self.n_joints)], -1)
 
     def resample(self, rate: float | None = None, *, times=None) -> "Trajectory":
         """A trajectory on a new time grid: every ``1/rate`` s, or at the given ``times``."""
@@ -152,7 +156,9 @@ class Trajectory:
             rate = check_rate(rate, hint="It is how many samples per second the new grid has")
             count = sample_count(self.duration, rate, "the resampled trajectory")
             times = self.times[0] + np.arange(count) / rate
-        times = real_array(times, "times", "(M,)", "Give the new sample times [s]")
+        times = finite_array(times, "times", "(M,)", "Give the new sample times [s]")
+        if times.ndim != 1:
+            raise ShapeError("times", "(M,)", times.shape, "Give the new sample times [s] as a list")
         vel = None
         if self.velocities is not None:
             vel = np.stack([np.interp(times, self.times, self.velocities[:, j])
@@ -170,6 +176,7 @@ class Trajectory:
         must do) and the stored ``velocities``, when given (``"stored velocity"``), against
         the velocity limit.
         """
+        spec, velocity = check_spec(spec), check_flag(velocity, "velocity", "True also checks the speeds")
         out = _stretches(self.positions, self.times, spec.lower, spec.upper, "position")
         if velocity:
             vmax = spec.velocity_limit * (1 + 1e-9)
@@ -209,7 +216,7 @@ class Trajectory:
             FileFormatError: another suffix.
             FileWriteError: the folder is missing, the path is a folder, or writing failed.
         """
-        path = Path(path)
+        path = as_path(path, "trajectory file")
         if path.suffix not in (".npz", ".csv"):
             raise FileFormatError(f"cannot save a trajectory as '{path.suffix}' ({path}); use .npz or .csv")
         writable_file(path, "trajectory file", probe=False)
@@ -242,28 +249,19 @@ class Trajectory:
         Raises:
             FileFormatError: missing, truncated or malformed file, with what was wrong.
         """
+        n_joints = check_count(n_joints, "n_joints", 1, 100, hint="It is how many joints the arm has (default: 5)")
         path = readable_file(path, "trajectory file")
         if path.suffix == ".npz":
-            try:
-                with np.load(path, allow_pickle=False) as z:
-                    missing = {"times", "positions"} - set(z.files)
-                    if missing:
-                        raise FileFormatError(f"{path} lacks the array(s) {sorted(missing)}; a trajectory "
-                                              f".npz holds 'times' and 'positions' (and may hold 'velocities')")
-                    arrays = {k: z[k] for k in ("times", "positions", "velocities") if k in z.files}
-            except FileFormatError:
-                raise
-            except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-                raise FileFormatError(f"{path} is not a readable .npz file ({e}); it may be truncated. "
-                                      "Save it again with Trajectory.save.") from e
+            arrays = read_npz(path, "trajectory file", ("times", "positions"), ("velocities",),
+                              fix="save it again with Trajectory.save")
         elif path.suffix == ".csv":
             arrays = _read_csv(path, n_joints)
         else:
             raise FileFormatError(f"cannot read a trajectory from '{path.suffix}' ({path}); use .npz or .csv")
         try:
             return cls(**arrays, n_joints=n_joints)
-        except (ShapeError, TrajectoryError, NotFiniteError, InputTypeError) as e:
-            raise FileFormatError(f"{path} does not hold a valid trajectory: {e}") from e
+        except SnakekitError as e:  # the arrays are not a trajectory (shape, order, size, values)
+            raise FileFormatError(f"{path} does not hold a valid trajectory: {e}") from None
 
 
 def _csv_header_problem(header: list[str], n: int) -> str | None:
@@ -277,7 +275,7 @@ def _csv_header_problem(header: list[str], n: int) -> str | None:
     missing = [h for h in want if h not in header]
     some_qd = [h for h in full[n + 1:] if h in header]
     if extra:
-        return (f"has the column(s) {', '.join(extra)} that a trajectory does not have; {forms}. "
+        return (f"has the column(s) {excerpt(', '.join(extra))} that a trajectory does not have; {forms}. "
                 "Remove them (nothing is dropped silently)")
     if missing:
         return f"lacks the column(s) {', '.join(missing)}; {forms}"
@@ -285,7 +283,7 @@ def _csv_header_problem(header: list[str], n: int) -> str | None:
         lacking = [h for h in full[n + 1:] if h not in header]
         return (f"has velocities for some joints only (lacks {', '.join(lacking)}); {forms}. "
                 f"Give all of qd1..qd{n}, or none")
-    return f"has its columns in another order or repeated ({','.join(header)}); {forms}"
+    return f"has its columns in another order or repeated ({excerpt(','.join(header))}); {forms}"
 
 
 def _not_utf8(path: Path, e: UnicodeDecodeError) -> FileFormatError:
@@ -308,19 +306,31 @@ def _csv_line_problem(path: Path, width: int) -> FileFormatError | None:
     when the vectorised read failed, to say where and why)."""
     with open(path, newline="", encoding="utf-8-sig") as f:
         reader = csv.reader(f)
-        next(reader, None)
-        for row in reader:
-            line = reader.line_num
-            if not row:
-                continue
-            if len(row) != width:
-                return FileFormatError(f"{path}, line {line}: {len(row)} values, expected {width}; " + (
-                    "the file may be truncated" if len(row) < width else "remove the extra values"))
-            for x in row:
-                try:
-                    float(x)
-                except ValueError as e:
-                    return FileFormatError(f"{path}, line {line}: not a number ({e})")
+        try:
+            next(reader, None)
+            return _first_bad_row(path, reader, width)
+        except csv.Error as e:  # a field longer than csv's limit (131072 characters): not a number either
+            what = (f"a value longer than {csv.field_size_limit()} characters" if "field limit" in str(e)
+                    else excerpt(str(e)))
+            return FileFormatError(f"{path}, line {reader.line_num}: {what}; a trajectory .csv holds only numbers "
+                                   "below its header")
+
+
+def _first_bad_row(path: Path, reader, width: int) -> FileFormatError | None:
+    """The error for the first row of ``reader`` that is not ``width`` numbers, or None."""
+    for row in reader:
+        line = reader.line_num
+        if not row:
+            continue
+        if len(row) != width:
+            return FileFormatError(f"{path}, line {line}: {len(row)} values, expected {width}; " + (
+                "the file may be truncated" if len(row) < width else "remove the extra values"))
+        for x in row:
+            try:
+                float(x)
+            except ValueError:
+                return FileFormatError(f"{path}, line {line}: not a number ({quote(x)}); a trajectory .csv "
+                                       "holds only numbers below its header")
     return None
 
 
@@ -328,7 +338,11 @@ def _read_csv(path: Path, n: int) -> dict:
     """The arrays of a trajectory .csv, read in one vectorised pass (``numpy.loadtxt``)."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
-            first = f.readline()
+            first = f.readline(4097)  # a header is shorter: time,q1..q100,qd1..qd100 is under 1300 characters
+            if len(first) > 4096:
+                raise FileFormatError(f"{path}: its first line is longer than 4096 characters (it starts "
+                                      f"{quote(first[:30])}), so it is not the header time,q1..q{n}; this is not a "
+                                      "file Trajectory.save wrote")
             if not first.strip():
                 raise FileFormatError(f"{path} is empty; a trajectory .csv starts with the header "
                                       f"time,q1..q{n}")
@@ -340,9 +354,13 @@ def _read_csv(path: Path, n: int) -> dict:
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", UserWarning)  # "input contained no data": checked below
-                    a = np.loadtxt(f, delimiter=",", dtype=float, ndmin=2, comments=None, quotechar='"')
+                    a = np.loadtxt(f, delimiter=",", dtype=float, ndmin=2, comments=None, quotechar='"',
+                                   max_rows=MAX_POINTS + 1)  # one more than allowed: enough to refuse the file
             except ValueError as e:
-                raise _csv_line_problem(path, width) or FileFormatError(f"{path}: {e}") from e
+                raise _csv_line_problem(path, width) or FileFormatError(f"{path}: {excerpt(str(e))}") from None
+            if a.shape[0] > MAX_POINTS:
+                raise FileFormatError(f"{path} holds more than {MAX_POINTS} points, more than the kit handles; "
+                                      "it was not read. Resample it to a lower rate, or split it")
     except UnicodeDecodeError as e:
         raise _not_utf8(path, e) from e
     except OSError as e:
@@ -361,6 +379,10 @@ def _read_csv(path: Path, n: int) -> dict:
 # --- time scaling (Modern Robotics, ch. 9) ----------------------------------------------
 
 
+def _times(t) -> np.ndarray:  # a time scaling's t [s]: finite (NaN would come back as NaN positions)
+    return finite_array(t, "t", "() or (M,)", "Give the time(s) [s] from the start of the move")
+
+
 def _move_time(T) -> float:
     """A time scaling's ``T``, checked: a duration > 0 [s] (0 would divide by zero, < 0 run backwards)."""
     return number(T, "T", "s", above=0, hint="T is how long the move takes")
@@ -372,7 +394,7 @@ def cubic_time_scaling(T: float, t):
     >>> round(float(cubic_time_scaling(2.0, 1.0)), 6)
     0.5
     """
-    r = np.clip(np.asarray(t, dtype=float) / _move_time(T), 0, 1)
+    r = np.clip(_times(t) / _move_time(T), 0, 1)
     return 3 * r**2 - 2 * r**3
 
 
@@ -382,7 +404,7 @@ def quintic_time_scaling(T: float, t):
     >>> round(float(quintic_time_scaling(2.0, 1.0)), 6)
     0.5
     """
-    r = np.clip(np.asarray(t, dtype=float) / _move_time(T), 0, 1)
+    r = np.clip(_times(t) / _move_time(T), 0, 1)
     return 10 * r**3 - 15 * r**4 + 6 * r**5
 
 
@@ -393,12 +415,12 @@ def trapezoidal_time_scaling(T: float, t, *, accel_fraction: float = 0.25):
     0.5
     """
     T = _move_time(T)
-    if not 0 < accel_fraction <= 0.5:
-        raise TrajectoryError(f"accel_fraction must be in (0, 0.5], got {accel_fraction}")
+    accel_fraction = number(accel_fraction, "accel_fraction", above=0, at_most=0.5,
+                            hint="It is the share of T spent speeding up, and again slowing down (default: 0.25)")
     ta = accel_fraction * T
     v = 1.0 / (T - ta)
     a = v / ta
-    t = np.clip(np.asarray(t, dtype=float), 0, T)
+    t = np.clip(_times(t), 0, T)
     return np.where(t < ta, 0.5 * a * t**2,
                     np.where(t <= T - ta, v * (t - ta / 2), 1 - 0.5 * a * (T - t) ** 2))
 
@@ -424,8 +446,8 @@ def joint_trajectory(q_start, q_end, duration: float | None = None, *, method: s
     >>> len(tr), float(tr.positions[-1, 0])
     (11, 0.5)
     """
-    if method not in _SCALINGS:
-        raise TrajectoryError(f"unknown time scaling '{method}'; choose one of {sorted(_SCALINGS)}")
+    if not isinstance(method, str) or method not in _SCALINGS:
+        raise TrajectoryError(f"unknown time scaling {quote(method)}; choose one of {sorted(_SCALINGS)}")
     scaling, peak = _SCALINGS[method]
     a = check_limits(q_start, spec, "q_start")
     b = check_limits(q_end, spec, "q_end")
@@ -461,6 +483,7 @@ def side_sweep(*, points: int = 500, rate: float = 10.0, sweeps: int = 50,
     >>> len(tr), round(tr.duration, 1), bool(abs(tr.positions[[0, -1]]).max() < 1e-12)
     (500, 49.9, True)
     """
+    spec = check_spec(spec)
     points = check_count(points, "points", 2, 100_000, hint="It is how many goals the sweep sends (the task: 500)")
     rate = check_rate(rate, hint="It is how many goals per second are sent (the task: 10)")
     sweeps = check_count(sweeps, "sweeps", 1, points, hint="It is how many side-to-side sweeps fill the run "

@@ -592,3 +592,457 @@ def test_check_timeout_must_be_a_time(tmp_path, value):
                        text=True, timeout=120)
     assert r.returncode == 2
     assert "argument --timeout: --timeout must be a finite number > 0 and <= 86400 [s]" in r.stderr
+
+
+# --- every public function, every argument: generated bad values --------------------------------
+#
+# For each argument of each public function that takes numbers, arrays, files or options, the
+# bad values of its kind are generated, and every one must raise a SnakekitError whose message
+# is under 300 characters (an input of a million characters is quoted by a short excerpt).
+
+NAN, INF = float("nan"), float("inf")
+LONG = "x" * 1_000_000  # a million characters: the message must quote an excerpt only
+HUGE_ROWS = 10_000_000  # rows of a "huge" array: a read-only broadcast, so the test takes no memory for it
+
+
+def _huge(shape_tail=()):
+    return np.broadcast_to(0.0, (HUGE_ROWS, *shape_tail))
+
+
+def _bad_values(kind, good):
+    """(label, value) of the bad values of an argument of ``kind``, built around a ``good`` value."""
+    if kind in ("count", "positive", "bounded", "fraction", "seed", "nonneg", "real"):
+        out = [("nan", NAN), ("inf", INF), ("bool", True), ("long_str", LONG), ("none", None), ("list", [1.0, 2.0])]
+        if kind in ("count", "bounded", "fraction"):  # a seed may be any whole number >= 0
+            out.append(("huge", 10 ** 12 if kind == "count" else 1e300))
+        if kind in ("count", "positive", "bounded", "fraction", "seed", "nonneg"):
+            out.append(("negative", -1))
+        if kind in ("count", "seed"):
+            out.append(("fraction", 2.5))
+        if kind == "real":
+            out.remove(("none", None))  # the optional ones take None: see OPTIONAL
+        return out
+    if kind in ("times", "elementwise"):  # one time or a list of times [s] (elementwise: an array of any shape)
+        out = [("nan", [0.1, NAN]), ("inf", [INF]), ("bool", [0.1, True]), ("str", [0.1, "x"]), ("long_str", LONG),
+               ("none", None), ("huge", _huge())]
+        return out + ([("table", np.zeros((2, 2)))] if kind == "times" else [])
+    if kind == "array":  # a float array of a known shape (good), e.g. q (5,), target (2,), positions (N, 5)
+        good = np.asarray(good, dtype=float)
+        flat = good.ravel().tolist()
+
+        def put(x):
+            vals = list(flat)
+            vals[len(vals) // 2] = x
+            return np.array(vals, dtype=object).reshape(good.shape).tolist()
+        return [("nan", put(NAN)), ("inf", put(-INF)), ("bool", put(True)), ("str", put("x")),
+                ("long_str", LONG), ("none", None), ("wrong_shape", np.zeros((good.shape[0] + 1, *good.shape[1:])).T
+                                                       if good.ndim == 2 else np.zeros(good.size + 1)),
+                ("huge", _huge(good.shape[1:])), ("number", 0.5) if good.ndim else ("list", [0.5, 0.5])]
+    if kind == "path":
+        return [("none", None), ("int", 5), ("list", ["run.npz"]), ("bytes", b"run.npz"),
+                ("too_long", "x" * 100_000 + ".npz"), ("nul", "run\0.npz")]
+    if kind == "flag":
+        return [("str", "no"), ("int", 1), ("none", None), ("nan", NAN)]
+    if kind == "spec":
+        return [("str", "SPEC"), ("none", None), ("dict", {"n_joints": 5})]
+    if kind == "choice":
+        return [("unknown", "nonsense"), ("none", None), ("list", ["a"]), ("long_str", LONG)]
+    if kind == "trajectory":
+        return [("none", None), ("array", np.zeros((10, 5))), ("str", LONG)]
+    raise AssertionError(kind)
+
+
+#: Arguments that take None on purpose (leaving them out): by name, or "function:name".
+OPTIONAL = {"heading", "q0", "duration", "velocities", "progress", "ids", "margin", "times", "rate", "robot.render:q"}
+
+
+def _tr():
+    return joint_trajectory(np.zeros(5), [0.2, 0, 0, 0, 0], 1.0, rate=20)
+
+
+def _public_calls():
+    """(function label, argument, kind, good value, call(value)) for every checked argument."""
+    from snakekit import trajectory as T
+    from snakekit.robot import JointState
+
+    sk = snakekit
+    q5, xy = [0.1, 0.2, 0.1, 0.0, -0.1], [0.25, 0.1]
+    calls = []
+
+    def add(label, fn, args):
+        for arg, kind, good in args:
+            calls.append((label, arg, kind, good, (lambda fn, arg: lambda v: fn(**{arg: v}))(fn, arg)))
+
+    for name in ("forward_kinematics", "joint_frames", "tool_pose_2d", "jacobian", "planar_jacobian",
+                 "clearance", "as_configuration", "check_limits"):
+        f = getattr(sk, name)
+        add(name, lambda f=f, q=q5, spec=SPEC: f(q, spec=spec), [("q", "array", q5), ("spec", "spec", SPEC)])
+    add("collides", lambda q=q5, margin=None, spec=SPEC: sk.collides(q, spec=spec, margin=margin),
+        [("q", "array", q5), ("margin", "nonneg", 0.005), ("spec", "spec", SPEC)])
+    ik = dict(target_xy=xy, heading=None, q0=None, tol=1e-6, max_iter=100, restarts=2, seed=0, spec=SPEC)
+    add("inverse_kinematics", lambda **kw: sk.inverse_kinematics(**{**ik, **kw}),
+        [("target_xy", "array", xy), ("heading", "real", 0.3), ("q0", "array", q5), ("tol", "positive", 1e-6),
+         ("max_iter", "count", 100), ("restarts", "count", 2), ("seed", "seed", 0), ("spec", "spec", SPEC)])
+    add("closest_reachable_point", lambda target_xy=xy, heading=None, q0=None, seed=0, spec=SPEC:
+        sk.closest_reachable_point(target_xy, heading, q0, seed=seed, spec=spec),
+        [("target_xy", "array", xy), ("heading", "real", 0.3), ("q0", "array", q5), ("seed", "seed", 0),
+         ("spec", "spec", SPEC)])
+    add("SnakeSpec", lambda **kw: sk.forward_kinematics(np.zeros(5), spec=sk.SnakeSpec(**kw)),
+        [("n_joints", "count", 5), ("link_length", "bounded", 0.071), ("tool_offset", "bounded", 0.0475),
+         ("velocity_limit", "bounded", 1.5), ("link_mass", "bounded", 0.012), ("collision_margin", "bounded", 0.005),
+         ("lower", "real", -1.57), ("upper", "real", 1.57), ("servo_ids", "array", (1, 2, 3, 4, 5))])
+    add("workspace_points", lambda n=3, seed=0, spec=SPEC: sk.workspace_points(n, seed=seed, spec=spec),
+        [("n", "count", 3), ("seed", "seed", 0), ("spec", "spec", SPEC)])
+    add("workspace_boundary", lambda **kw: sk.workspace_boundary(**kw),
+        [("bins", "count", 120), ("samples", "count", 20000), ("refine", "count", 60), ("seed", "seed", 0),
+         ("spec", "spec", SPEC)])
+    tr = _tr()
+    add("Trajectory", lambda times=tr.times, positions=tr.positions, velocities=None, n_joints=5:
+        Trajectory(times, positions, velocities, n_joints),
+        [("times", "array", tr.times), ("positions", "array", tr.positions), ("velocities", "array", tr.positions),
+         ("n_joints", "count", 5)])
+    add("Trajectory.sample", lambda t=0.5: tr.sample(t), [("t", "times", [0.1, 0.5])])
+    add("Trajectory.resample", lambda rate=None, times=None: tr.resample(rate, times=times),
+        [("rate", "bounded", 10.0), ("times", "times", [0.0, 0.5])])
+    add("Trajectory.check_limits", lambda spec=SPEC, velocity=True: tr.check_limits(spec, velocity=velocity),
+        [("spec", "spec", SPEC), ("velocity", "flag", True)])
+    add("Trajectory.limit_violations", lambda spec=SPEC, velocity=True: tr.limit_violations(spec, velocity=velocity),
+        [("spec", "spec", SPEC), ("velocity", "flag", True)])
+    add("Trajectory.save", lambda path: tr.save(path), [("path", "path", "t.npz")])
+    add("Trajectory.load", lambda path="t.npz", n_joints=5: Trajectory.load(path, n_joints=n_joints),
+        [("path", "path", "t.npz"), ("n_joints", "count", 5)])
+    jt = dict(q_start=np.zeros(5), q_end=q5, duration=1.0, method="quintic", rate=100.0, spec=SPEC, speed_fraction=0.8)
+    add("joint_trajectory", lambda **kw: joint_trajectory(**{**jt, **kw}),
+        [("q_start", "array", np.zeros(5)), ("q_end", "array", q5), ("duration", "bounded", 1.0),
+         ("method", "choice", "quintic"), ("rate", "bounded", 100.0), ("spec", "spec", SPEC)])
+    add("joint_trajectory(speed_fraction)", lambda speed_fraction: joint_trajectory(
+        np.zeros(5), q5, speed_fraction=speed_fraction), [("speed_fraction", "fraction", 0.8)])
+    add("side_sweep", lambda **kw: side_sweep(**kw),
+        [("points", "count", 500), ("rate", "bounded", 10.0), ("sweeps", "count", 50), ("amplitude", "real", 0.2),
+         ("spec", "spec", SPEC)])
+    for name in ("cubic", "quintic", "trapezoidal"):
+        f = getattr(T, f"{name}_time_scaling")
+        add(f"{name}_time_scaling", lambda f=f, T=2.0, t=1.0: f(T, t), [("T", "positive", 2.0), ("t", "elementwise", [0.5, 1])])
+    add("trapezoidal_time_scaling(accel_fraction)", lambda accel_fraction: T.trapezoidal_time_scaling(
+        2.0, 1.0, accel_fraction=accel_fraction), [("accel_fraction", "fraction", 0.25)])
+    z = np.zeros(5)
+    add("JointState", lambda time=0.0, positions=z, velocities=z, efforts=z: JointState(time, positions, velocities,
+                                                                                           efforts),
+        [("time", "real", 0.0), ("positions", "array", z), ("velocities", "array", z), ("efforts", "array", z)])
+    with snakekit.make_robot("sim") as robot:
+        run = robot.run(_tr())
+    m = run.measured
+    add("Run", lambda commanded=run.commanded, measured=m, efforts=run.efforts, backend="sim", wall_time=1.0,
+        realtime=False: Run(commanded, measured, efforts, backend, wall_time, realtime),
+        [("commanded", "trajectory", run.commanded), ("measured", "trajectory", m), ("efforts", "array", run.efforts),
+         ("wall_time", "nonneg", 1.0), ("realtime", "flag", False)])
+    add("Run.save", lambda path: run.save(path), [("path", "path", "r.npz")])
+    add("Run.load", lambda path: Run.load(path), [("path", "path", "r.npz")])
+    add("make_robot('sim')", lambda **kw: snakekit.make_robot("sim", **kw).close(),
+        [("realtime", "flag", False), ("q0", "array", q5), ("spec", "spec", SPEC), ("profile_velocity", "count", 30),
+         ("profile_acceleration", "count", 10), ("any_profile", "flag", False)])
+    add("make_robot('emulator')", lambda **kw: snakekit.make_robot("emulator", **kw).close(),
+        [("motion", "choice", "mujoco"), ("q0", "array", q5), ("timing", "flag", False),
+         ("boot_time", "bounded", 0.05), ("baudrate", "count", 4_000_000), ("ids", "array", [1, 2, 3, 4, 5]),
+         ("latency_timer", "count", 0)])
+    add("make_robot('hardware')", lambda **kw: snakekit.make_robot("hardware", **{"port": "/dev/no-such-port", **kw}),
+        [("baudrate", "count", 4_000_000), ("retries", "count", 3), ("profile_velocity", "count", 30),
+         ("watchdog", "bounded", 0.1), ("on_close", "choice", "torque_off"), ("ids", "array", [1, 2, 3, 4, 5])])
+    add("make_robot", lambda backend: snakekit.make_robot(backend), [("backend", "choice", "sim")])
+    return calls
+
+
+def _robot_calls():
+    """(method label, argument, kind, good value, call(robot, value)) for a simulated robot's methods."""
+    q5 = [0.1, 0.2, 0.1, 0.0, -0.1]
+    tr = _tr()
+    out = []
+
+    def add(label, fn, args):
+        for arg, kind, good in args:
+            out.append((label, arg, kind, good, (lambda fn, arg: lambda robot, v: fn(robot, **{arg: v}))(fn, arg)))
+
+    add("robot.command", lambda r, q: r.command(q), [("q", "array", q5)])
+    add("robot.move_to", lambda r, q=q5, duration=1.0: r.move_to(q, duration),
+        [("q", "array", q5), ("duration", "bounded", 1.0)])
+    add("robot.home", lambda r, duration: r.home(duration), [("duration", "bounded", 1.0)])
+    add("robot.run", lambda r, trajectory=tr, record_rate=100.0, settle=0.5, progress=None: r.run(
+        trajectory, record_rate=record_rate, settle=settle, progress=progress),
+        [("trajectory", "trajectory", tr), ("record_rate", "bounded", 100.0), ("settle", "bounded", 0.5),
+         ("progress", "flag", False)])
+    add("robot.step", lambda r, duration: r.step(duration), [("duration", "bounded", 0.1)])
+    add("robot.render", lambda r, q=None, width=64, height=48, camera="perspective": r.render(
+        q, width=width, height=height, camera=camera),
+        [("q", "array", q5), ("width", "count", 64), ("height", "count", 48), ("camera", "choice", "perspective")])
+    return out
+
+
+def _cases(calls):
+    cases = []
+    for label, arg, kind, good, call in calls:
+        for bad, value in _bad_values(kind, good):
+            if value is None and (arg in OPTIONAL or f"{label}:{arg}" in OPTIONAL):
+                continue
+            cases.append(pytest.param(call, value, id=f"{label}-{arg}-{bad}"))
+    return cases
+
+
+def _refused_clearly(call, value, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _tr().save(tmp_path / "t.npz")
+    with pytest.raises(Exception) as e:
+        call(value)
+    assert isinstance(e.value, snakekit.SnakekitError), f"{type(e.value).__name__}: {str(e.value)[:300]}"
+    assert 0 < len(str(e.value)) < 300, f"{len(str(e.value))} characters: {str(e.value)[:400]}"
+
+
+@pytest.mark.parametrize("call, value", _cases(_public_calls()))
+def test_every_public_function_refuses_every_bad_value_in_a_short_message(call, value, tmp_path, monkeypatch):
+    _refused_clearly(call, value, tmp_path, monkeypatch)
+
+
+@pytest.fixture(scope="module")
+def sim_robot():
+    with snakekit.make_robot("sim") as robot:
+        yield robot
+
+
+@pytest.mark.parametrize("call, value", _cases(_robot_calls()))
+def test_every_robot_method_refuses_every_bad_value_in_a_short_message(sim_robot, call, value, tmp_path,
+                                                                        monkeypatch):
+    _refused_clearly(lambda v: call(sim_robot, v), value, tmp_path, monkeypatch)
+    assert not sim_robot.closed
+
+
+# --- the probe's cases, one by one: what the user reads --------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def run_file(tmp_path_factory):
+    """A run saved by Run.save (a 1 s move on the simulator), and its bytes."""
+    path = tmp_path_factory.mktemp("run") / "run.npz"
+    with snakekit.make_robot("sim") as robot:
+        robot.run(small()).save(path)
+    return path, path.read_bytes()
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.1, 0.5, 0.9, 0.999])
+def test_a_truncated_run_file_is_refused(tmp_path, run_file, fraction):
+    _, data = run_file
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(data[: int(len(data) * fraction)])
+    words = ("is empty" if fraction == 0 else
+             "is not a readable .npz file (File is not a zip file); it may be truncated or damaged. Save runs with "
+             "Run.save")
+    with raises(snakekit.FileFormatError, f"{cut} " + words if fraction else words):  # before: BadZipFile
+        Run.load(cut)
+
+
+def _zip_structure(data: bytes) -> list[int]:
+    """The offsets of every byte of a zip file's headers (local, central directory, end record)."""
+    out = []
+    for magic, size in ((b"PK\x03\x04", 30), (b"PK\x01\x02", 46), (b"PK\x05\x06", 22)):
+        at = data.find(magic)
+        while at >= 0:
+            out += range(at, min(at + size + 20, len(data)))  # the fixed part and the name after it
+            at = data.find(magic, at + 1)
+    return sorted(set(out))
+
+
+def test_every_bit_flip_in_a_run_file_is_refused_or_harmless(tmp_path):
+    """A flipped bit in an array breaks its checksum (refused); in a zip or array header, the file
+    is refused or, where the byte does not matter (a time stamp), read as the same run. Every byte
+    of the headers is flipped (three bits each), and every 13th byte of the rest."""
+    with snakekit.make_robot("sim") as robot:
+        robot.run(small(), record_rate=10, settle=0).save(tmp_path / "run.npz")
+    data = (tmp_path / "run.npz").read_bytes()
+    good = Run.load(tmp_path / "run.npz")
+    flipped = tmp_path / "flip.npz"
+    outcomes = {"refused": 0, "same": 0}
+    headers = _zip_structure(data)
+    flips = [(at, bit) for at in headers for bit in (0x01, 0x10, 0x80)] + [
+        (at, 0x10) for at in range(0, len(data), 13) if at not in headers]
+    for at, bit in flips:
+        b = bytearray(data)
+        b[at] ^= bit
+        flipped.write_bytes(bytes(b))
+        try:
+            run = Run.load(flipped)
+        except snakekit.FileFormatError as e:  # before: BadZipFile "Bad CRC-32 for file 'measured_positions.npy'",
+            assert str(e).startswith(f"{flipped} is"), str(e)  # RuntimeError "... is encrypted", SyntaxError...
+            assert len(str(e).replace(str(flipped), "")) < 250, str(e)
+            outcomes["refused"] += 1
+            continue
+        for a, g in ((run.measured.positions, good.measured.positions), (run.efforts, good.efforts),
+                     (run.commanded.positions, good.commanded.positions), (run.measured.times, good.measured.times)):
+            np.testing.assert_array_equal(a, g)
+        assert (run.backend, run.wall_time, run.realtime) == (good.backend, good.wall_time, good.realtime)
+        outcomes["same"] += 1
+    assert outcomes["refused"] > 0.4 * len(flips), outcomes  # 1921 of 3342 measured: the rest are time stamps...
+
+
+def test_a_run_whose_efforts_do_not_match_its_samples_is_refused(tmp_path, run_file):
+    path, _ = run_file
+    arrays = dict(np.load(path))
+    arrays["efforts"] = np.zeros((3, 2))
+    np.savez(tmp_path / "efforts.npz", **arrays)
+    n = len(arrays["measured_times"])
+    with raises(snakekit.FileFormatError, f"efforts.npz is not a snakekit run file (efforts must have shape ({n}, 5) "
+                "(one row per measured sample, one column per joint), got shape (3, 2)); save runs with Run.save"):
+        Run.load(tmp_path / "efforts.npz")  # before: accepted
+    run = Run.load(path)
+    with raises(snakekit.ShapeError, f"efforts must have shape ({n}, 5)"):
+        Run(run.commanded, run.measured, run.efforts[:, :3], "sim", 1.0, False)
+
+
+@pytest.mark.parametrize("path", [5, None, ["t.npz"], b"t.npz"])
+def test_trajectory_files_are_named_by_paths(tmp_path, path):
+    kind = type(path).__name__
+    with raises(snakekit.InputTypeError, f"the trajectory file must be a path (a str or pathlib.Path), got {path!r} "
+                f"({kind}); e.g. 'run.npz'"):
+        Trajectory.load(path)  # before: TypeError "expected str, bytes or os.PathLike object"
+    with raises(snakekit.InputTypeError, "the trajectory file must be a path"):
+        small().save(path)
+
+
+def test_a_ten_million_point_trajectory_is_refused_before_memory_is_taken():
+    n = 10_000_000
+    times = np.broadcast_to(0.0, (n,))  # no memory of its own: only the check may look at it
+    with raises(snakekit.ConfigurationError, "trajectory times holds 10000000 points, more than the 1000000 the kit "
+                "handles; use fewer points (a lower rate, or shorter moves)"):
+        Trajectory(times, np.broadcast_to(0.0, (n, 5)))  # before: MemoryError from robot.run, after 67 s
+    with raises(snakekit.ConfigurationError, "t holds 10000000 points"):
+        small().sample(times)
+
+
+def test_a_trajectory_file_of_too_many_points_is_refused_unread(tmp_path):
+    np.savez(tmp_path / "big.npz", times=np.zeros(2_000_000), positions=np.zeros((2, 5)))
+    with raises(snakekit.FileFormatError, "big.npz: array 'times' has shape (2000000,), more than the 1000000 points "
+                "the kit handles; it was not read"):
+        Trajectory.load(tmp_path / "big.npz")
+
+
+def test_the_probes_wrong_types_and_nan_get_clear_errors():
+    with raises(snakekit.InputTypeError, "seed must be a whole number >= 0, got 'x' (str). It picks the random draws"):
+        snakekit.workspace_points(5, seed="x")  # before: numpy's TypeError from SeedSequence
+    from snakekit.trajectory import trapezoidal_time_scaling
+
+    with raises(snakekit.InputTypeError, "accel_fraction must be a finite number > 0 and <= 0.5, got 'x' (str)"):
+        trapezoidal_time_scaling(1.0, 0.5, accel_fraction="x")  # before: TypeError "'<' not supported"
+    tr = small()
+    with raises(snakekit.NotFiniteError, "t holds NaN or infinity; every value must be finite. Give the time(s) [s] "
+                "to sample at"):
+        tr.sample(float("nan"))  # before: NaN positions
+    with raises(snakekit.NotFiniteError, "t holds NaN or infinity (first at index 1)"):
+        tr.sample([0.5, float("inf")])  # before: the last point, silently
+    with raises(snakekit.ConfigurationError, "boot_time must be a finite number from 0 to 10 [s], got nan"):
+        snakekit.make_robot("emulator", boot_time=float("nan"))  # before: accepted
+
+
+@pytest.mark.parametrize("size", [8_900_000, 150_000_000])
+def test_a_message_quotes_a_short_excerpt_of_a_huge_input(size):
+    text = "x" * size
+    # before: messages of 8.9 and 150 million characters
+    with raises(snakekit.InputTypeError, f"rate must be a finite number > 0 and <= 10000 [Hz], got '{'x' * 27}...{'x' * 28}' "
+                f"({size} characters) (str)") as e:
+        side_sweep(rate=text)
+    assert len(str(e.value)) < 250
+    with raises(snakekit.InputTypeError, f"q holds '{'x' * 27}...{'x' * 28}' ({size} characters), which is not a number"):
+        snakekit.forward_kinematics([text, 0, 0, 0, 0])
+
+
+def test_a_csv_without_newlines_is_refused_by_its_first_line(tmp_path):
+    p = tmp_path / "one_line.csv"
+    p.write_text("1," * 5_000_000)
+    with raises(snakekit.FileFormatError, f"{p}: its first line is longer than 4096 characters (it starts "
+                f"'{'1,' * 15}'), so it is not the header time,q1..q5") as e:
+        Trajectory.load(p)
+    assert len(str(e.value)) < 300
+    p.write_text("time,q1,q2,q3,q4,q5\n" + "1" * 10_000_000)
+    with raises(snakekit.FileFormatError, f"{p}, line 2: a value longer than 131072 characters; a trajectory .csv "
+                "holds only numbers below its header"):
+        Trajectory.load(p)  # before: csv.Error
+
+
+def test_check_reads_an_nbformat_3_notebook(tmp_path):
+    """nbformat 3 keeps its cells in worksheets: the lesson is converted to version 4, as it was before."""
+    import nbformat
+    from nbformat.v4 import new_notebook
+
+    nb = new_notebook(cells=[_graded("assert 1 + 1 == 2", grade_id="first_test", points=1),
+                             _graded("assert 1 == 2, 'one is not two'", grade_id="second_test", points=2)])
+    nbformat.write(nbformat.convert(nb, 3), tmp_path / "old.ipynb", version=3)
+    assert '"worksheets"' in (tmp_path / "old.ipynb").read_text()
+    exe = Path(sys.executable).parent / "snakekit"
+    r = subprocess.run([str(exe), "check", "old.ipynb"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1, r.stdout + r.stderr  # before: exit 2, "JSON but not a Jupyter notebook"
+    rows = [line.split() for line in r.stdout.splitlines()]
+    assert ["first_test", "1", "pt", "passed"] in rows
+    assert ["second_test", "2", "pt", "FAILED", "AssertionError:", "one", "is", "not", "two"] in rows
+    assert "1 of 2 exercises passed, 1 of 3 points" in r.stdout
+
+
+@pytest.mark.parametrize("backend", ["sim", "emulator"])
+def test_ctrl_c_during_sweep_saves_the_partial_run(tmp_path, backend):
+    """Ctrl-C part way through ``snakekit sweep --out``: the goals sent and the motion recorded so
+    far are saved to the --out file, the user is told, the robot is closed and the exit is 130."""
+    import signal
+    import time
+
+    options = ["--realtime"] if backend == "sim" else []
+    proc = subprocess.Popen([sys.executable, "-m", "snakekit.cli", "sweep", "--backend", backend, *options,
+                             "--out", "run.npz"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout.readline().startswith("Task 2: 500 goals")  # printed just before the robot is made
+        time.sleep(4)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err  # before: 130, but the run was lost
+    run = Run.load(tmp_path / "run.npz")
+    sent = len(run.commanded)
+    assert 0 < sent < 500
+    assert f"snakekit sweep: the partial run ({sent} of 500 goals, {run.robot_time:.1f} s recorded) was saved to " \
+           "run.npz" in err
+    assert err.rstrip().endswith("snakekit sweep: interrupted; the robot was closed")
+    np.testing.assert_array_equal(run.commanded.positions, side_sweep().positions[:sent])  # the goals as planned
+    # the recording covers the goals sent: the last one went out inside the recorded time
+    assert run.commanded.times[-1] <= run.measured.times[-1] + 0.1
+    assert run.backend == backend and len(run.measured) > 10
+
+
+# --- the command line: every bad argument is exit 2 and one line --------------------------------
+
+LONG_NAME = "x" * 5000  # longer than a file name may be
+
+
+@pytest.mark.parametrize("args, words", [
+    (["sweep", "--backend", "gazebo"], "snakekit sweep: argument --backend: invalid choice: 'gazebo'"),
+    (["sweep", "--backend", LONG_NAME], "snakekit sweep: argument --backend: invalid choice: 'xxx"),
+    (["sweep", "--bogus"], "snakekit: unrecognized arguments: --bogus; see snakekit --help"),
+    (["sweep", "--out", "run.txt"], "snakekit sweep: run file run.txt must end in .npz"),
+    (["sweep", "--out", "missing/run.npz"], "snakekit sweep: cannot write run file missing/run.npz: folder"),
+    (["sweep", "--out", LONG_NAME + ".npz"], "(5004 characters): File name too long. Choose a place you can write"),
+    (["sweep", "--plot", "plot.txt"], "snakekit sweep: plot plot.txt must end in .png or .pdf or .svg"),
+    (["sweep", "--plot", LONG_NAME + ".png"], "(5004 characters): File name too long"),
+    (["sweep", "--backend", "hardware"], "snakekit sweep: --backend hardware needs --port"),
+    (["check"], "snakekit check: the following arguments are required: notebook; see snakekit check --help"),
+    (["check", "missing.ipynb"], "snakekit check: missing.ipynb is not a notebook file"),
+    (["check", "notes.txt"], "snakekit check: notes.txt is not a notebook file"),
+    (["check", LONG_NAME + ".ipynb"], ".ipynb (5006 characters) can't be opened: File name too long"),
+    (["check", "--timeout", "abc", "x.ipynb"], "snakekit check: argument --timeout: not a number of seconds: 'abc'"),
+    (["check", "--timeout", LONG_NAME, "x.ipynb"], "not a number of seconds: 'xxxxxxxxxxxxxxxxxxxxxxxxxxx...x"),
+    (["generate", "--nothing"], "snakekit: unrecognized arguments: --nothing"),
+    ([], "snakekit: the following arguments are required: COMMAND; see snakekit --help"),
+], ids=lambda v: v[:40] if isinstance(v, str) else "-".join(x[:12] for x in v) or "none")
+def test_every_bad_argument_is_exit_2_and_one_line(tmp_path, monkeypatch, args, words):
+    monkeypatch.delenv("SNAKEKIT_PORT", raising=False)
+    r = subprocess.run([sys.executable, "-m", "snakekit.cli", *args], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert words in r.stderr, r.stderr
+    # before: usage lines, or a traceback; the length leaves out the working folder (named twice for a missing one)
+    assert len(r.stderr.splitlines()) == 1 and len(r.stderr.replace(str(tmp_path), "")) < 300, r.stderr
+    assert "Traceback" not in r.stderr and "Task 2" not in r.stdout

@@ -24,7 +24,7 @@ import traceback
 
 from ..errors import ConfigurationError, InputTypeError
 from ..model import SPEC, SnakeSpec
-from ..validate import as_configuration
+from ..validate import as_configuration, check_count, check_flag, check_spec, length_of, number, quote
 from . import protocol as p
 from .control_table import FIRMWARE_VERSION_ADDRESS, MODEL_NUMBER_ADDRESS, field_at, to_signed
 from .faults import NO_FAULTS, Faults
@@ -67,20 +67,38 @@ class BusEmulator:
                  baudrate: int = 4_000_000, timing: bool = False, boot_time: float = 0.05,
                  faults: Faults = NO_FAULTS, record_limit: int = 200_000, spec: SnakeSpec = SPEC,
                  tcp: str | None = None, latency_timer: int = 0):
-        ids = tuple(int(i) for i in (spec.servo_ids if ids is None else ids))
-        if len(ids) != spec.n_joints or len(set(ids)) != len(ids) or not all(0 <= i <= p.MAX_ID for i in ids):
-            raise ConfigurationError(f"ids must be {spec.n_joints} distinct servo ids in 0..252, got {ids}")
-        if baudrate not in BAUD_RATES:
-            raise ConfigurationError(f"an MX-28 runs at one of {', '.join(map(str, BAUD_RATES))} baud, got {baudrate}")
+        check_spec(spec)
+        wrong = f"ids must be {spec.n_joints} distinct servo ids in 0..252, base to tip, e.g. (1, 2, 3, 4, 5); got "
+        # (checked before the ids are read one by one: an iterable of a million is refused at once)
+        if ids is not None and (isinstance(ids, (str, bytes)) or not hasattr(ids, "__iter__")):
+            raise InputTypeError(wrong + quote(ids))
+        if ids is not None and length_of(ids) != spec.n_joints:
+            raise ConfigurationError(wrong + quote(ids))
+        ids = tuple(number(i, "each servo id", at_least=0, at_most=p.MAX_ID, integer=True)
+                    for i in (spec.servo_ids if ids is None else ids))
+        if len(set(ids)) != len(ids):
+            raise ConfigurationError(wrong + quote(ids))
+        timing = check_flag(timing, "timing", "It waits the wire time of each reply, like a real bus")
+        boot_time = number(boot_time, "boot_time", "s", at_least=0, at_most=10,
+                           hint="It is how long a rebooted servo stays silent (default: 0.05)")
+        record_limit = check_count(record_limit, "record_limit", 0, 10_000_000,
+                                   hint="It is how many received packets the emulator keeps")
+        if isinstance(baudrate, bool) or baudrate not in BAUD_RATES:
+            raise ConfigurationError(f"an MX-28 runs at one of {', '.join(map(str, BAUD_RATES))} baud, got "
+                                     f"{quote(baudrate)}")
         if isinstance(latency_timer, bool) or not isinstance(latency_timer, int) or not 0 <= latency_timer <= 255:
             raise ConfigurationError(f"latency_timer is a whole number of milliseconds, 1..255 as on an FTDI chip "
-                                     f"(0: not modelled), got {latency_timer!r}")
+                                     f"(0: not modelled), got {quote(latency_timer)}")
         q0 = spec.home if q0 is None else as_configuration(q0, spec, "q0")
         if isinstance(motion, str):
             if motion not in MOTION_SOURCES:
-                raise ConfigurationError(f"unknown motion source '{motion}'; choose one of {', '.join(MOTION_SOURCES)}")
+                raise ConfigurationError(f"unknown motion source {quote(motion)}; choose one of "
+                                         f"{', '.join(MOTION_SOURCES)}")
             kw = {"spec": spec} if motion == "mujoco" else {}
             motion = MOTION_SOURCES[motion](q0, **kw)
+        elif not isinstance(motion, MotionSource):
+            raise InputTypeError(f"motion is one of {', '.join(map(repr, MOTION_SOURCES))} or a MotionSource, got "
+                                 f"{quote(motion)} ({type(motion).__name__})")
         self.motion = motion
         self.ids = ids
         self.baudrate = baudrate

@@ -7,6 +7,7 @@ import signal
 import sys
 from typing import TextIO
 
+from ..validate import excerpt
 from .faults import Faults
 
 
@@ -15,7 +16,8 @@ def _overload(text: str) -> tuple[int, float]:
     try:
         return int(servo), float(after or 0)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--overload takes ID or ID@SECONDS (e.g. 3@5), got '{text}'") from None
+        raise argparse.ArgumentTypeError(f"--overload takes ID or ID@SECONDS (e.g. 3@5), got "
+                                         f"{excerpt(repr(text))}") from None
 
 
 def parser() -> argparse.ArgumentParser:

@@ -9,7 +9,7 @@ import os
 from ..errors import ConfigurationError, InputTypeError
 from ..model import SnakeSpec
 from ..profile_planner import check_profile
-from ..validate import number
+from ..validate import number, quote
 from .bus import SUPPORTED_BAUD_RATES
 
 ON_CLOSE = ("torque_off", "hold")
@@ -29,7 +29,7 @@ def port_name(port) -> str:
 def _whole(value, name: str, low: int, high: int | None = None) -> int:
     """``value`` as an int in ``low..high``, or a :class:`ConfigurationError` that says so."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise InputTypeError(f"{name} must be a whole number, got {value!r}")
+        raise InputTypeError(f"{name} must be a whole number, got {quote(value)}")
     value = int(value)
     if value < low or (high is not None and value > high):
         bound = f">= {low}" if high is None else f"in {low}..{high}"
@@ -46,16 +46,17 @@ def check_options(spec: SnakeSpec, ids, on_close, retries, profile_velocity, pro
     if ids is None:
         ids = spec.servo_ids
     if isinstance(ids, (str, bytes)) or not hasattr(ids, "__iter__"):
-        raise InputTypeError(f"ids must be {spec.n_joints} servo ids, base to tip, e.g. (1, 2, 3, 4, 5); got {ids!r}")
+        raise InputTypeError(f"ids must be {spec.n_joints} servo ids, base to tip, e.g. (1, 2, 3, 4, 5); got {quote(ids)}")
     ids = tuple(_whole(i, "each servo id", 0, 252) for i in ids)
     if len(ids) != spec.n_joints or len(set(ids)) != len(ids):
-        raise ConfigurationError(f"ids must be {spec.n_joints} distinct servo ids, one a joint, got {ids}")
-    if on_close not in ON_CLOSE:
-        raise ConfigurationError(f"on_close must be one of {', '.join(map(repr, ON_CLOSE))}, got {on_close!r}")
+        raise ConfigurationError(f"ids must be {spec.n_joints} distinct servo ids, one a joint, got {quote(ids)}")
+    if not isinstance(on_close, str) or on_close not in ON_CLOSE:
+        raise ConfigurationError(f"on_close must be one of {', '.join(map(repr, ON_CLOSE))}, got {quote(on_close)}")
     retries = _whole(retries, "retries", 0, 100)
     profile_velocity, profile_acceleration = check_profile(profile_velocity, profile_acceleration, spec)
-    if not isinstance(watchdog, numbers.Real) or not (watchdog == 0 or 0.02 <= watchdog <= 2.54):
-        raise ConfigurationError(f"watchdog must be 0 (off) or 0.02..2.54 s, got {watchdog!r}")
+    if isinstance(watchdog, bool) or not isinstance(watchdog, numbers.Real) or not (
+            watchdog == 0 or 0.02 <= watchdog <= 2.54):
+        raise ConfigurationError(f"watchdog must be 0 (off) or 0.02..2.54 s, got {quote(watchdog)}")
     return ids, retries, profile_velocity, profile_acceleration, float(watchdog)
 
 

@@ -1,7 +1,10 @@
 """Input checks shared by every layer: numpy only, so the light modules stay light.
 
 Kinematics, trajectories, the robot interface and the viewer all take joint angles from
-students; they check them here, with the same messages everywhere.
+students; they check them here, with the same messages everywhere. A message quotes an input
+through :func:`quote` (or :func:`excerpt`): at most a short excerpt of it. The checks of files
+(a path to read or to write, an ``.npz`` archive) are in :mod:`snakekit.validate.files` and
+are names of this module too.
 
 >>> as_configuration([0, 0.1, 0, 0, 0]).tolist()
 [0.0, 0.1, 0.0, 0.0, 0.0]
@@ -14,14 +17,47 @@ snakekit.errors.LimitError: q is outside the joint limits [-1.57, 1.57] rad: joi
 from __future__ import annotations
 
 import operator
+import reprlib
+from functools import lru_cache
 from itertools import chain
-from pathlib import Path
-
 import numpy as np
 
-from .errors import (ConfigurationError, FileFormatError, FileWriteError, InputTypeError, LimitError,
-                     NotFiniteError, ShapeError)
-from .model import SPEC, SnakeSpec
+from ..errors import ConfigurationError, InputTypeError, LimitError, NotFiniteError, ShapeError
+from ..model import SPEC, SnakeSpec
+
+
+#: How an input is quoted in a message: at most a short excerpt of it (a 150-million-character
+#: string or a list of a million values is shown by its first few characters or items).
+_QUOTE = reprlib.Repr()
+_QUOTE.maxstring = _QUOTE.maxother = 60
+_QUOTE.maxlist = _QUOTE.maxtuple = _QUOTE.maxdict = _QUOTE.maxset = 6
+_QUOTE.maxlevel = 3
+
+
+def quote(x) -> str:
+    """``repr(x)`` for a message, cut to a short excerpt when ``x`` is long (with its length).
+
+    >>> quote("x" * 10_000_000)
+    "'xxxxxxxxxxxxxxxxxxxxxxxxxxx...xxxxxxxxxxxxxxxxxxxxxxxxxxxx' (10000000 characters)"
+    >>> quote([0.5] * 1000)
+    '[0.5, 0.5, 0.5, 0.5, 0.5, 0.5, ...] (1000 items)'
+    """
+    text = _QUOTE.repr(x)
+    if isinstance(x, (str, bytes)) and len(x) > _QUOTE.maxstring:
+        return f"{text} ({len(x)} characters)"
+    if isinstance(x, (list, tuple, dict, set, frozenset)) and len(x) > _QUOTE.maxlist:
+        return f"{text} ({len(x)} items)"
+    return text
+
+
+def excerpt(text: str, limit: int = 120) -> str:
+    """``text`` itself, or its start and end with the length between, if longer than ``limit``
+    (a file name or a line of a file, shown in a message)."""
+    text = str(text)
+    if len(text) <= limit:
+        return text
+    half = limit // 2
+    return f"{text[:half]}...{text[-half:]} ({len(text)} characters)"
 
 
 def frozen(a) -> np.ndarray:
@@ -60,6 +96,30 @@ def _first_bool(items):
     return None
 
 
+def _first_text(items):
+    """The first str or bytes in the (nested) lists or tuples ``items``, or None: found before
+    numpy would make an array of it (a list holding one string of 150 million characters
+    would become gigabytes of text)."""
+    kinds = set(map(type, items))
+    if kinds & {str, bytes, np.str_, np.bytes_}:
+        return next(x for x in items if isinstance(x, (str, bytes)))
+    if kinds and kinds <= {list, tuple}:
+        return _first_text(list(chain.from_iterable(items)))
+    return None
+
+
+def _reads_as_number(text) -> bool:
+    """Whether ``text`` (str or bytes) is a number written as text: at most 100 characters
+    (none is written longer), that ``float`` reads."""
+    if len(text) > 100:
+        return False
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _no_bools(a, arr: np.ndarray, name: str, hint: str) -> None:
     """Refuse booleans given as numbers: numpy reads True as 1 (1 rad, 1 s...) without a word."""
     if arr.dtype.kind == "b":
@@ -85,6 +145,10 @@ def real_array(a, name: str, expected: str, hint: str = "") -> np.ndarray:
     ...
     snakekit.errors.ShapeError: positions must have shape (N, 2), got rows of different lengths (2, 1). Give every row the same number of values
     """
+    text = _first_text(a) if isinstance(a, (list, tuple)) else None
+    if text is not None and not _reads_as_number(text):  # "0.5" is a number written as text: numpy reads it
+        raise InputTypeError(f"{name} holds {quote(text)}, which is not a number ({type(text).__name__}); every "
+                             "value must be a real number" + (f". {hint}" if hint else ""))
     try:
         arr = np.asarray(a)
     except ValueError as e:  # numpy's "inhomogeneous shape": ragged rows
@@ -111,9 +175,27 @@ def real_array(a, name: str, expected: str, hint: str = "") -> np.ndarray:
     if not why:
         raise InputTypeError(f"{name} holds values numpy can't read as numbers ({arr.dtype}); every value must "
                              "be a real number" + (f". {hint}" if hint else ""))
-    raise InputTypeError(f"{name} holds {x!r}, which is {why}; every value must be a real number"
+    raise InputTypeError(f"{name} holds {quote(x)}, which is {why}; every value must be a real number"
                          + (" (use .real if the imaginary parts are only rounding noise)" if "complex" in why else "")
                          + (f". {hint}" if hint else ""))
+
+
+def finite_array(a, name: str, expected: str, hint: str = "") -> np.ndarray:
+    """``a`` as a float array (:func:`real_array`) of at most :data:`MAX_POINTS` rows (checked
+    before it is made), every value finite.
+
+    Raises:
+        ConfigurationError: more rows than :data:`MAX_POINTS`.
+        NotFiniteError: a NaN or an infinity (the message says where).
+    """
+    check_length(a, name)
+    arr = real_array(a, name, expected, hint)
+    if not np.isfinite(arr).all():
+        where = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        at = f" (first at index {where[0] if len(where) == 1 else where})" if where else ""
+        raise NotFiniteError(f"{name} holds NaN or infinity{at}; every value must be finite"
+                             + (f". {hint}" if hint else ""))
+    return arr
 
 
 def _num(v: float) -> str:
@@ -145,14 +227,14 @@ def number(x, name: str, unit: str = "", *, above: float | None = None, at_least
     tail = f". {hint}" if hint else ""
     if isinstance(x, (str, bytes, bool, np.bool_)) or np.ndim(x) != 0 or (
             isinstance(x, (complex, np.complexfloating)) and x.imag != 0):
-        raise InputTypeError(f"{want}, got {x!r} ({type(x).__name__}){tail}")
+        raise InputTypeError(f"{want}, got {quote(x)} ({type(x).__name__}){tail}")
     try:
         v = operator.index(x) if integer else float(np.real(x))
     except (TypeError, ValueError) as e:
-        raise InputTypeError(f"{want}, got {x!r} ({type(x).__name__}){tail}") from e
+        raise InputTypeError(f"{want}, got {quote(x)} ({type(x).__name__}){tail}") from None
     if not np.isfinite(v) or (above is not None and not v > above) or (
             at_least is not None and not v >= at_least) or (at_most is not None and not v <= at_most):
-        raise ConfigurationError(f"{want}, got {x!r}{tail}")
+        raise ConfigurationError(f"{want}, got {quote(x)}{tail}")
     return v
 
 
@@ -167,6 +249,31 @@ MAX_RATE = 10_000.0
 MAX_POINTS = 1_000_000
 
 
+def length_of(a) -> int | None:
+    """How many rows ``a`` has, read without converting it (None if it has no length): what
+    :func:`check_length` compares before an array is made."""
+    if isinstance(a, np.ndarray):
+        return a.shape[0] if a.ndim else None
+    try:
+        return len(a)
+    except Exception:  # a number, or an object without a length
+        return None
+
+
+def check_length(a, name: str, high: int = MAX_POINTS, hint: str = "") -> None:
+    """Refuse ``a`` if it holds more than ``high`` rows, before any memory is taken for it.
+
+    >>> check_length(range(2_000_000), "times")
+    Traceback (most recent call last):
+    ...
+    snakekit.errors.ConfigurationError: times holds 2000000 points, more than the 1000000 the kit handles; use fewer points (a lower rate, or shorter moves)
+    """
+    n = length_of(a)
+    if n is not None and n > high:
+        raise ConfigurationError(f"{name} holds {n} points, more than the {high} the kit handles; "
+                                 + (hint or "use fewer points (a lower rate, or shorter moves)"))
+
+
 def check_count(x, name: str, low: int, high: int, hint: str = "") -> int:
     """``x`` as an int from ``low`` to ``high``: how many points, restarts, steps...
 
@@ -176,6 +283,57 @@ def check_count(x, name: str, low: int, high: int, hint: str = "") -> int:
     snakekit.errors.ConfigurationError: points must be a whole number from 2 to 100000, got 1000000000
     """
     return number(x, name, at_least=low, at_most=high, integer=True, hint=hint)
+
+
+def check_seed(x, name: str = "seed") -> int:
+    """``x`` as a seed for numpy's random generator: a whole number >= 0."""
+    return number(x, name, at_least=0, integer=True, hint="It picks the random draws: the same seed, the same "
+                  "result (default: 0)")
+
+
+def check_flag(x, name: str, hint: str = "") -> bool:
+    """``x`` as a bool, if it is one: a switch given as text (``"no"``) or a number would
+    otherwise be read as on."""
+    if not isinstance(x, (bool, np.bool_)):
+        raise InputTypeError(f"{name} is a switch, True or False, got {quote(x)} ({type(x).__name__})"
+                             + (f". {hint}" if hint else ""))
+    return bool(x)
+
+
+def check_spec(spec) -> SnakeSpec:
+    """``spec`` if it is a :class:`~snakekit.model.SnakeSpec` (the arm's description) whose
+    numbers are usable: checked once per spec (:func:`_check_spec_fields`), the kit's own at once."""
+    if spec is SPEC:
+        return spec
+    if not isinstance(spec, SnakeSpec):
+        raise InputTypeError(f"spec must be a snakekit.SnakeSpec (the arm's description, e.g. snakekit.SPEC), got "
+                             f"{quote(spec)} ({type(spec).__name__}); leave it out for the kit's arm")
+    try:
+        hash(spec)
+    except TypeError:  # a field holds a list...: checked each time
+        _check_spec_fields.__wrapped__(spec)
+    else:
+        _check_spec_fields(spec)
+    return spec
+
+
+@lru_cache(maxsize=16)
+def _check_spec_fields(spec: SnakeSpec) -> None:
+    """Refuse a spec whose numbers the kinematics, simulator or driver can't use (NaN, a negative
+    length, limits the wrong way round, servo ids that are not one per joint...)."""
+    hint = "It is a field of the SnakeSpec"
+    n = check_count(spec.n_joints, "spec.n_joints", 1, 100, hint)
+    for name in ("link_length", "tool_offset", "velocity_limit"):
+        number(getattr(spec, name), f"spec.{name}", above=0, at_most=1e3, hint=hint)
+    for name in ("link_mass", "tool_mass", "collision_margin"):
+        number(getattr(spec, name), f"spec.{name}", at_least=0, at_most=1e3, hint=hint)
+    lower = number(spec.lower, "spec.lower", "rad", at_least=-np.pi, at_most=np.pi, hint=hint)
+    number(spec.upper, "spec.upper", "rad", above=lower, at_most=np.pi, hint=hint + "; upper > lower")
+    ids = spec.servo_ids
+    if not isinstance(ids, tuple) or len(ids) != n or len(set(ids)) != n or not all(
+            isinstance(i, int) and not isinstance(i, bool) and 0 <= i <= 252 for i in ids):
+        raise ConfigurationError(f"spec.servo_ids must be a tuple of {n} distinct servo ids in 0..252, one a joint, "
+                                 f"got {quote(ids)}")
 
 
 def check_rate(x, name: str = "rate", hint: str = "", *, high: float = MAX_RATE) -> float:
@@ -255,6 +413,7 @@ def as_configuration(q, spec: SnakeSpec = SPEC, name: str = "q") -> np.ndarray:
         InputTypeError: ``q`` holds something that is not a real number.
         NotFiniteError: ``q`` holds NaN or infinity.
     """
+    check_spec(spec)
     q = real_array(q, name, f"({spec.n_joints},)", "Give one angle [rad] per joint, base to tip")
     if q.shape != (spec.n_joints,):
         raise ShapeError(name, f"({spec.n_joints},)", q.shape,
@@ -282,61 +441,5 @@ def check_limits(q, spec: SnakeSpec = SPEC, name: str = "q") -> np.ndarray:
     return q
 
 
-# --- files --------------------------------------------------------------------------------
-
-
-def writable_file(path, what: str, *, probe: bool = True) -> Path:
-    """``path`` as a Path, if ``what`` (e.g. "run file") can be written there.
-
-    With ``probe``, a file is really opened there for writing (and removed again if it was
-    not there before): permission bits do not tell everything (read-only mounts, /proc...),
-    so this is how a long job checks its output before it starts.
-
-    Raises:
-        FileWriteError: the folder is missing, the path is a folder, or writing fails; the
-            message says which and what to do.
-    """
-    path = Path(path)
-    parent = path.absolute().parent
-    if not parent.is_dir():
-        state = "is a file, not a folder" if parent.exists() else "does not exist"
-        raise FileWriteError(f"cannot write {what} {path}: folder {parent} {state}. Create the folder first "
-                             f"(pathlib.Path('{parent}').mkdir(parents=True)) or choose another path")
-    if path.is_dir():
-        raise FileWriteError(f"cannot write {what} {path}: it is a folder. Give a file name inside it, "
-                             f"e.g. {path / ('name' + path.suffix)}")
-    if probe:
-        existed = path.exists()
-        try:
-            with open(path, "ab"):
-                pass
-            if not existed:
-                path.unlink()
-        except OSError as e:
-            raise write_failed(path, what, e) from e
-    return path
-
-
-def write_failed(path, what: str, e: OSError) -> FileWriteError:
-    """The error for an ``OSError`` while writing ``what`` to ``path``."""
-    return FileWriteError(f"cannot write {what} {path}: {e.strerror or e}. Choose a place you can write to "
-                          "(e.g. a file in your home folder)")
-
-
-def readable_file(path, what: str) -> Path:
-    """``path`` as a Path, if it is an existing regular file (not a folder, pipe or device).
-
-    Raises:
-        FileFormatError: it does not exist, it is a folder, or it is not a regular file (a
-            named pipe would make reading wait forever).
-    """
-    path = Path(path)
-    if path.is_dir():
-        raise FileFormatError(f"{what} {path} is a folder, not a file; give the path of the "
-                              "file itself")
-    if not path.exists():
-        raise FileFormatError(f"{what} {path} does not exist")
-    if not path.is_file():  # a pipe or a device: reading it could wait forever
-        raise FileFormatError(f"{what} {path} is not a regular file (a pipe, socket or device); give the "
-                              "path of a file saved on disk")
-    return path
+# The file checks use quote() and MAX_POINTS from above: imported once those exist.
+from .files import as_path, read_npz, readable_file, writable_file, write_failed  # noqa: E402,F401
