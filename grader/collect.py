@@ -15,8 +15,10 @@ Reads three layouts (a zip, or the folder it was unpacked into):
 
 A roster CSV (``--roster``, default ``<course>/roster.csv``) maps the LMS's ids and names to
 student ids: a column ``student`` and any of ``canvas_id``, ``moodle_id``, ``name`` (the full
-name as the LMS shows it), ``email``, ``sis_id``, ``login_id``, ``section``. A file whose
-student the roster does not name (or names twice) is reported and kept aside in
+name as the LMS shows it), ``email``, ``sis_id``, ``login_id``, ``section``. A roster on which
+two rows share a student id, LMS id, SIS id, login or e-mail is refused, naming the rows (two
+people merged would get one grade). A file whose student the roster does not name (or whose
+name two students share) is reported and kept aside in
 ``<course>/collected/<assignment>-unmatched/``, never guessed.
 
 Per student the newest notebook of the assignment wins (latest time, then Canvas's file id,
@@ -24,7 +26,9 @@ then the ``-N`` resubmission number); earlier ones are kept in ``submitted/<stud
 and not graded. A notebook under another name that holds the assignment's cells (its grade
 ids) is found and saved under the assignment's name. The submission time becomes nbgrader's
 ``timestamp.txt`` (so the gradebook's due date and the course's late-penalty plugin apply); a
-submission Canvas marks LATE without a time is stamped one second after the due date. What was
+submission Canvas marks LATE without a time is stamped one second after the due date. A time
+collected before is never replaced by that guess: a file collected again unchanged keeps its
+time, and the new files that have no time are named. What was
 collected is listed in ``<course>/collected/<assignment>.csv`` (``snakekit return`` reads it
 to name the LMS's feedback files). Exit codes: 0 every file placed, 1 some could not be (see
 the report), 2 bad arguments.
@@ -172,6 +176,28 @@ def _canvas_name(s: str) -> str:  # Canvas writes the sortable name lower-case, 
     return re.sub(r"[\W_]", "", str(s)).casefold()
 
 
+#: Roster columns no two rows may share (compared as the LMS does: e-mails and logins in any case).
+UNIQUE = {"student": str, "canvas_id": str, "moodle_id": str, "sis_id": str, "login_id": str.casefold,
+          "email": str.casefold}
+
+
+def _repeated(rows: list[dict]) -> list[str]:
+    """What repeats in a roster: ``the canvas_id '102' is on rows 3 and 5`` for each value two rows share."""
+    out = []
+    for column, key in UNIQUE.items():
+        lines: dict[str, list[int]] = {}
+        for line, r in enumerate(rows, start=2):
+            if r.get(column) and r.get("student"):
+                lines.setdefault(key(r[column]), []).append(line)
+        for value, at in lines.items():
+            if len(at) > 1:
+                where = ", ".join(map(str, at[:-1])) + f" and {at[-1]}"
+                out.append(f"the {'student id' if column == 'student' else column} {excerpt(value)} is on rows {where}")
+    if len(out) > 5:
+        out = out[:5] + [f"and {len(out) - 5} more repeated id(s)"]
+    return out
+
+
 class Roster:
     """Students by LMS id and name (``<course>/roster.csv``)."""
 
@@ -190,6 +216,10 @@ class Roster:
         for line, r in enumerate(rows, start=2):
             if r.get("student"):
                 student_id(r["student"], f"roster {path}, row {line}")
+        repeated = _repeated(rows)
+        if repeated:
+            raise CourseError(f"roster {path}: {'; '.join(repeated)}; each student has one row and ids of their own "
+                              "(a name may repeat): merge or correct the rows, then run the command again")
         return cls([r for r in rows if r.get("student")], path)
 
     def find(self, column: str, value: str, *, norm=_norm) -> list[str]:
@@ -357,6 +387,11 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
     for r in rows:
         print(f"{r['student']:<{width}}  {r['notebook'] or 'missing notebook':<24} "
               f"{r['submitted_at'] or '-':<27} {'late' if r['late'] == 'yes' else '':<4} {r['note']}".rstrip(), file=out)
+    untimed = [r["student"] for r in rows if r.pop("untimed")]
+    if untimed:
+        print(f"no submission time for the new file(s) of {len(untimed)} student(s): "
+              f"{excerpt(', '.join(untimed), quote=False)} (the download has none; times collected before stay with "
+              "the files they belong to); for their real times collect again with --times TIMES.csv", file=out)
     for p in problems:
         print(f"not collected: {p}", file=out)
     print(f"collected {len(rows)} student(s) of {assignment} into {course}/submitted/ from {source}"
@@ -376,6 +411,11 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
             newest[nb] = u
     notes = []
     folder.mkdir(parents=True, exist_ok=True)
+    same = bool(newest) and all((folder / f"{nb}.ipynb").is_file() and (folder / f"{nb}.ipynb").read_bytes() == u.data
+                                for nb, u in newest.items())
+    known = _read_stamp(folder / "timestamp.txt") if same and when is None else None
+    if known is not None and due is not None and known == _guess(due):  # collect's own guess is no known time
+        known = None
     for nb, u in newest.items():
         dest = folder / f"{nb}.ipynb"
         if dest.exists() and dest.read_bytes() != u.data:  # collected before: the earlier one is kept, not graded
@@ -395,8 +435,10 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
     stamp = None
     if when is not None:
         stamp = when
+    elif known is not None:  # the same file as collected before: its time stays (never replaced by a guess)
+        stamp = known
     elif late and due is not None:
-        stamp = due.replace(tzinfo=dt.timezone.utc) + dt.timedelta(seconds=1)
+        stamp = _guess(due)
         notes.append("marked late by the LMS, which gives no time: stamped 1 s after the due date")
     elif late:
         notes.append("marked late by the LMS, but the assignment has no due date in nbgrader_config.py")
@@ -409,8 +451,24 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
     return {"student": student, "lms": u0.lms, "lms_id": u0.lms_id, "lms_name": u0.lms_name,
             "file": file_name(u0.entry),
             "notebook": ", ".join(f"{nb}.ipynb" for nb in newest), "submitted_at": _stamp(stamp) if stamp else "",
-            "late": "yes" if is_late else "", "attempts": str(len(older)),
+            "late": "yes" if is_late else "", "attempts": str(len(older)), "untimed": bool(newest) and when is None and known is None,
             "note": "; ".join(notes) if newest else "missing notebook: no notebook of the assignment (kept in attempts/)"}
+
+
+def _guess(due: dt.datetime) -> dt.datetime:
+    """The time of a submission the LMS marks late without a time: one second after the due date."""
+    return due.replace(tzinfo=dt.timezone.utc) + dt.timedelta(seconds=1)
+
+
+def _read_stamp(path: Path) -> dt.datetime | None:
+    """The time in a ``timestamp.txt`` (as collect or nbgrader wrote it), or None."""
+    import dateutil.parser
+
+    try:
+        t = dateutil.parser.parse(path.read_text()[:100].strip())
+    except (OSError, ValueError, OverflowError):
+        return None
+    return t if t.tzinfo is not None else t.replace(tzinfo=dt.timezone.utc)
 
 
 def _keep(path: Path, attempts: Path, tag: str) -> None:
