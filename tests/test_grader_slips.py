@@ -5,6 +5,9 @@
   people: every command that reads a roster refuses it, naming the rows, and writes nothing.
 * A second download collected without ``--times`` keeps the times collected before (the same
   file keeps its time, never a guess) and names the new files that have none.
+* Ctrl-C in ``grade`` or ``collect`` stops between two students: those done before are in the
+  gradebook, the CSV or the manifest, the others as they were.
+* Another assignment's download is refused, naming the assignment its notebooks belong to.
 """
 
 from __future__ import annotations
@@ -167,3 +170,139 @@ def test_a_second_collect_without_times_keeps_the_times_it_had(course, tmp_path,
     assert (sub / "ann" / A / "timestamp.txt").read_bytes() == ann_stamp
     assert manifest(course)["ann"] == rows["ann"]
     assert "no submission time for the new file(s) of 1 student(s): cat" in r.stdout
+
+
+# --- Ctrl-C ------------------------------------------------------------------------------------------
+
+#: A bound for a hang, not a speed: Ctrl-C stops within 5 s (measured); the test waits 30 s.
+HANG = 30.0
+
+
+def interrupt(argv: list, course: Path, ready, *, timeout: float = 600) -> tuple[int, float, str, str]:
+    """Run a ``snakekit`` command as the TA does, press Ctrl-C (SIGINT to its process group, as a
+    terminal sends it) once ``ready()`` holds; (exit code, seconds from Ctrl-C to exit, stdout, stderr)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out, err = course.parent / "out.txt", course.parent / "err.txt"
+    with open(out, "w") as o, open(err, "w") as e:
+        p = subprocess.Popen([sys.executable, "-m", "snakekit.cli", *map(str, argv)], stdout=o, stderr=e,
+                             cwd=Path(__file__).resolve().parent.parent, start_new_session=True)
+        try:
+            end = time.monotonic() + timeout
+            while not ready() and p.poll() is None and time.monotonic() < end:
+                time.sleep(0.02)
+            assert p.poll() is None, f"it ended before Ctrl-C: {p.returncode}\n{err.read_text()[-3000:]}"
+            t0 = time.monotonic()
+            os.killpg(p.pid, signal.SIGINT)
+            code = p.wait(HANG)
+            return code, time.monotonic() - t0, out.read_text(), err.read_text()
+        finally:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+
+
+def gradebook_rows(course: Path) -> dict[str, float]:
+    from grader.course import gradebook
+
+    with gradebook(course) as gb:
+        return {sub.student.id: float(sub.score or 0.0) for sub in gb.find_assignment(A).submissions}
+
+
+def test_ctrl_c_stops_grade_between_two_students(course, capsys):
+    from conftest import need_program
+    from grader_helpers import REFERENCES, submit
+
+    need_program("unshare")
+    submit(course, "ann")
+    for s in ("ben", "cat", "dan"):  # each still running when the TA presses Ctrl-C
+        submit(course, s, {"ex3_peak_speed": "import time\ntime.sleep(600)\npeak_speed = 0.0"})
+    csv_path = course / f"grades-{A}.csv"
+    r = interrupt(["grade", A, "--course", course, "--references", REFERENCES, "--jobs", "2", "--timeout", "900"],
+                  course, lambda: csv_path.exists() or "ann" in gradebook_rows(course))
+    code, took, out, err = r
+    assert code == 130, err[-3000:]
+    assert took < HANG
+    # ann's grade is in the gradebook and the CSV; the others are as they were (nowhere)
+    assert gradebook_rows(course) == {"ann": 7.0}
+    with open(csv_path, newline="") as f:
+        assert [(row["student"], row["score"], row["status"]) for row in csv.DictReader(f)] == [("ann", "7", "graded")]
+    assert err.strip().splitlines()[-1] == (
+        f"snakekit grade: interrupted; 1 submission(s) graded before it are in the gradebook and {csv_path}, the other "
+        f"3 are as they were (grade them: `snakekit grade {A} --course {course} --student ben --student cat "
+        "--student dan`)")
+    assert not list((course / "autograded").glob("ben/*/*.ipynb"))
+
+
+def test_ctrl_c_stops_collect_between_two_students(course, tmp_path):
+    students = [f"s{i:03d}" for i in range(600)]
+    files = {s: notebook(course, s) for s in students}
+    dl = canvas_zip(tmp_path / "dl.zip", {f"{s}.ipynb": data for s, data in files.items()})
+    sub = course / "submitted"
+    code, took, out, err = interrupt(["collect", A, "--course", course, "--from", dl], course,
+                                     lambda: sub.is_dir() and len(list(sub.iterdir())) >= 20)
+    assert code == 130, err[-3000:]
+    assert took < HANG
+    placed = sorted(p.name for p in sub.iterdir())
+    assert 20 <= len(placed) < len(students)
+    # every student placed is whole and listed; none half-placed; the others untouched
+    assert sorted(manifest(course)) == placed
+    assert all((sub / s / A / f"{A}.ipynb").read_bytes() == files[s] for s in placed)
+    assert err.strip().splitlines()[-1] == (
+        f"snakekit collect: interrupted; {len(placed)} of {len(students)} student(s) placed and listed in "
+        f"{course}/collected/{A}.csv, the others as they were; collect the same download again to finish")
+    r = run_collect(course, dl)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert sorted(manifest(course)) == students
+    assert all((sub / s / A / f"{A}.ipynb").read_bytes() == files[s] for s in students)
+    assert not list(sub.glob(f"*/{A}/attempts"))  # collected again: the same files, nothing kept aside
+
+
+def run_collect(course: Path, dl: Path):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "snakekit.cli", "collect", A, "--course", str(course), "--from",
+                           str(dl)], capture_output=True, text=True, cwd=Path(__file__).resolve().parent.parent,
+                          timeout=600)
+
+
+# --- another assignment's download -------------------------------------------------------------------
+
+
+def test_another_assignments_download_is_refused_naming_it(course, tmp_path, capsys):
+    import nbformat
+
+    from grader.course import gradebook
+
+    with gradebook(course) as gb:  # lesson t0_intro, released earlier: its notebook and cells
+        gb.add_assignment("t0_intro")
+        gb.add_notebook("t0_intro", "t0_intro")
+        for gid in ("t0_hello", "t0_hello_test"):
+            gb.add_solution_cell(gid, "t0_intro", "t0_intro")
+        gb.add_grade_cell("t0_hello_test", "t0_intro", "t0_intro", max_score=1, cell_type="code")
+
+    def t0_notebook(who: str) -> bytes:
+        cells = [nbformat.v4.new_code_cell(f"x = '{who}'", metadata={"nbgrader": {"grade_id": "t0_hello",
+                                                                                   "solution": True}}),
+                 nbformat.v4.new_code_cell("assert x", metadata={"nbgrader": {"grade_id": "t0_hello_test",
+                                                                               "grade": True, "points": 1}})]
+        return nbformat.writes(nbformat.v4.new_notebook(cells=cells)).encode()
+
+    (course / "roster.csv").write_text("student,canvas_id\nann,101\nben,102\n")
+    first = canvas_zip(tmp_path / "t1.zip", {f"leeann_101_5001_{A}.ipynb": notebook(course, "ann"),
+                                             f"odeben_102_5002_{A}.ipynb": notebook(course, "ben")})
+    r = run(capsys, "collect", A, "--course", course, "--from", first)
+    assert r.returncode == 0, r.stdout + r.stderr
+    before = tree(course)
+    # the TA picks last week's download: t0_intro's notebooks, collected as t1_sweep
+    wrong = canvas_zip(tmp_path / "t0.zip", {"leeann_101_4001_t0_intro.ipynb": t0_notebook("ann"),
+                                             "odeben_102_4002_t0_intro.ipynb": t0_notebook("ben")})
+    r = run(capsys, "collect", A, "--course", course, "--from", wrong)
+    one_line_error(r, f"{wrong}: its notebooks are t0_intro's, not {A}'s (2 of 2 hold t0_intro's cells, none {A}'s); "
+                      f"nothing was collected. Collect it as `snakekit collect t0_intro --from {wrong}`")
+    assert tree(course) == before  # the manifest's rows, the notebooks, their times: as they were
