@@ -306,3 +306,58 @@ def test_another_assignments_download_is_refused_naming_it(course, tmp_path, cap
     one_line_error(r, f"{wrong}: its notebooks are t0_intro's, not {A}'s (2 of 2 hold t0_intro's cells, none {A}'s); "
                       f"nothing was collected. Collect it as `snakekit collect t0_intro --from {wrong}`")
     assert tree(course) == before  # the manifest's rows, the notebooks, their times: as they were
+
+
+# --- student data never lands in git -----------------------------------------------------------------
+
+
+def git(repo: Path, *args) -> str:
+    import subprocess
+
+    r = subprocess.run(["git", "-C", str(repo), *args], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return r.stdout
+
+
+def test_every_file_a_week_writes_is_ignored_by_git(released, tmp_path, capsys):
+    """The project's .gitignore over a course a TA ran a week in: after collect, grade, return
+    and export, a `git add -A` would add nothing (no file is untracked and not ignored), and
+    each file that holds names, ids, e-mails or grades is listed as ignored."""
+    from conftest import need_program
+    from grader_helpers import REFERENCES
+
+    need_program("git")
+    need_program("unshare")
+    repo = tmp_path / "kit"
+    repo.mkdir()
+    shutil.copyfile(Path(__file__).resolve().parent.parent / ".gitignore", repo / ".gitignore")
+    course = repo / "course"
+    shutil.copytree(released, course)
+    git(repo, "init", "-q")
+    git(repo, "add", "-A")  # what the repository keeps of a course: sources, cases, the config
+    kept = set(git(repo, "diff", "--cached", "--name-only").split())
+    assert kept >= {".gitignore", "course/nbgrader_config.py", f"course/source/{A}/{A}.ipynb"}
+    assert not {k for k in kept if k.startswith(("course/release/", "course/gradebook"))}
+
+    (course / "roster.csv").write_text("student,name,canvas_id,email\nann,Ann Lee,101,ann@uni.test\n")
+    dl = canvas_zip(tmp_path / "dl.zip", {f"leeann_101_5001_{A}.ipynb": notebook(course, "ann"),
+                                          f"nobody_999_5002_{A}.ipynb": notebook(course, "who")})
+    week = [["collect", A, "--course", course, "--from", dl],
+            ["grade", A, "--course", course, "--references", REFERENCES, "--jobs", "1"],
+            ["return", A, "--course", course],
+            ["export", "--course", course, "--lms", "canvas"],
+            ["export", "--course", course]]
+    for argv in week:
+        r = run(capsys, *argv)
+        assert r.returncode in (0, 1), (argv, r.stdout[-2000:], r.stderr[-2000:])
+    assert git(repo, "status", "--porcelain", "--untracked-files=all") == "".join(f"A  {k}\n" for k in sorted(kept))
+    ignored = set(git(repo, "status", "--porcelain", "--ignored", "--untracked-files=all").split("\n"))
+    for path in ["course/roster.csv", "course/gradebook.db", f"course/collected/{A}.csv",
+                 f"course/collected/{A}-unmatched/nobody_999_5002_{A}.ipynb", f"course/submitted/ann/{A}/{A}.ipynb",
+                 f"course/autograded/ann/{A}/{A}.ipynb", f"course/feedback/ann/{A}/{A}.html",
+                 f"course/grades-{A}.csv", "course/grades-canvas.csv", "course/grades-all.csv",
+                 f"course/feedback-{A}-canvas.zip"]:
+        assert (course.parent / path).is_file(), path
+        assert f"!! {path}" in ignored, path
+    backups = [p for p in ignored if p.startswith("!! course/backups/gradebook-")]
+    assert len(backups) == 1
