@@ -361,3 +361,32 @@ def test_every_file_a_week_writes_is_ignored_by_git(released, tmp_path, capsys):
         assert f"!! {path}" in ignored, path
     backups = [p for p in ignored if p.startswith("!! course/backups/gradebook-")]
     assert len(backups) == 1
+
+
+# --- running the instructor's notebook is no change ---------------------------------------------------
+
+
+def test_files_a_run_of_the_instructor_notebook_writes_do_not_block_grading(course, capsys):
+    """An instructor runs the source notebook in its folder (lesson 06 saves task2_run.npz, lesson
+    00 meet_the_arm.html): the reference still matches; a file the release would ship does not."""
+    from conftest import need_program
+    from grader_helpers import REFERENCES, submit
+
+    need_program("unshare")
+    submit(course, "ann")
+    src = course / "source" / A
+    (src / "task2_run.npz").write_bytes(b"PK\x03\x04 a run")
+    (src / "meet_the_arm.html").write_text("<html>the arm</html>")
+    (src / "sweep.png").write_bytes(b"\x89PNG")
+    r = run(capsys, "grade", A, "--course", course, "--references", REFERENCES, "--student", "ann")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "changed since" not in r.stderr
+    csv_path = course / f"grades-{A}.csv"
+    with open(csv_path, newline="") as f:
+        assert [(row["student"], row["score"]) for row in csv.DictReader(f)] == [("ann", "7")]
+    before = csv_path.read_bytes()
+    (src / "hints.txt").write_text("a file the release hands out")  # released with the notebook: a change
+    r = run(capsys, "grade", A, "--course", course, "--references", REFERENCES, "--student", "ann")
+    assert r.returncode == 2
+    assert f"{course}/source/{A} changed since {REFERENCES}/{A}.npz was recorded from it" in r.stderr
+    assert csv_path.read_bytes() == before
