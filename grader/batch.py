@@ -37,6 +37,7 @@ from . import rerun, sandbox, worker
 from .assignment import (MAX_FILE, GradingError, _Assignment, _Cell, ensure_released, load_assignment,  # noqa: F401
                          read_inside, tampered_cells, _template_gradebook)
 from .cases import CasesError, CaseServer, draw
+from .files import uninterrupted
 from .records import CSV_COLUMNS, class_rows, late_penalties, read_class_csv, record, write_csv  # noqa: F401
 from .references import REFERENCES, ReferenceError, expected
 from .runner import Runner
@@ -46,6 +47,14 @@ from .score import read_handin
 
 #: The student id the instructor notebook runs under in its sandbox (never a row of the gradebook).
 INSTRUCTOR = "_instructor_reference"
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C stopped the batch between two students; ``results`` are those written to the gradebook."""
+
+    def __init__(self, results: list[SubmissionResult]):
+        super().__init__(f"interrupted after {len(results)} submission(s)")
+        self.results = results
 
 
 class Grader:
@@ -141,51 +150,67 @@ class Grader:
         run beside them, in this process, once the instructor's results are in."""
         results, waiting = [], []
         bar = Progress(len(students), self.progress, self.jobs)
-        with ThreadPoolExecutor(self.jobs) as pool, ThreadPoolExecutor(1) as post:
-            pending = {}
-            if self.draw is not None:
-                pending[pool.submit(self._run_reference)] = INSTRUCTOR
-            else:
-                waiting = None  # nothing to wait for
-            pending.update({pool.submit(self._grade_one, s): s for s in students})
-            while pending:
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    s = pending.pop(fut)
-                    if s == INSTRUCTOR:
-                        try:
-                            self.verdicts.expected = fut.result()
-                            self.verdicts.draw = self.draw
-                        except Exception:
-                            for f in pending:
-                                f.cancel()
-                            raise
-                        for s2, call in waiting:  # the submissions that ran meanwhile: score them now
-                            pending[post.submit(call)] = s2
-                        waiting = None
-                        continue
-                    try:
-                        r = fut.result()
-                    except Exception as e:  # noqa: BLE001 - one submission never stops the batch
-                        r = SubmissionResult(s, self.assignment, 0.0, self.a.max_score, "grader error",
-                                             f"{type(e).__name__}: {e}")
-                    if isinstance(r, Again):  # a second run (grader.rerun): a sandbox like the first
-                        pending[pool.submit(r)] = s
-                        continue
-                    if callable(r):  # ran: score it and write the feedback, while the next sandbox runs
-                        if waiting is not None:
-                            waiting.append((s, r))
-                        else:
-                            pending[post.submit(r)] = s
-                        continue
-                    try:
-                        record(self.course, self.a, r, self.late_plugin, self._lock)  # only this thread writes
-                    except Exception as e:  # noqa: BLE001
-                        raise GradingError(f"cannot write {s}'s grade to the gradebook: {e}") from e
-                    results.append(r)
-                    bar.update(r.status != "graded")
-        bar.close()
+        sandbox.STOP.clear()
+        pending = {}
+        try:
+            with ThreadPoolExecutor(self.jobs) as pool, ThreadPoolExecutor(1) as post:
+                try:
+                    self._loop(students, pool, post, pending, results, waiting, bar)
+                except KeyboardInterrupt:  # Ctrl-C: the running sandboxes are killed, nothing more runs
+                    sandbox.STOP.set()
+                    for f in pending:
+                        f.cancel()
+                    pool.shutdown(wait=False, cancel_futures=True)
+                    post.shutdown(wait=False, cancel_futures=True)
+                    raise Interrupted(sorted(results, key=lambda r: r.student)) from None
+        finally:
+            bar.close()
         return sorted(results, key=lambda r: r.student)
+
+    def _loop(self, students, pool, post, pending, results, waiting, bar) -> None:
+        """Submit every sandbox, then score and write each result as it comes (``results``)."""
+        if self.draw is not None:
+            pending[pool.submit(self._run_reference)] = INSTRUCTOR
+        else:
+            waiting = None  # nothing to wait for
+        pending.update({pool.submit(self._grade_one, s): s for s in students})
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                s = pending.pop(fut)
+                if s == INSTRUCTOR:
+                    try:
+                        self.verdicts.expected = fut.result()
+                        self.verdicts.draw = self.draw
+                    except Exception:
+                        for f in pending:
+                            f.cancel()
+                        raise
+                    for s2, call in waiting:  # the submissions that ran meanwhile: score them now
+                        pending[post.submit(call)] = s2
+                    waiting = None
+                    continue
+                try:
+                    r = fut.result()
+                except Exception as e:  # noqa: BLE001 - one submission never stops the batch
+                    r = SubmissionResult(s, self.assignment, 0.0, self.a.max_score, "grader error",
+                                         f"{type(e).__name__}: {e}")
+                if isinstance(r, Again):  # a second run (grader.rerun): a sandbox like the first
+                    pending[pool.submit(r)] = s
+                    continue
+                if callable(r):  # ran: score it and write the feedback, while the next sandbox runs
+                    if waiting is not None:
+                        waiting.append((s, r))
+                    else:
+                        pending[post.submit(r)] = s
+                    continue
+                try:
+                    with uninterrupted():  # a Ctrl-C waits until the student's rows are written whole
+                        record(self.course, self.a, r, self.late_plugin, self._lock)  # only this thread writes
+                        results.append(r)
+                except Exception as e:  # noqa: BLE001
+                    raise GradingError(f"cannot write {s}'s grade to the gradebook: {e}") from e
+                bar.update(r.status != "graded")
 
     def _run_reference(self) -> dict:
         """The instructor notebook, run in a sandbox at the batch's cases: the expected results."""

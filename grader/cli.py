@@ -107,6 +107,26 @@ def check_current(args, out) -> list[str]:
     return problems
 
 
+def interrupted(course: Path, assignment: str, results: list, students: list[str], csv_path: Path) -> int:
+    """After a Ctrl-C: the CSV gets the students graded before it (as the gradebook has them), the
+    others' rows stay as they were; says who is left and how to grade them. Exit code 130."""
+    from .batch import class_rows, read_class_csv, write_csv
+    from .files import excerpt, uninterrupted
+
+    if results:
+        with uninterrupted():
+            write_csv(class_rows(course, assignment, results, read_class_csv(csv_path)), csv_path)
+    done = {r.student for r in results}
+    left = [s for s in students if s not in done]
+    again = " ".join(f"--student {s}" for s in left[:20])
+    print(f"snakekit grade: interrupted; {len(done)} submission(s) graded before it are in the gradebook and "
+          f"{csv_path}, the other {len(left)} are as they were"
+          + (f" (grade them: `snakekit grade {assignment}{'' if course == COURSE else f' --course {course}'} "
+             f"{excerpt(again, 300, quote=False)}`"
+             f"{' ...' if len(left) > 20 else ''})" if left else ""), file=sys.stderr)
+    return 130
+
+
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
     args = build_parser().parse_args(argv)
@@ -169,6 +189,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
     except SnakekitError as e:
         print(f"snakekit grade: {e}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print(f"snakekit grade: interrupted before anything was graded; the gradebook and {csv_path} are as they "
+              "were", file=sys.stderr)
+        return 130
     if stale:
         for p in stale:
             print(f"snakekit grade: {p}", file=sys.stderr)
@@ -180,9 +204,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
     except SnakekitError as e:
         print(f"snakekit grade: {e}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print("snakekit grade: interrupted; grades written so far are in the gradebook", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        return interrupted(course, args.assignment, getattr(e, "results", []), students, csv_path)
     rows = class_rows(course, args.assignment, results, read_class_csv(csv_path))
     write_csv(rows, csv_path)
     failed = [r for r in results if r.status != "graded"]

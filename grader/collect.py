@@ -15,16 +15,22 @@ Reads three layouts (a zip, or the folder it was unpacked into):
 
 A roster CSV (``--roster``, default ``<course>/roster.csv``) maps the LMS's ids and names to
 student ids: a column ``student`` and any of ``canvas_id``, ``moodle_id``, ``name`` (the full
-name as the LMS shows it), ``email``, ``sis_id``, ``login_id``, ``section``. A file whose
-student the roster does not name (or names twice) is reported and kept aside in
+name as the LMS shows it), ``email``, ``sis_id``, ``login_id``, ``section``. A roster on which
+two rows share a student id, LMS id, SIS id, login or e-mail is refused, naming the rows (two
+people merged would get one grade). A file whose student the roster does not name (or whose
+name two students share) is reported and kept aside in
 ``<course>/collected/<assignment>-unmatched/``, never guessed.
 
 Per student the newest notebook of the assignment wins (latest time, then Canvas's file id,
 then the ``-N`` resubmission number); earlier ones are kept in ``submitted/<student>/<a>/attempts/``
 and not graded. A notebook under another name that holds the assignment's cells (its grade
-ids) is found and saved under the assignment's name. The submission time becomes nbgrader's
+ids) is found and saved under the assignment's name; a download none of whose notebooks is
+the assignment's, while some are another assignment's (by their grade ids), is refused, naming
+that assignment. The submission time becomes nbgrader's
 ``timestamp.txt`` (so the gradebook's due date and the course's late-penalty plugin apply); a
-submission Canvas marks LATE without a time is stamped one second after the due date. What was
+submission Canvas marks LATE without a time is stamped one second after the due date. A time
+collected before is never replaced by that guess: a file collected again unchanged keeps its
+time, and the new files that have no time are named. What was
 collected is listed in ``<course>/collected/<assignment>.csv`` (``snakekit return`` reads it
 to name the LMS's feedback files). Exit codes: 0 every file placed, 1 some could not be (see
 the report), 2 bad arguments.
@@ -46,18 +52,25 @@ from pathlib import Path
 from snakekit.errors import SnakekitError
 
 from .course import CourseError, default_roster, gradebook, require
-from .files import (ALLOWED_ID, MAX_DOWNLOAD, MAX_FILE, STUDENT_ID, excerpt, file_name, one_line, read_table, size_text,
-                    student_id, unique_in)
+from .files import MAX_DOWNLOAD, MAX_FILE, excerpt, file_name, one_line, read_table, size_text, student_id, uninterrupted, unique_in
+from .roster import ROSTER_IDS, UNIQUE, Roster, _norm, no_roster_who  # noqa: F401 - the roster's names, as they were here
 
 COURSE = Path("course")
 MANIFEST_COLUMNS = ["student", "lms", "lms_id", "lms_name", "file", "notebook", "submitted_at", "late", "attempts", "note"]
-ROSTER_IDS = ("canvas_id", "moodle_id", "name", "email", "sis_id", "login_id")
 
 CANVAS = re.compile(r"^(?:(?P<name>.*?)_)??(?:(?P<late>late)_)?(?P<uid>\d+|anon_[A-Za-z0-9]+)_(?P<fid>\d+)_(?P<file>.+)$",
                     re.I | re.S)
 MOODLE_DIR = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_[a-z]+_?$")
 MOODLE_FLAT = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_file_(?P<file>.+)$", re.S)
 RESUBMISSION = re.compile(r"^(?P<stem>.*?)-(?P<n>\d+)$")
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C stopped collect between two students: ``placed`` of ``total`` were placed and listed."""
+
+    def __init__(self, placed: int, total: int):
+        super().__init__(f"{placed} of {total}")
+        self.placed, self.total = placed, total
 
 
 @dataclass(frozen=True)
@@ -161,76 +174,6 @@ def read_download(source: Path) -> tuple[list[Upload], list[str]]:
     return out, problems
 
 
-# --- the roster -------------------------------------------------------------------------------
-
-
-def _norm(s: str) -> str:
-    return " ".join(str(s).split()).casefold()
-
-
-def _canvas_name(s: str) -> str:  # Canvas writes the sortable name lower-case, letters and digits only
-    return re.sub(r"[\W_]", "", str(s)).casefold()
-
-
-class Roster:
-    """Students by LMS id and name (``<course>/roster.csv``)."""
-
-    def __init__(self, rows: list[dict], path: Path | None = None):
-        self.rows, self.path = rows, path
-        self.students = {r["student"] for r in rows}
-
-    @classmethod
-    def load(cls, path: Path | None) -> "Roster | None":
-        """The roster at ``path``; :class:`CourseError` naming the row of a student id that is not
-        a folder name (``../source``, ``/etc``, a name with ``/`` or a newline)."""
-        if path is None:
-            return None
-        _, rows = read_table(path, "roster", need=("student",),
-                             fix=f"give student and any of {', '.join(ROSTER_IDS)}")
-        for line, r in enumerate(rows, start=2):
-            if r.get("student"):
-                student_id(r["student"], f"roster {path}, row {line}")
-        return cls([r for r in rows if r.get("student")], path)
-
-    def find(self, column: str, value: str, *, norm=_norm) -> list[str]:
-        return sorted({r["student"] for r in self.rows if r.get(column) and norm(r[column]) == norm(value)})
-
-    def row(self, student: str) -> dict:
-        return next((r for r in self.rows if r["student"] == student), {"student": student})
-
-    def who(self, u: Upload) -> tuple[str | None, str]:
-        """The student id of an upload, or None and why not."""
-        if u.lms == "canvas":
-            found = self.find("canvas_id", u.lms_id)
-            if not found and u.lms_name:
-                found = self.find("name", u.lms_name, norm=_canvas_name)
-                if not found:  # Canvas writes "last, first" as lastfirst: the roster's "First Last" reversed
-                    found = sorted({r["student"] for r in self.rows if r.get("name") and
-                                    _canvas_name(" ".join(r["name"].split()[-1:] + r["name"].split()[:-1])) == _canvas_name(u.lms_name)})
-            what = f"Canvas user {u.lms_id} ({excerpt(u.lms_name, quote=False) if u.lms_name else 'anonymous'})"
-        elif u.lms == "moodle":
-            found = self.find("moodle_id", u.lms_id) or self.find("name", u.lms_name)
-            what = f"Moodle participant {u.lms_id} ({excerpt(u.lms_name, quote=False)})"
-        else:
-            found = [u.lms_id] if u.lms_id in self.students else self.find("login_id", u.lms_id) or self.find("email", u.lms_id)
-            what = excerpt(u.lms_id)
-        if len(found) == 1:
-            return found[0], ""
-        if not found:
-            return None, f"{what} is not in the roster {self.path}"
-        return None, f"{what} matches {len(found)} students of the roster ({excerpt(', '.join(found), quote=False)}); not guessed"
-
-
-def no_roster_who(u: Upload) -> tuple[str | None, str]:
-    if u.lms == "folder" and STUDENT_ID.fullmatch(u.lms_id):
-        return u.lms_id, ""
-    what = {"canvas": f"Canvas user {u.lms_id}", "moodle": f"Moodle participant {u.lms_id} ({excerpt(u.lms_name, quote=False)})"}.get(
-        u.lms, excerpt(u.lms_id))
-    if u.lms == "folder":
-        return None, f"{what} cannot be a student's folder name (a student id is {ALLOWED_ID})"
-    return None, f"{what}: no roster to map it to a student (give --roster, or write {COURSE}/roster.csv)"
-
-
 # --- submission times ---------------------------------------------------------------------------
 
 TIME_COLUMNS = ("submitted_at", "time", "timestamp", "Last modified (submission)")
@@ -319,6 +262,27 @@ def which_notebook(u: Upload, cells: dict[str, set[str]]) -> str | None:
     return best if best is not None and len(ids & cells[best]) * 2 >= max(len(cells[best]), 1) else None
 
 
+def _not_another_assignments(course: Path, assignment: str, source: Path, uploads: list[Upload], cells) -> None:
+    """Refuse a download none of whose notebooks is ``assignment``'s while some are another
+    assignment's of the gradebook (by their grade ids): nothing of it is placed."""
+    if not uploads or any(which_notebook(u, cells) for u in uploads):
+        return
+    with gradebook(course) as gb:
+        others = {a.name: {nb.name: {c.name for c in nb.grade_cells} | {c.name for c in nb.solution_cells}
+                           for nb in a.notebooks} for a in gb.assignments if a.name != assignment}
+    found: dict[str, int] = {}
+    for u in uploads:
+        ids = grade_ids(u.data) or set()
+        for name, nbs in others.items():
+            if ids and any(len(ids & c) * 2 >= max(len(c), 1) for c in nbs.values()):
+                found[name] = found.get(name, 0) + 1
+    if found:
+        other = max(found, key=lambda name: (found[name], name))
+        raise CourseError(f"{source}: its notebooks are {other}'s, not {assignment}'s ({found[other]} of "
+                          f"{len(uploads)} hold {other}'s cells, none {assignment}'s); nothing was collected. Collect it "
+                          f"as `snakekit collect {other} --from {source}`, or download {assignment}'s submissions")
+
+
 # --- collecting ---------------------------------------------------------------------------------
 
 
@@ -336,6 +300,7 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
     if not uploads and not problems:
         raise CourseError(f"{source} holds no notebook (.ipynb)")
     old = read_manifest(course, assignment)  # a damaged one stops collect before anything is placed
+    _not_another_assignments(course, assignment, source, uploads, cells)
     by_student: dict[str, list[Upload]] = {}
     unmatched = []
     aside = course / "collected" / f"{assignment}-unmatched"
@@ -350,13 +315,24 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
         else:
             by_student.setdefault(student, []).append(u)
     rows = []
-    for student, ups in sorted(by_student.items()):
-        rows.append(_place(course, assignment, student, ups, cells, due, _time_for(student, ups, roster, times)))
+    try:
+        for student, ups in sorted(by_student.items()):
+            with uninterrupted():  # a Ctrl-C stops between two students, never inside one's folder
+                rows.append(_place(course, assignment, student, ups, cells, due, _time_for(student, ups, roster, times)))
+    except KeyboardInterrupt:
+        with uninterrupted():
+            _write_manifest(course, assignment, rows, old)  # the students placed before it are listed
+        raise Interrupted(len(rows), len(by_student)) from None
     _write_manifest(course, assignment, rows, old)
     width = max([len(r["student"]) for r in rows] + [7])
     for r in rows:
         print(f"{r['student']:<{width}}  {r['notebook'] or 'missing notebook':<24} "
               f"{r['submitted_at'] or '-':<27} {'late' if r['late'] == 'yes' else '':<4} {r['note']}".rstrip(), file=out)
+    untimed = [r["student"] for r in rows if r.pop("untimed")]
+    if untimed:
+        print(f"no submission time for the new file(s) of {len(untimed)} student(s): "
+              f"{excerpt(', '.join(untimed), quote=False)} (the download has none; times collected before stay with "
+              "the files they belong to); for their real times collect again with --times TIMES.csv", file=out)
     for p in problems:
         print(f"not collected: {p}", file=out)
     print(f"collected {len(rows)} student(s) of {assignment} into {course}/submitted/ from {source}"
@@ -376,6 +352,11 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
             newest[nb] = u
     notes = []
     folder.mkdir(parents=True, exist_ok=True)
+    same = bool(newest) and all((folder / f"{nb}.ipynb").is_file() and (folder / f"{nb}.ipynb").read_bytes() == u.data
+                                for nb, u in newest.items())
+    known = _read_stamp(folder / "timestamp.txt") if same and when is None else None
+    if known is not None and due is not None and known == _guess(due):  # collect's own guess is no known time
+        known = None
     for nb, u in newest.items():
         dest = folder / f"{nb}.ipynb"
         if dest.exists() and dest.read_bytes() != u.data:  # collected before: the earlier one is kept, not graded
@@ -395,8 +376,10 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
     stamp = None
     if when is not None:
         stamp = when
+    elif known is not None:  # the same file as collected before: its time stays (never replaced by a guess)
+        stamp = known
     elif late and due is not None:
-        stamp = due.replace(tzinfo=dt.timezone.utc) + dt.timedelta(seconds=1)
+        stamp = _guess(due)
         notes.append("marked late by the LMS, which gives no time: stamped 1 s after the due date")
     elif late:
         notes.append("marked late by the LMS, but the assignment has no due date in nbgrader_config.py")
@@ -409,8 +392,24 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
     return {"student": student, "lms": u0.lms, "lms_id": u0.lms_id, "lms_name": u0.lms_name,
             "file": file_name(u0.entry),
             "notebook": ", ".join(f"{nb}.ipynb" for nb in newest), "submitted_at": _stamp(stamp) if stamp else "",
-            "late": "yes" if is_late else "", "attempts": str(len(older)),
+            "late": "yes" if is_late else "", "attempts": str(len(older)), "untimed": bool(newest) and when is None and known is None,
             "note": "; ".join(notes) if newest else "missing notebook: no notebook of the assignment (kept in attempts/)"}
+
+
+def _guess(due: dt.datetime) -> dt.datetime:
+    """The time of a submission the LMS marks late without a time: one second after the due date."""
+    return due.replace(tzinfo=dt.timezone.utc) + dt.timedelta(seconds=1)
+
+
+def _read_stamp(path: Path) -> dt.datetime | None:
+    """The time in a ``timestamp.txt`` (as collect or nbgrader wrote it), or None."""
+    import dateutil.parser
+
+    try:
+        t = dateutil.parser.parse(path.read_text()[:100].strip())
+    except (OSError, ValueError, OverflowError):
+        return None
+    return t if t.tzinfo is not None else t.replace(tzinfo=dt.timezone.utc)
 
 
 def _keep(path: Path, attempts: Path, tag: str) -> None:
@@ -487,6 +486,11 @@ def main(argv: list[str] | None = None, out=None) -> int:
     except (SnakekitError, OSError) as e:
         print(f"snakekit collect: {one_line(e)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as e:
+        placed = f"{e.placed} of {e.total} student(s) placed and listed in {course}/collected/{args.assignment}.csv, " \
+            "the others as they were" if isinstance(e, Interrupted) else "nothing was placed"
+        print(f"snakekit collect: interrupted; {placed}; collect the same download again to finish", file=sys.stderr)
+        return 130
     return 1 if problems else 0
 
 

@@ -229,14 +229,30 @@ def release_differences(course: Path, assignment: str) -> list[str]:
 # --- the source a reference was recorded from -----------------------------------------------
 
 
+def released_files(course: Path, assignment: str) -> list[Path]:
+    """The files of ``source/<a>`` nbgrader's release copies: none whose name (or a folder's on
+    its way) matches the course's ``CourseDirectory.ignore``, only those matching its
+    ``include`` (what a run of the notebook writes beside it is ignored by the course's config)."""
+    import fnmatch
+
+    from nbgrader.coursedir import CourseDirectory
+
+    cd = CourseDirectory(config=config(course))
+    folder = Path(course) / "source" / assignment
+    return sorted(p for p in folder.rglob("*") if p.is_file()
+                  and not any(fnmatch.fnmatch(part, g) for part in p.relative_to(folder).parts for g in cd.ignore)
+                  and any(fnmatch.fnmatch(p.name, g) for g in cd.include))
+
+
 def source_hash(course: Path, assignment: str) -> str:
     """A hash of what a reference depends on in ``source/<a>``: every code cell of its
-    notebooks and every other file (markdown and outputs do not change a hand-in)."""
+    notebooks and every other file the release ships (markdown and outputs do not change a
+    hand-in, nor a file a run of the notebook wrote: :func:`released_files`)."""
     import nbformat
 
     folder = Path(course) / "source" / assignment
     h = hashlib.sha256()
-    for path in sorted(p for p in folder.rglob("*") if p.is_file() and ".ipynb_checkpoints" not in p.parts):
+    for path in released_files(course, assignment):
         h.update(str(path.relative_to(folder)).encode() + b"\0")
         if path.suffix == ".ipynb":
             for c in nbformat.read(path, as_version=4).cells:

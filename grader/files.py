@@ -11,15 +11,19 @@
   before it is read.
 * :func:`excerpt` is how a message quotes what it was given: one line, at most
   :data:`EXCERPT` characters.
+* :func:`uninterrupted` holds Ctrl-C back until one student's files are written whole.
 """
 
 from __future__ import annotations
 
 import codecs
+import contextlib
 import csv
 import io
 import os
 import re
+import signal
+import threading
 import zipfile
 from pathlib import Path
 
@@ -63,6 +67,26 @@ def size_text(n: int) -> str:
     if n >= 1 << 30:
         return f"{n / 2**30:.1f} GB"
     return f"{n / 2**20:.1f} MB" if n < 10 << 20 else f"{n / 2**20:.0f} MB"
+
+
+@contextlib.contextmanager
+def uninterrupted():
+    """Run the block whole: a Ctrl-C (SIGINT) during it is held back and raised as
+    :class:`KeyboardInterrupt` when it ends, so a command stops between two students, never
+    in the middle of one student's files or gradebook rows. Outside the main thread, or when
+    SIGINT is not Python's own handler, the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    held = []
+    signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if held:
+        raise KeyboardInterrupt
 
 
 # --- names that stay in their folder ---------------------------------------------------------

@@ -35,6 +35,8 @@ import threading
 import time
 from pathlib import Path
 
+from .sandbox import STOP, TICK, Stopped
+
 CLONE_NEWNS, CLONE_NEWUSER, CLONE_NEWPID, CLONE_NEWNET = 0x00020000, 0x10000000, 0x20000000, 0x40000000
 PR_SET_PDEATHSIG = 1
 
@@ -193,16 +195,17 @@ class ForkServer:
                 socket.send_fds(self._ctl, [json.dumps(cfg).encode()], [child.fileno()])
             child.close()
             deadline = time.monotonic() + wall
-            pid, code, buf = None, None, b""
+            pid, code, buf, stopped = None, None, b"", False
             while code is None:
                 left = deadline - time.monotonic()
-                if left <= 0:
+                if left <= 0 or stopped:
                     break
-                mine.settimeout(left)
+                mine.settimeout(min(left, TICK))
                 try:
                     data = mine.recv(4096)
                 except TimeoutError:
-                    break
+                    stopped = STOP.is_set()  # the batch was interrupted: kill it now
+                    continue
                 if not data:
                     return (-signal.SIGKILL if pid else 125), False  # the supervisor died
                 buf += data
@@ -226,6 +229,8 @@ class ForkServer:
                         pass
                 except OSError:
                     pass
+            if stopped:
+                raise Stopped("the batch was interrupted")
             return None, True
         finally:
             mine.close()
@@ -235,6 +240,8 @@ class ForkServer:
         if self._ctl.fileno() < 0:
             return
         self._ctl.close()  # the server reads end-of-file and exits
+        if STOP.is_set():  # interrupted: nothing of the server's is worth the wait of its exit
+            self.proc.kill()
         try:
             self.proc.wait(10)
         except subprocess.TimeoutExpired:

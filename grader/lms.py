@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import os
 import re
 import shutil
 import sys
@@ -46,7 +47,7 @@ from .collect import Roster, _Parser, read_manifest
 from snakekit.errors import SnakekitError
 
 from .course import CourseError, config, course_id, default_roster, gradebook, require
-from .files import check_output, excerpt, one_line
+from .files import check_output, excerpt, one_line, uninterrupted
 
 COURSE = Path("course")
 CANVAS_PREFIX = re.compile(r"^(?P<prefix>.*?_(?:\d+|anon_[A-Za-z0-9]+)_\d+_)")
@@ -187,6 +188,14 @@ def lms_name(row: dict, page: Path) -> str | None:
     return None
 
 
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C stopped return between two students: ``released`` to the exchange, ``zips`` written whole."""
+
+    def __init__(self, released: int, zips: list | None = None):
+        super().__init__(f"{released} released")
+        self.released, self.zips = released, list(zips or [])
+
+
 def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip_path: Path | None, out) -> tuple[int, list]:
     pages = _pages(course, assignment)
     if not pages:
@@ -195,39 +204,50 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
     manifest = read_manifest(course, assignment)
     problems, done = [], {"exchange": 0, "zip": 0}
     entries: dict[str, dict[str, Path]] = {}
-    for student, files in pages.items():
-        row = manifest.get(student)
-        src = course / "submitted" / student / assignment
-        if row and row.get("lms") in ("canvas", "moodle"):
-            names = {lms_name(row, p): p for p in files}
-            if None in names:
-                problems.append(f"{student}: the collected file name {excerpt(row.get('file'))} does not carry the "
-                                "LMS's ids")
-                continue
-            entries.setdefault(row["lms"], {}).update(names)
-            done["zip"] += 1
-        elif (src / "submission_secret.txt").is_file() and (src / "timestamp.txt").is_file():
-            try:
-                release_to_exchange(course, assignment, student, exchange)
-                done["exchange"] += 1
-            except CourseError as e:
-                problems.append(str(e))
-        else:
-            problems.append(f"{student}: neither collected from an LMS (no row in {course}/collected/{assignment}.csv) "
-                            f"nor from the exchange (no submission_secret.txt): the page stays in {course}/feedback/")
-    written = []
-    for lms, names in sorted(entries.items()):
-        path = zip_path or course / f"feedback-{assignment}-{lms}.zip"
-        if len(entries) > 1 and zip_path is not None:
-            path = zip_path.with_name(f"{zip_path.stem}-{lms}{zip_path.suffix}")
-        check_output(path, course, suffix=".zip", what="the feedback zip", command="snakekit return")
-        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
-            for name, page in sorted(names.items()):
-                z.write(page, name)
-        written.append(path)
-        how = {"canvas": "Canvas: the assignment's page > Re-Upload Submissions",
-               "moodle": "Moodle: View all submissions > Upload multiple feedback files in a zip"}[lms]
-        print(f"wrote {path}: {len(names)} page(s) for the {lms} bulk upload ({how})", file=out)
+    written: list[Path] = []
+    try:  # a Ctrl-C: what was released and the zips written whole are said, nothing half-written stays
+        for student, files in pages.items():
+            row = manifest.get(student)
+            src = course / "submitted" / student / assignment
+            if row and row.get("lms") in ("canvas", "moodle"):
+                names = {lms_name(row, p): p for p in files}
+                if None in names:
+                    problems.append(f"{student}: the collected file name {excerpt(row.get('file'))} does not carry the "
+                                    "LMS's ids")
+                    continue
+                entries.setdefault(row["lms"], {}).update(names)
+                done["zip"] += 1
+            elif (src / "submission_secret.txt").is_file() and (src / "timestamp.txt").is_file():
+                try:
+                    with uninterrupted():  # a Ctrl-C stops between two students
+                        release_to_exchange(course, assignment, student, exchange)
+                        done["exchange"] += 1
+                except CourseError as e:
+                    problems.append(str(e))
+            else:
+                problems.append(f"{student}: neither collected from an LMS (no row in {course}/collected/{assignment}.csv) "
+                                f"nor from the exchange (no submission_secret.txt): the page stays in {course}/feedback/")
+        for lms, names in sorted(entries.items()):
+            path = zip_path or course / f"feedback-{assignment}-{lms}.zip"
+            if len(entries) > 1 and zip_path is not None:
+                path = zip_path.with_name(f"{zip_path.stem}-{lms}{zip_path.suffix}")
+            check_output(path, course, suffix=".zip", what="the feedback zip", command="snakekit return")
+            tmp = path.with_name(f".{path.name}.tmp")
+            try:  # written aside, then put in place: a Ctrl-C never leaves half a zip
+                with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+                    for name, page in sorted(names.items()):
+                        z.write(page, name)
+                with uninterrupted():
+                    os.replace(tmp, path)
+                    written.append(path)
+            except KeyboardInterrupt:
+                tmp.unlink(missing_ok=True)
+                raise
+            how = {"canvas": "Canvas: the assignment's page > Re-Upload Submissions",
+                   "moodle": "Moodle: View all submissions > Upload multiple feedback files in a zip"}[lms]
+            print(f"wrote {path}: {len(names)} page(s) for the {lms} bulk upload ({how})", file=out)
+    except KeyboardInterrupt:
+        raise Interrupted(done["exchange"], written) from None
     if done["exchange"]:
         print(f"released {done['exchange']} student(s)' feedback to the exchange: they get it with "
               f"`nbgrader fetch_feedback {assignment}`", file=out)
@@ -258,6 +278,12 @@ def return_main(argv: list[str] | None = None, out=None) -> int:
     except (SnakekitError, OSError) as e:
         print(f"snakekit return: {one_line(e)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as e:
+        released, zips = (e.released, e.zips) if isinstance(e, Interrupted) else (0, [])
+        print(f"snakekit return: interrupted; {released} student(s)' feedback released to the exchange, "
+              f"{len(zips)} LMS zip(s) written whole{' (' + ', '.join(map(str, zips)) + ')' if zips else ''}, "
+              f"no zip half-written; run `snakekit return {args.assignment}` again to finish", file=sys.stderr)
+        return 130
     print(f"returned {n} student(s)' feedback of {args.assignment}" + (f"; {len(problems)} not" if problems else ""),
           file=out)
     return 1 if problems else 0

@@ -20,6 +20,7 @@ it (the submission then runs under the grader's own uid, but still sees only its
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import pwd
@@ -27,6 +28,7 @@ import signal
 import subprocess
 import sys
 import sysconfig
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,8 +40,19 @@ INIT = Path(__file__).resolve().parent / "_sandbox_init.py"
 PACKAGE_ROOT = Path(__file__).resolve().parent.parent  # holds snakekit/ and grader/
 
 
+#: Set when the batch is interrupted (Ctrl-C): every sandbox still running is killed within
+#: :data:`TICK` and its run raises :class:`Stopped`; the batch clears it when it starts.
+STOP = threading.Event()
+#: How often a running sandbox looks at :data:`STOP` [s].
+TICK = 0.2
+
+
 class SandboxError(SnakekitError):
     """The sandbox cannot be made on this machine (no namespaces, no unshare...)."""
+
+
+class Stopped(SnakekitError):
+    """A sandbox was killed because the batch was interrupted (:data:`STOP`)."""
 
 
 @dataclass(frozen=True)
@@ -130,9 +143,15 @@ def run(argv: list[str], *, workdir: Path, env: dict, limits: Limits, hide: list
                             stdin=subprocess.DEVNULL, stdout=stdout, stderr=stderr, start_new_session=True)
     timed_out = False
     try:
-        proc.wait(timeout=limits.wall)
-    except subprocess.TimeoutExpired:
-        timed_out = True
+        while proc.poll() is None:  # a Ctrl-C of the batch (STOP) ends the sandbox within a tick
+            if STOP.is_set():
+                raise Stopped("the batch was interrupted")
+            left = limits.wall - (time.monotonic() - t0)
+            if left <= 0:
+                timed_out = True
+                break
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(timeout=min(left, TICK))
     finally:
         if proc.poll() is None:
             try:

@@ -160,6 +160,14 @@ CASES = [
          answers(ex2_sweep="_kept = snakekit.side_sweep()  # before the shortcut guard is in place\n"
                  "def my_sweep(points=500, rate=10.0, sweeps=50, amplitude=0.2):\n    return _kept"),
          "graded", 4.5, "points: 500, expected", at_most=True),
+    Case("a reference to the library function kept in the notebook", "kept_reference",
+         answers(ex1_tool_xy="fk = snakekit.tool_pose_2d  # kept before the shortcut guard patches it\n"
+                 "def tool_xy(q):\n    return fk(q)[:2]"),
+         "graded", 5.0, "`snakekit.tool_pose_2d` was called"),
+    Case("a reference to the library function kept in a default argument", "kept_in_default",
+         answers(ex1_tool_xy="def tool_xy(q, _fk=snakekit.tool_pose_2d):  # out of the guard's reach\n"
+                 "    return _fk(q)[:2]"),
+         "graded", 7.0),
     Case("calling the visible check cell's helper", "check_helper",
          answers(ex1_tool_xy="def tool_xy(q):\n    return at_home()  # the check's own worked number"),
          "graded", 5.0, "8 of 8 hidden cases wrong"),
