@@ -340,13 +340,14 @@ def test_corrupted_status_is_seen_as_corrupt(client, bus):
 
 def test_delayed_reply_times_out(client, bus):
     port, ph = client
-    bus.faults = Faults(delay=1.0, delay_time=0.06, count=1)
-    t = time.perf_counter()
+    bus.faults = Faults(delay=1.0, delay_time=0.3, count=1)
+    # the SDK gives up before the reply held back 0.3 s comes (a reply in time would be a success)
     assert ph.ping(port, 1)[1] == sdk.COMM_RX_TIMEOUT
-    assert time.perf_counter() - t < 0.06
-    time.sleep(0.08)
+    assert bus.received()[-1].fault == "delayed"
+    time.sleep(1.0)  # the late reply came and went
     port.clearPort()
-    assert ph.ping(port, 1)[1] == sdk.COMM_SUCCESS
+    # the bus answers again (a ping or two may miss the SDK's 34 ms on a busy machine)
+    assert sdk.COMM_SUCCESS in [ph.ping(port, 1)[1] for _ in range(3)]
 
 
 def test_scheduled_overload_from_faults(client, bus):
