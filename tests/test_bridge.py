@@ -385,29 +385,34 @@ def test_the_driver_sets_its_adapters_latency_timer(tmp_path, monkeypatch, emula
         robot.close()
 
 
-def cycle_rate(robot, seconds=1.0) -> float:
-    """Read + command cycles a second."""
-    k, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
-        robot.read()
-        robot.command(np.zeros(5))
-        k += 1
-    return k / (time.perf_counter() - t0)
-
-
-def test_the_latency_timer_sets_the_drivers_cycle_rate():
-    rates = {}
+def test_the_latency_timer_holds_each_of_the_drivers_replies_until_it_expires():
+    """Every read's reply waits in the modelled chip for its timer (at most one period), so the
+    timer sets the cycle: never more than 1 / timer a second. How fast the cycle runs against
+    the bare port is a figure of ``bench/bridge.py``, not a test."""
+    holds, reads = {}, 100
     for ms in (16, 1):
         robot = make_emulated_robot(motion="profile", latency_timer=ms, watchdog=0)
         try:
             assert f"USB latency timer {ms} ms" in robot.emulator.describe()
-            cycle_rate(robot, 0.2)
-            rates[ms] = cycle_rate(robot)
+            chip = robot.emulator._chip
+            chip.holds.clear()
+            t0 = time.perf_counter()
+            for _ in range(reads):
+                robot.read()
+                robot.command(np.zeros(5))
+            wall = time.perf_counter() - t0
+            holds[ms] = list(chip.holds)
+            print(f"{ms} ms: {reads} cycles in {wall:.2f} s, {len(holds[ms])} replies held")
         finally:
             robot.close()
-    print(f"cycle rate: {rates[16]:.0f} Hz at 16 ms, {rates[1]:.0f} Hz at 1 ms")
-    assert 40 <= rates[16] <= 1000 / 16 * 1.02  # each read waits for the chip's timer: at most 62.5 a second
-    assert rates[1] > 5 * rates[16]
+        # a reply (the five servos' status packets, under one chip buffer) held for each read, and
+        # for each read the driver sent again after a reply that came too late on a busy machine
+        assert len(holds[ms]) >= reads, (ms, len(holds[ms]))
+        assert all(0 < h <= ms / 1000 + 1e-9 for h in holds[ms]), (ms, min(holds[ms]), max(holds[ms]))
+        # each read waits for its own expiry of the timer: a cycle can't be shorter than the timer
+        assert wall >= reads * ms / 1000 * 0.98, (ms, wall)
+    # at 16 ms the replies wait for longer than the whole 1 ms timer
+    assert sum(h > 0.001 for h in holds[16]) > reads / 2, sorted(holds[16])
 
 
 def test_the_modelled_chip_sends_a_full_buffer_at_once_and_the_rest_when_its_timer_expires():
@@ -425,7 +430,8 @@ def test_the_modelled_chip_sends_a_full_buffer_at_once_and_the_rest_when_its_tim
                 got += chunk
                 times.append((len(got), time.perf_counter() - sent))
         first = next(t for n, t in times if n >= 510)
-        assert first < 0.1 and times[-1][1] > 0.15  # 510 bytes at once; the rest at the timer's expiry
+        # 510 bytes at once; the rest a timer's period (255 ms) later
+        assert times[-1][1] - first > 0.15, times
         assert [pk.id for pk in p.Parser().feed(got)] == [1, 2, 3, 4, 5]
     finally:
         bus.stop()

@@ -664,8 +664,6 @@ def test_a_cell_whose_reply_never_comes_counts_as_finished_once_its_kernel_is_id
     its execute_reply never arrived: the notebook waited out its whole timeout. The worker gives the
     reply LATE_REPLY s after the idle, then takes the cell as finished with the outputs it sent (an
     error stays an error) and goes on; result.json lists those cells."""
-    import time
-
     import nbformat
     from jupyter_core.utils import run_sync
 
@@ -705,16 +703,15 @@ def test_a_cell_whose_reply_never_comes_counts_as_finished_once_its_kernel_is_id
         "print('fourth', x + 3)")])
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
     monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
-    started = time.monotonic()
     LosesReplies(timeout=15, kernel_name="python3").preprocess(nb, {"metadata": {"path": str(tmp_path)}})
-    seconds = time.monotonic() - started
     text = ["".join(o.get("text", "") for o in c.outputs if o.output_type == "stream") for c in nb.cells]
     assert text == ["first 42\n", "second 43\n", "third 44\n", "fourth 45\n"]
     assert [o.ename for o in nb.cells[2].outputs if o.output_type == "error"] == ["ValueError"]
     assert not any(o.output_type == "error" for c in (nb.cells[0], nb.cells[1], nb.cells[3]) for o in c.outputs)
     assert [c.execution_count for c in nb.cells] == [1, 2, 3, 4]
+    # taken as finished after LATE_REPLY: had a lost reply been waited for as long as the cell's
+    # limit (15 s), the cell would have been stopped by the clock, with an error, and not listed
     assert [d["cell"] for d in worker._late] == [1, 2]
-    assert seconds < 25, f"{seconds:.0f} s: each lost reply was waited for as long as the cell's limit (15 s)"
 
 
 def test_the_ta_is_told_where_a_lost_reply_was_taken_as_finished(tmp_path, capsys):

@@ -21,7 +21,9 @@ from grader_corpus import CASES, PWNED
 from grader_helpers import ASSIGNMENT, REFERENCES, make_course, read_csv
 
 REPO = Path(__file__).resolve().parent.parent
-TIMEOUT = 30  # a notebook's wall clock [s]
+# Bounds for a hang, not for speed: a submission of the corpus that ends needs under 12 s (its
+# longest cell, the 4 MB of output, under 2 s) on a quiet machine, and at least 5x that is given.
+TIMEOUT = 60  # a notebook's wall clock [s]
 CELL_TIMEOUT = 10  # a cell's: a cell that hangs is interrupted and the exercises after it are still graded
 
 
@@ -149,7 +151,7 @@ def test_the_kernel_ran_as_the_sandbox_user_with_its_limits(batch):
     uid = pwd.getpwnam("snakekit-grader").pw_uid
     assert uid != 0
     html = (batch["course"] / "feedback" / "write_outside" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
-    # --memory 1536 (MB); CPU seconds: 2 x the 20 s timeout + 30
+    # --memory 1536 (MB); CPU seconds: 2 x the notebook's timeout + 30
     assert f"who {uid} {uid} nonewprivs 1 memory 1536 cpu {2 * TIMEOUT + 30}" in html
 
 
@@ -208,4 +210,5 @@ def test_asking_for_the_cases_ahead_gets_none(batch):
 
 def test_megabytes_of_output_stay_bounded(batch):
     html = batch["course"] / "feedback" / "big_output" / ASSIGNMENT / f"{ASSIGNMENT}.html"
-    assert html.stat().st_size < 5_000_000
+    # 4 MB printed; the page keeps a bounded part of it (a page without the output is about 0.5 MB)
+    assert html.stat().st_size < 1_000_000

@@ -10,6 +10,7 @@ arm through the bridge, and no pseudo-terminal is needed.
 
 from __future__ import annotations
 
+import collections
 import math
 import os
 import socket
@@ -40,12 +41,15 @@ class FtdiChip:
         self.held = bytearray()
         self.tick = time.perf_counter()  # the last USB transfer
         self.flush_at = math.inf
+        #: how long each reply the chip took with an empty buffer was to be held [s], newest last
+        self.holds: collections.deque[float] = collections.deque(maxlen=10_000)
 
     def write(self, data: bytes) -> None:
         """Bytes from the servos: held, and sent on when the buffer is full."""
         now = time.perf_counter()
         if not self.held:  # the next expiry of the timer, which restarts at every transfer
             self.flush_at = self.tick + self.period * max(1, math.ceil((now - self.tick) / self.period))
+            self.holds.append(self.flush_at - now)
         self.held += data
         while len(self.held) >= CHIP_PACKET:  # a full buffer leaves at once
             self._transfer(CHIP_PACKET)
