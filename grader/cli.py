@@ -198,6 +198,13 @@ def main(argv: list[str] | None = None, out=None) -> int:
             print(f"snakekit grade: {p}", file=sys.stderr)
         print("snakekit grade: nothing was graded", file=sys.stderr)
         return 2
+    try:  # the lab's settings, when the course has a lab for it: a bad value stops grading before the backup
+        from .lab.keep import lab_case
+
+        lab_case(course, args.assignment)
+    except SnakekitError as e:
+        print(f"snakekit grade: {one_line(e)}; nothing was graded", file=sys.stderr)
+        return 2
     backup = backup_gradebook(course)
     try:
         results = grader.run(students)

@@ -67,6 +67,9 @@ def gradebook(course: Path):
     from nbgrader.api import Gradebook
     from sqlalchemy.exc import DatabaseError
 
+    path = Path(course) / "gradebook.db"
+    if path.is_file() and path.stat().st_size == 0:  # nbgrader would make an empty gradebook of it: all grades gone
+        raise gradebook_error(course, sqlite3.DatabaseError("the file is empty, 0 bytes"))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

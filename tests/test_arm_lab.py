@@ -276,6 +276,17 @@ def test_status_lists_each_job_with_its_state_and_reason_and_writes_a_csv(calibr
     assert rows[0] == "student,state,points,reason,attempts,updated" and len(rows) == 11
 
 
+def test_csv_without_status_starts_nothing(calibrated, capsys):
+    """--csv belongs to --status: forgotten, the command would otherwise start a session on the arm."""
+    course, _, _ = calibrated
+    queue = course / "lab" / A / "queue.json"
+    before = queue.read_bytes() if queue.exists() else None
+    assert lab_cli.main([A, "--course", str(course), "--emulator", "--csv", str(course.parent / "s.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "writes the list of --status: give --status with it" in err and "nothing was started" in err
+    assert (queue.read_bytes() if queue.exists() else None) == before and not (course.parent / "s.csv").exists()
+
+
 @pytest.mark.parametrize("argv, message", [
     (["07_nothing"], "unknown assignment '07_nothing': the course"),
     (["06_coded_sweep", "--port", "/dev/ttyNOPE9"], "the port /dev/ttyNOPE9 is not there"),

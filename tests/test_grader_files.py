@@ -409,12 +409,14 @@ def _damage(course: Path, how: str) -> None:
     db = course / "gradebook.db"
     if how == "not a database":
         db.write_bytes(b"this is not SQLite\n" * 500)
+    elif how == "emptied":  # nbgrader would take it for a new gradebook: every grade gone
+        db.write_bytes(b"")
     else:  # truncated: the first pages of a real gradebook only
         data = db.read_bytes()
         db.write_bytes(data[: len(data) // 3])
 
 
-@pytest.mark.parametrize("how", ["not a database", "truncated"])
+@pytest.mark.parametrize("how", ["not a database", "truncated", "emptied"])
 @pytest.mark.parametrize("command", ["grade", "export", "collect", "return"])
 def test_a_damaged_gradebook_is_one_line_saying_how_to_restore_it(course, command, how, tmp_path, capsys):
     from grader.course import backup_gradebook
@@ -513,3 +515,19 @@ def test_a_feedback_zip_entry_never_climbs_out_of_its_folder(lms_name, entry):
 
     row = {"lms": "moodle", "lms_name": lms_name, "lms_id": "9001"}
     assert feedback_entry(row, Path(f"/feedback/ann/{A}/{A}.html")) == entry
+
+
+def test_grade_refuses_a_bad_lab_json_before_it_backs_up_or_grades(course, capsys):
+    """A TA's slip in the lab's settings stops `grade` with exit 2 before anything is written,
+    not as a failure of the grader after a backup (which would push an older one out)."""
+    lab = course / "lab" / A / "lab.json"
+    lab.write_text('{"sim_tolerance": NaN, "exercise": "ex2_sweep_test", '
+                   '"case": {"points": 30, "rate": 10.0, "sweeps": 2, "amplitude": 0.2}}')
+    handed_in = course / "submitted" / "ann" / A / f"{A}.ipynb"
+    handed_in.parent.mkdir(parents=True)
+    handed_in.write_bytes(notebook(course))
+    before = tree(course)
+    r = run(capsys, "grade", A, "--course", course, "--references", REFERENCES)
+    one_line_error(r, 'lab.json: "sim_tolerance" must be a finite number > 0 and <= 0.5 [rad], got nan',
+                   "nothing was graded")
+    assert tree(course) == before  # no backup, no grade, no CSV

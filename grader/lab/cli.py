@@ -100,6 +100,9 @@ def main(argv=None, out=None) -> int:
         if not course.is_dir():
             raise LabError(f"no course folder {course} (give --course DIR)")
         if not calibrating and args.csv is not None:
+            if not args.status:
+                raise LabError(f"--csv {args.csv} writes the list of --status: give --status with it (without "
+                               "--status the command starts a session on the arm); nothing was started")
             check_output(args.csv, course, suffix=".csv", what="--csv", command="snakekit lab")
         s = settings(course, args.assignment)
         if not calibrating and args.status:
@@ -111,11 +114,14 @@ def main(argv=None, out=None) -> int:
         print(f"snakekit lab: {one_line(e)}", file=sys.stderr)
         return 2
     except SnakekitError as e:
-        print(f"snakekit lab: {e}", file=sys.stderr)
+        again = "Run the same snakekit lab command again: it turns torque on and goes on."
+        print(f"snakekit lab: {str(e).replace('Call robot.torque_on() to clear it and go on.', again)}",
+              file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         why = "terminated (SIGTERM)" if terminated else "interrupted"
-        print(f"snakekit lab: {why}; the arm was stopped (torque off) and the queue kept: start again to go on",
+        kept = "nothing of the calibration was kept" if calibrating else "the queue kept"
+        print(f"snakekit lab: {why}; the arm was stopped (torque off) and {kept}: start again to go on",
               file=sys.stderr)
         return 143 if terminated else 130
     finally:
