@@ -93,7 +93,9 @@ def make_course(root):
     course = root / "course"
     (course / "source" / A).mkdir(parents=True)
     (course / "lab" / A).mkdir(parents=True)
-    (course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE, "stall_delay": 0.03}))  # short sweeps
+    # short sweeps; a band floor of 1.4 deg: on a loaded test machine the emulated servos' timing
+    # alone moves a run by up to 0.6 deg, while erin's near-miss is 3.4 deg from the reference
+    (course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE, "stall_delay": 0.03, "band_floor": 0.025}))
     for student, (tr, _) in CLASS.items():
         hand_in(course, student, tr)
     feedback_pages(course, list(CLASS))
@@ -139,7 +141,7 @@ def test_calibration_sets_the_bands_from_the_spread_of_the_reference_runs(calibr
         runs, mean = z["runs"], z["positions"]
     spread = np.max([np.abs(a - b).max(axis=0) for a in runs for b in runs], axis=0)  # the most two runs differ
     assert runs.shape[0] == 4 and np.allclose(cal["spread_rad"], spread) and np.allclose(mean, runs.mean(axis=0))
-    assert np.allclose(cal["bands_rad"], np.maximum(2 * spread, 0.01))
+    assert np.allclose(cal["bands_rad"], np.maximum(2 * spread, 0.025)) and s.band_floor == 0.025
     assert cal["backend"] == "emulator" and cal["kit_version"] == snakekit.__version__
     # the reference run follows the spec's sweep (the arm lags its goals a little)
     assert np.abs(mean).max() == pytest.approx(0.2, abs=0.03)

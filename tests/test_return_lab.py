@@ -60,7 +60,8 @@ def returned(tmp_path_factory):
     course = make_course(tmp)
     (course / "lab" / ASSIGNMENT).mkdir(parents=True)
     (course / "lab" / ASSIGNMENT / "lab.json").write_text(json.dumps(
-        {"exercise": "ex2_sweep_test", "case": CASE, "stall_delay": 0.03}))
+        {"exercise": "ex2_sweep_test", "case": CASE, "stall_delay": 0.03,
+         "band_floor": 0.025}))  # 1.4 deg: a loaded machine's timing moves a run by up to 0.6 deg
     exchange = tmp / "exchange"
     exchange.mkdir()
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
