@@ -146,20 +146,16 @@ def _pages(course: Path, assignment: str) -> dict[str, list[Path]]:
     return out
 
 
-def release_to_exchange(course: Path, assignment: str, student: str, exchange: Path | None) -> str:
-    """nbgrader's own release_feedback for one student (after the files it needs are beside the page)."""
+def nbgrader_api(course: Path, exchange: Path | None):
+    """nbgrader's API as its own commands see the course: the Jupyter config folders'
+    ``nbgrader_config.py`` (on a hub's server, the hub's exchange: docker/hub/nbgrader_config.py),
+    then the course's; ``exchange`` (if given) as the exchange's root."""
     from jupyter_core.paths import jupyter_config_path
     from nbgrader.apps import NbGraderAPI
     from nbgrader.coursedir import CourseDirectory
     from traitlets.config import Config
     from traitlets.config.loader import ConfigFileNotFound, PyFileConfigLoader
 
-    src = course / "submitted" / student / assignment
-    fb = course / "feedback" / student / assignment
-    for name in ("timestamp.txt", "submission_secret.txt"):
-        shutil.copyfile(src / name, fb / name)
-    # as nbgrader's own release_feedback: the Jupyter config folders' nbgrader_config.py (on a
-    # hub's server, the hub's exchange: docker/hub/nbgrader_config.py), then the course's
     cfg = Config()
     for folder in reversed(jupyter_config_path()):
         with contextlib.suppress(ConfigFileNotFound):
@@ -168,8 +164,16 @@ def release_to_exchange(course: Path, assignment: str, student: str, exchange: P
     cfg.merge(Config({"CourseDirectory": {"root": str(course), "course_id": course_id(course)}}))
     if exchange is not None:
         cfg.merge(Config({"Exchange": {"root": str(exchange)}}))
-    api = NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
-    result = api.release_feedback(assignment, student)
+    return NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
+
+
+def release_to_exchange(course: Path, assignment: str, student: str, exchange: Path | None) -> str:
+    """nbgrader's own release_feedback for one student (after the files it needs are beside the page)."""
+    src = course / "submitted" / student / assignment
+    fb = course / "feedback" / student / assignment
+    for name in ("timestamp.txt", "submission_secret.txt"):
+        shutil.copyfile(src / name, fb / name)
+    result = nbgrader_api(course, exchange).release_feedback(assignment, student)
     if not result.get("success"):
         raise CourseError(f"nbgrader release_feedback for {student} failed: "
                           f"{(result.get('error') or result.get('log') or '').strip()[-500:]}")
