@@ -73,7 +73,7 @@ def parse(text: str) -> LateRule:
     if not m:
         raise LateRuleError(bad)
     if m["unit"] not in UNITS:
-        raise LateRuleError(f"--late-penalty {str(text)[:80]!r}: no unit '{m['unit']}'; per-{', per-'.join(UNITS)} "
+        raise LateRuleError(f"--late-penalty {str(text)[:80]!r}: no unit '{m['unit']}'; give per-{', per-'.join(UNITS)} "
                             f"(e.g. {EXAMPLES})")
     try:
         amount = float(m["amount"])

@@ -193,6 +193,9 @@ def test_snakekit_grade_reaches_the_grader_through_its_entry_point():
     assert cli.plugin_command("grade") is grader.cli.main
     assert cli.plugin_command("collect") is grader.collect.main
     assert (cli.plugin_command("return"), cli.plugin_command("export")) == (grader.lms.return_main, grader.lms.export_main)
+    import grader.release
+
+    assert cli.plugin_command("release") is grader.release.main
     import grader.lab.cli
 
     assert cli.plugin_command("lab") is grader.lab.cli.main
