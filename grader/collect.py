@@ -220,6 +220,8 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
             _write_manifest(course, assignment, rows, old)  # the students placed before it are listed
         raise Interrupted(len(rows), len(by_student)) from None
     _write_manifest(course, assignment, rows, old)
+    if roster is not None:  # formgrader lists them by name
+        roster.into_gradebook(course, [r["student"] for r in rows])
     width = max([len(r["student"]) for r in rows] + [7])
     for r in rows:
         print(f"{r['student']:<{width}}  {r['notebook'] or 'missing notebook':<24} "

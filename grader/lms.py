@@ -46,7 +46,7 @@ from pathlib import Path
 from .collect import Roster, _Parser, read_manifest
 from snakekit.errors import SnakekitError
 
-from .course import CourseError, config, course_id, default_roster, gradebook, require
+from .course import CourseError, config, course_id, db_url, default_roster, gradebook, require
 from .files import check_output, excerpt, one_line, uninterrupted
 
 COURSE = Path("course")
@@ -200,7 +200,48 @@ class Interrupted(KeyboardInterrupt):
         self.released, self.zips = released, list(zips or [])
 
 
+def hand_set(course: Path, assignment: str) -> list[str]:
+    """Students with a score or a comment a TA set in formgrader on a graded submission of ``assignment``."""
+    from nbgrader.api import MissingEntry
+
+    if not (course / "gradebook.db").is_file():
+        return []
+    with gradebook(course) as gb:
+        try:
+            subs = gb.find_assignment(assignment).submissions
+        except MissingEntry:
+            return []
+        return sorted({sub.student.id for sub in subs for nb in sub.notebooks
+                       if any(g.manual_score is not None for g in nb.grades)
+                       or any(c.manual_comment for c in nb.comments)})
+
+
+def refresh_pages(course: Path, assignment: str, out) -> list[str]:
+    """The feedback pages of the students with a hand-set score or comment, written again from the
+    gradebook (what formgrader's Generate Feedback does with the course's config), so the page
+    returned says it."""
+    import nbformat
+
+    from .nbgrader_plugins import safe_page
+
+    students = [s for s in hand_set(course, assignment) if (course / "autograded" / s / assignment).is_dir()]
+    for s in students:
+        for graded in sorted((course / "autograded" / s / assignment).glob("*.ipynb")):
+            page = safe_page(nbformat.read(graded, as_version=4), root=course, student=s, assignment=assignment,
+                             notebook=graded.stem, db_url=db_url(course), course_id=course_id(course))
+            folder = course / "feedback" / s / assignment
+            folder.mkdir(parents=True, exist_ok=True)
+            tmp = folder / f".{graded.stem}.html.tmp"
+            tmp.write_text(page)
+            os.replace(tmp, folder / f"{graded.stem}.html")
+    if students:
+        print(f"feedback pages written again with the scores and comments set in formgrader: {', '.join(students)}",
+              file=out)
+    return students
+
+
 def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip_path: Path | None, out) -> tuple[int, list]:
+    refresh_pages(course, assignment, out)
     pages = _pages(course, assignment)
     if not pages:
         raise CourseError(f"no feedback pages of {assignment} in {course}/feedback/<student>/{assignment}/; "

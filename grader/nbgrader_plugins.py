@@ -55,15 +55,22 @@ class SafeFeedbackExporter(HTMLExporter):
         info = (resources or {}).get("nbgrader") or {}
         student, assignment, notebook = info.get("student"), info.get("assignment"), info.get("notebook")
         course_id = getattr(getattr(self.parent, "coursedir", None), "course_id", None) or "default_course"
-        page = regenerate(nb, student=student, assignment=assignment, notebook=notebook,
-                          db_url=info.get("db_url"), course_id=course_id)
-        body, _ = feedback._exporter().from_notebook_node(page)
         root = getattr(getattr(self.parent, "coursedir", None), "root", None)
-        if root and student and assignment:  # the lab's result, when the lab ran the student's sweep
-            body = lab_feedback.add_to(body, Path(root), assignment, student)
+        body = safe_page(nb, root=root, student=student, assignment=assignment, notebook=notebook,
+                         db_url=info.get("db_url"), course_id=course_id)
         resources = dict(resources or {})
         resources["output_extension"] = ".html"
         return body, resources
+
+
+def safe_page(nb, *, root, student: str, assignment: str, notebook: str, db_url: str, course_id: str) -> str:
+    """The grader's page of an autograded notebook, from the gradebook's scores and comments (and
+    the lab's result, when the lab ran the student's sweep)."""
+    page = regenerate(nb, student=student, assignment=assignment, notebook=notebook, db_url=db_url, course_id=course_id)
+    body, _ = feedback._exporter().from_notebook_node(page)
+    if root and student and assignment:
+        body = lab_feedback.add_to(body, Path(root), assignment, student)
+    return body
 
 
 def regenerate(nb, *, student: str, assignment: str, notebook: str, db_url: str, course_id: str):
