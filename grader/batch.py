@@ -4,17 +4,17 @@ For each ``<course>/submitted/<student>/<assignment>/`` the grader
 
 1. reads the notebook (not valid JSON / nbformat -> ``invalid notebook``, nothing runs) and
    compares each autograded test cell with the released one (edited, deleted or duplicated
-   -> those cells score 0, status ``tests tampered``) (:mod:`grader.assignment`);
+   -> those cells score 0, status ``tests tampered``) (:mod:`grader.course.assignment`);
 2. copies the submission into a fresh folder with a gradebook that holds only this
-   assignment, and runs nbgrader's ``autograde`` there in a sandbox (:mod:`grader.runner`,
-   :mod:`grader.sandbox`), with the batch's hidden cases served on a socket in that folder
-   (:mod:`grader.cases`) and ``SNAKEKIT_HANDIN_DIR`` set, so each test cell hands in its results;
+   assignment, and runs nbgrader's ``autograde`` there in a sandbox (:mod:`grader.sandbox.runner`,
+   :mod:`grader.sandbox.namespaces`), with the batch's hidden cases served on a socket in that folder
+   (:mod:`grader.scoring.cases`) and ``SNAKEKIT_HANDIN_DIR`` set, so each test cell hands in its results;
 3. scores every test cell in its own process from the hand-ins, case by case, against the
    instructor notebook's results at the same cases: the batch runs it first, in a sandbox like
-   the students' (:mod:`grader.verdict`, :mod:`grader.score`, :func:`grader.references.expected`);
+   the students' (:mod:`grader.scoring.verdict`, :mod:`grader.scoring.score`, :func:`grader.scoring.references.expected`);
 4. writes the scores into the course's gradebook (only this process writes it, one
    submission at a time), the executed notebook into ``autograded/``, and the feedback HTML
-   (:mod:`grader.records`, :mod:`grader.feedback`).
+   (:mod:`grader.course.gradebook`, :mod:`grader.feedback.report`).
 """
 
 from __future__ import annotations
@@ -33,17 +33,19 @@ from pathlib import Path
 
 import nbformat
 
-from . import rerun, sandbox, worker
-from .assignment import (MAX_FILE, GradingError, _Assignment, _Cell, ensure_released, load_assignment,  # noqa: F401
+from grader.scoring import rerun
+from grader.sandbox import namespaces as sandbox
+from grader.sandbox.inside import worker
+from grader.course.assignment import (MAX_FILE, GradingError, _Assignment, _Cell, ensure_released, load_assignment,  # noqa: F401
                          read_inside, tampered_cells, _template_gradebook)
-from .cases import CasesError, CaseServer, draw
-from .files import uninterrupted
-from .records import CSV_COLUMNS, class_rows, late_penalties, read_class_csv, record, write_csv  # noqa: F401
-from .references import REFERENCES, ReferenceError, expected
-from .runner import Runner
-from .verdict import SubmissionResult, Verdicts
-from .lab.keep import with_lab_case
-from .score import read_handin
+from grader.scoring.cases import CasesError, CaseServer, draw
+from grader.files import uninterrupted
+from grader.course.gradebook import CSV_COLUMNS, class_rows, late_penalties, read_class_csv, record, write_csv  # noqa: F401
+from grader.scoring.references import REFERENCES, ReferenceError, expected
+from grader.sandbox.runner import Runner
+from grader.scoring.verdict import SubmissionResult, Verdicts
+from grader.arm.keep import with_lab_case
+from grader.scoring.score import read_handin
 
 #: The student id the instructor notebook runs under in its sandbox (never a row of the gradebook).
 INSTRUCTOR = "_instructor_reference"
@@ -119,7 +121,7 @@ class Grader:
                       f"(--seed {self.draw.seed} draws them again)", file=sys.stderr)
             from nbgrader.preprocessors import AssignLatePenalties
 
-            from .course import _on_path, config
+            from grader.course.folder import _on_path, config
 
             with _on_path(self.course):  # a plugin module beside the course's config (nbgrader's late.py)
                 self.late_plugin = AssignLatePenalties(config=config(self.course))
@@ -195,7 +197,7 @@ class Grader:
                 except Exception as e:  # noqa: BLE001 - one submission never stops the batch
                     r = SubmissionResult(s, self.assignment, 0.0, self.a.max_score, "grader error",
                                          f"{type(e).__name__}: {e}")
-                if isinstance(r, Again):  # a second run (grader.rerun): a sandbox like the first
+                if isinstance(r, Again):  # a second run (grader.scoring.rerun): a sandbox like the first
                     pending[pool.submit(r)] = s
                     continue
                 if callable(r):  # ran: score it and write the feedback, while the next sandbox runs
@@ -313,7 +315,7 @@ class Grader:
 
     def _run_again(self, student, src, nbs, tampered, again: dict, finish):
         """The submission run once more with the instructor's answers in the cells ``again`` names
-        (:mod:`grader.rerun`); only the dependent exercises' hand-ins are read from it."""
+        (:mod:`grader.scoring.rerun`); only the dependent exercises' hand-ins are read from it."""
         cells = {c for replaced in again.values() for c in replaced}
         work, second = None, {}
         try:
@@ -340,7 +342,7 @@ class Grader:
 
 def late_replies(work: Path, student: str) -> None:
     """Say (on stderr, for the TA) where a kernel finished a cell whose reply never came, which the
-    worker took as finished (:data:`grader.worker.LATE_REPLY`): the kernel's fault, never a score."""
+    worker took as finished (:data:`grader.sandbox.inside.worker.LATE_REPLY`): the kernel's fault, never a score."""
     raw = read_inside(work, "result.json", limit=1 << 20)
     try:
         late = json.loads(raw).get("late_replies") or [] if raw else []
@@ -380,7 +382,7 @@ def default_jobs() -> int:
 
 
 class Again:
-    """A second sandbox run a submission needs (:mod:`grader.rerun`): it goes to the pool."""
+    """A second sandbox run a submission needs (:mod:`grader.scoring.rerun`): it goes to the pool."""
 
     def __init__(self, call):
         self.call = call

@@ -27,7 +27,7 @@ import threading
 import zipfile
 from pathlib import Path
 
-from .course import CourseError
+from grader.course.folder import CourseError
 
 #: The longest quote of an input in a message [characters].
 EXCERPT = 200

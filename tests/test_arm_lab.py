@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 import snakekit
-from grader.lab import cli as lab_cli
-from grader.lab import session as lab
-from grader.lab.jobs import Queue, settings
+from grader.commands import lab as lab_cli
+from grader.arm import session as lab
+from grader.arm.jobs import Queue, settings
 from snakekit.emulator import Faults
 from snakekit.hardware.registers import GOAL_POSITION, TORQUE_ENABLE
 
@@ -64,7 +64,7 @@ def feedback_pages(course, students):
     """Each student's feedback page as the grader writes them (a heading cell, then the lesson's cells)."""
     import nbformat
 
-    from grader import feedback
+    from grader.feedback import report as feedback
 
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(f"# Feedback: {A}\n\nScore: **9 / 10**"),
                                          nbformat.v4.new_markdown_cell("Grader: ex06_3_task2_test: 3 / 3 points")])
@@ -317,8 +317,8 @@ def test_grading_keeps_each_trajectory_at_the_spec_values_for_the_lab(tmp_path):
     unsandboxed here)."""
     from pathlib import Path
 
-    from grader.cases import draw, execute
-    from grader.lab.keep import keep, with_lab_case
+    from grader.scoring.cases import draw, execute
+    from grader.arm.keep import keep, with_lab_case
 
     root = Path(__file__).resolve().parents[1] / "course"
     batch = with_lab_case(draw(root, A, seed=7), root)
