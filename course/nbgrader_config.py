@@ -77,7 +77,7 @@ c.GenerateAssignment.preprocessors = [
 
 # nbgrader's generate_feedback and formgrader's Generate Feedback and Autograde buttons give
 # the grader's results: its safe pages and its sandboxed grading (see grader/README.md).
-from grader.course.nbgrader_plugins import use_safe_grading  # noqa: E402
+from grader.commands.nbgrader_plugins import use_safe_grading  # noqa: E402
 
 use_safe_grading(c)
 

@@ -36,15 +36,15 @@ import nbformat
 from grader.scoring import rerun
 from grader.sandbox import namespaces as sandbox
 from grader.sandbox.inside import worker
-from grader.course.assignment import (MAX_FILE, GradingError, _Assignment, _Cell, ensure_released, load_assignment,  # noqa: F401
-                         read_inside, tampered_cells, _template_gradebook)
-from grader.scoring.cases import CasesError, CaseServer, draw
+from grader.course.assignment import MAX_FILE, load_assignment, read_inside, tampered_cells, template_gradebook
+from grader.scoring.cases import CaseServer, draw
+from grader.errors import CasesError, GradingError, InstructorReferenceError
 from grader.files import uninterrupted
-from grader.course.gradebook import CSV_COLUMNS, class_rows, late_penalties, read_class_csv, record, write_csv  # noqa: F401
-from grader.scoring.references import REFERENCES, ReferenceError, expected
+from grader.hooks import NO_HOOKS, BatchHooks
+from grader.course.gradebook import late_penalties, write_grade
+from grader.scoring.references import REFERENCES, expected
 from grader.sandbox.runner import Runner
 from grader.scoring.verdict import SubmissionResult, Verdicts
-from grader.arm.keep import with_lab_case
 from grader.scoring.score import read_handin
 
 #: The student id the instructor notebook runs under in its sandbox (never a row of the gradebook).
@@ -65,12 +65,14 @@ class Grader:
     def __init__(self, course: Path, assignment: str, *, jobs: int | None = None, timeout: float = 120.0,
                  references: Path | None = REFERENCES, memory: int = 4 << 30, progress=None,
                  workroot: Path | None = None, use_sandbox: bool = True, cell_timeout: float | None = None,
-                 seed: int | None = None, retry_timeouts: bool = True):
+                 seed: int | None = None, retry_timeouts: bool = True, hooks: BatchHooks = NO_HOOKS):
         """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: ``timeout``);
         ``seed``: the batch's hidden cases (default: drawn from ``os.urandom``, printed);
-        ``retry_timeouts``: a submission stopped by a clock runs once more before the timeout counts."""
+        ``retry_timeouts``: a submission stopped by a clock runs once more before the timeout counts;
+        ``hooks``: what an optional part adds (the arm's lab: :data:`grader.arm.keep.HOOKS`, given by the command)."""
         self.course = Path(course).resolve()
         self.assignment = assignment
+        self.hooks = hooks
         self.jobs = jobs or default_jobs()
         self.timeout = float(timeout)
         self.cell_timeout = min(float(cell_timeout or timeout), self.timeout)
@@ -113,7 +115,7 @@ class Grader:
             if a.reference is not None:  # the hidden cases of this batch, drawn anew
                 try:
                     self.draw = draw(self.course, self.assignment, self.seed)
-                    self.draw = with_lab_case(self.draw, self.course)  # the spec's case too, kept for `snakekit lab`
+                    self.draw = self.hooks.cases(self.draw, self.course)  # the lab's case too, kept for `snakekit lab`
                 except CasesError as e:
                     raise GradingError(str(e)) from e
                 self.runner.cases = CaseServer(self.draw)
@@ -121,16 +123,16 @@ class Grader:
                       f"(--seed {self.draw.seed} draws them again)", file=sys.stderr)
             from nbgrader.preprocessors import AssignLatePenalties
 
-            from grader.course.folder import _on_path, config
+            from grader.course.folder import on_path, config
 
-            with _on_path(self.course):  # a plugin module beside the course's config (nbgrader's late.py)
+            with on_path(self.course):  # a plugin module beside the course's config (nbgrader's late.py)
                 self.late_plugin = AssignLatePenalties(config=config(self.course))
             # every notebook has its own deadline inside the sandbox; this one is the backstop
             self.limits = dataclasses.replace(self.limits, wall=self.timeout * max(1, len(a.notebooks)) + 30)
             self.runner.a, self.runner.limits = a, self.limits
             self.verdicts = Verdicts(self.course, a, base, timeout=self.timeout, cell_timeout=self.cell_timeout,
-                                     memory=self.limits.memory)
-            _template_gradebook(self.course, a, base / "template.db")
+                                     memory=self.limits.memory, hooks=self.hooks)
+            template_gradebook(self.course, a, base / "template.db")
             self.runner.server = self.runner.fork_server_ready(server)  # it built matplotlib's font cache
             if not (base / "mplcache").is_dir():
                 self.runner.mpl_cache(base / "mplcache")
@@ -208,7 +210,7 @@ class Grader:
                     continue
                 try:
                     with uninterrupted():  # a Ctrl-C waits until the student's rows are written whole
-                        record(self.course, self.a, r, self.late_plugin, self._lock)  # only this thread writes
+                        write_grade(self.course, self.a, r, self.late_plugin, self._lock)  # only this thread writes
                         results.append(r)
                 except Exception as e:  # noqa: BLE001
                     raise GradingError(f"cannot write {s}'s grade to the gradebook: {e}") from e
@@ -235,7 +237,7 @@ class Grader:
             try:
                 return expected(self.a.reference, self.draw, handins, where=where,
                                 sources={g: c.source for g, c in a.tests.items()})
-            except ReferenceError as e:
+            except InstructorReferenceError as e:
                 detail = "" if outcome.returncode == 0 else f" (its sandbox ended with {outcome.returncode}" + \
                     (", timed out" if outcome.timed_out else "") + ")"
                 raise GradingError(f"{e}{detail}; nothing was graded") from e

@@ -369,13 +369,13 @@ def test_kernel_verdict_hides_a_hidden_tests_message():
     """A test cell without a reference keeps nbgrader's verdict, but only a visible check's words."""
     from nbformat.v4 import new_code_cell, new_notebook, new_output
 
-    from grader.course.assignment import _Cell
+    from grader.course.assignment import TestCell
     from grader.scoring.verdict import kernel_score
 
     src = "check(f)\n### BEGIN HIDDEN TESTS\nassert f(7) == 49, 'f(7) should be 49'\n### END HIDDEN TESTS\n"
     cell = new_code_cell(src, execution_count=5, metadata={"nbgrader": {"grade_id": "t", "grade": True}})
     nb = new_notebook(cells=[cell])
-    info = _Cell("t", "nb", 2.0, src, "code")
+    info = TestCell("t", "nb", 2.0, src, "code")
 
     def fails_at(line):
         cell.outputs = [new_output("error", ename="AssertionError", evalue="f(7) should be 49",

@@ -67,7 +67,8 @@ def test_each_grade_id_draws_from_its_own_stream(course):
     ("TOLERANCES = {'ex_a_test': 1e-9}\ndef ex_a_test(rng, spec):\n    return [(1,)]", "must map grade ids to dicts"),
 ])
 def test_a_broken_cases_module_is_refused_with_what_is_wrong(course, body, says):
-    from grader.scoring.cases import CasesError, draw
+    from grader.scoring.cases import draw
+    from grader.errors import CasesError
 
     (course / "cases" / "t1.py").write_text(body)
     with pytest.raises(CasesError, match=says):
@@ -75,7 +76,8 @@ def test_a_broken_cases_module_is_refused_with_what_is_wrong(course, body, says)
 
 
 def test_no_cases_module_names_the_file_to_write(tmp_path):
-    from grader.scoring.cases import CasesError, draw
+    from grader.scoring.cases import draw
+    from grader.errors import CasesError
 
     with pytest.raises(CasesError, match=r"cases/t9\.py does not exist"):
         draw(tmp_path, "t9", 1)
@@ -220,14 +222,15 @@ def test_an_instructor_run_that_only_raises_stops_the_batch(course):
     """A solution that raised at every case (a device missing on the grading machine, say) would make
     every student who raises the same score full marks: the batch refuses it."""
     from grader.scoring.cases import draw
-    from grader.scoring.references import ReferenceError, expected
+    from grader.scoring.references import expected
+    from grader.errors import InstructorReferenceError
 
     batch = draw(course, "t1", 5)
     gid = "ex_a_test"
     ref = type("Ref", (), {"exercises": {gid: {"kind": "values", "outputs": ["value"], "tolerances": {}}}})()
     batch = dataclasses.replace(batch, cases={gid: batch.cases[gid]})
     errors = ["OSError: out of pty devices"] * len(batch.cases[gid])
-    with pytest.raises(ReferenceError, match=r"ex_a_test raised at every one of its 4 hidden cases .*OSError: out of pty"):
+    with pytest.raises(InstructorReferenceError, match=r"ex_a_test raised at every one of its 4 hidden cases .*OSError: out of pty"):
         expected(ref, batch, {gid: errors})
 
 

@@ -35,7 +35,7 @@ EXTRAS = {"ex1_tool_xy": "import ipywidgets\ndisplay(ipywidgets.VBox([ipywidgets
 def _use_safe_grading(course: Path) -> None:
     """The course's nbgrader config, as course/nbgrader_config.py does it, with the test course's references."""
     with open(course / "nbgrader_config.py", "a") as f:
-        f.write("\nfrom grader.course.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n"
+        f.write("\nfrom grader.commands.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n"
                 f"c.SnakekitGrade.references = {str(REFERENCES)!r}\nc.SnakekitGrade.timeout = {TIMEOUT}\n")
 
 
@@ -193,7 +193,7 @@ def test_a_page_opened_offline_in_chromium_shows_typeset_math():
     sync_api = need("playwright.sync_api")
     chromium = need_program("chromium")
     from grader.feedback import report as feedback
-    from grader.batch import SubmissionResult
+    from grader.scoring.verdict import SubmissionResult
 
     ARTIFACTS.mkdir(exist_ok=True)
     lesson = "01_forward_kinematics"

@@ -337,7 +337,7 @@ SAVED_AS = {
 
 @pytest.mark.parametrize("saved_as", sorted(SAVED_AS))
 def test_a_roster_is_read_in_every_encoding_a_spreadsheet_saves(saved_as, tmp_path):
-    from grader.lms.collect import Roster
+    from grader.lms.roster import Roster
 
     path = tmp_path / "roster.csv"
     path.write_bytes(SAVED_AS[saved_as](ROSTER))

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from grader.scoring import rerun
-from grader.scoring.cases import CasesError, draw
+from grader.scoring.cases import draw
+from grader.errors import CasesError
 from grader.scoring.rules import two_link_ik
 from grader.scoring.score import Expected, ExerciseScore, score_exercise
 from snakekit.trajectory import side_sweep

@@ -73,7 +73,7 @@ READERS = {
 
 
 def test_every_column_that_must_not_repeat_is_checked():
-    from grader.lms.collect import ROSTER_IDS, UNIQUE as checked
+    from grader.lms.roster import ROSTER_IDS, UNIQUE as checked
 
     assert set(checked) == set(UNIQUE)
     assert set(ROSTER_IDS) - set(checked) == {"name"}  # two students may share a name: reported when it matters
@@ -101,8 +101,8 @@ def test_a_roster_that_repeats_an_id_is_refused_naming_the_rows(course, tmp_path
 
 
 def test_a_roster_names_every_repeat_at_once(tmp_path):
-    from grader.lms.collect import Roster
-    from grader.course.folder import CourseError
+    from grader.lms.roster import Roster
+    from grader.errors import CourseError
 
     path = tmp_path / "roster.csv"
     path.write_text("student,canvas_id,email\nann,101,a@x\nben,101,b@x\nann,103,B@X\n")
@@ -113,7 +113,7 @@ def test_a_roster_names_every_repeat_at_once(tmp_path):
 
 
 def test_two_students_may_share_a_name(tmp_path):
-    from grader.lms.collect import Roster
+    from grader.lms.roster import Roster
 
     path = tmp_path / "roster.csv"
     path.write_text("student,name,canvas_id\nsam1,Sam Lee,101\nsam2,Sam Lee,102\n")

@@ -24,7 +24,8 @@ import snakekit
 from grader.commands import lab as lab_cli
 from grader.arm import lock
 from grader.arm import session as lab
-from grader.arm.jobs import CASE_NUMBERS, NUMBERS, LabError, Queue, settings
+from grader.arm.jobs import CASE_NUMBERS, NUMBERS, Queue, settings
+from grader.errors import LabError
 
 A = "06_coded_sweep"
 CASE = {"points": 30, "rate": 10.0, "sweeps": 2, "amplitude": 0.2}  # 2.9 s, peak 0.87 rad/s

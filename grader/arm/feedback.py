@@ -19,7 +19,8 @@ import json
 import re
 from pathlib import Path
 
-from grader.arm.jobs import LabError, Queue, lab_dir, settings, write_atomic
+from grader.arm.jobs import Queue, lab_dir, settings, write_atomic
+from grader.errors import LabError
 
 #: The states a student hears of on the page (a queued or running job has nothing to tell yet).
 SHOWN = ("graded", "refused", "lab fault")

@@ -21,6 +21,7 @@ import numpy as np
 
 from snakekit import validate
 from snakekit.errors import ConfigurationError, FileFormatError, SnakekitError
+from grader.errors import LabError, NoLab
 
 #: The states a student sees (``snakekit lab --status``).
 STATES = ("queued", "refused", "running", "graded", "lab fault")
@@ -32,14 +33,6 @@ RUNNABLE = ("queued", "running", "lab fault")
 #: hand-in is the trajectory, and the spec's own values (the study's Task 2).
 DEFAULTS = {"06_coded_sweep": {"exercise": "ex06_3_task2_test",
                                "case": {"points": 500, "rate": 10.0, "sweeps": 50, "amplitude": 0.2}}}
-
-
-class LabError(ConfigurationError):
-    """Bad arguments or a course the lab cannot work on yet (exit 2: nothing moved)."""
-
-
-class NoLab(LabError):
-    """The lab does not run this assignment (unknown, or its hand-in is not a trajectory)."""
 
 
 #: Each number of the settings: its unit and range (:func:`snakekit.validate.number`'s keywords).

@@ -19,7 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from grader.arm.jobs import NoLab, handin_path, settings
+from grader.arm.feedback import update_pages
+from grader.arm.jobs import handin_path, settings
+from grader.errors import NoLab
+from grader.hooks import BatchHooks
 
 KEPT = ("times", "positions", "measured_times", "measured_positions")
 
@@ -92,3 +95,8 @@ def keep_for_lab(course: Path, assignment: str, student: str, work: Path, batch)
     except ValueError:
         results = None
     return keep(course, assignment, student, results, batch)
+
+
+#: What a batch does for the lab (:class:`grader.hooks.BatchHooks`): the lab's case among the
+#: hidden cases, the trajectory kept at it, and the lab's result in the feedback pages.
+HOOKS = BatchHooks(cases=with_lab_case, graded=keep_for_lab, pages=update_pages)

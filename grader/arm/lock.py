@@ -25,19 +25,16 @@ import re
 import socket
 import stat
 import time
+from grader.errors import Busy
 from contextlib import contextmanager
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from grader.arm.jobs import LabError
+from grader.errors import LabError
 
 #: How long a refused session waits for the holder's details to be written [s] (the holder
 #: writes them right after taking the lock).
 READ_HOLDER_WAIT = 2.0
-
-
-class Busy(LabError):
-    """Another lab session holds the course or the arm (exit 2: nothing moved)."""
 
 
 def lock_dir() -> Path:

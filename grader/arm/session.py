@@ -24,20 +24,18 @@ import snakekit
 from snakekit import validate
 from snakekit.errors import BackendError, FileFormatError, SnakekitError
 from snakekit.model import SPEC
+from grader.errors import Stalled
 
 from grader.arm import gate
 from grader.arm.feedback import update_pages
-from grader.arm.jobs import LabError, LabSettings, Queue, handin_path, lab_dir, load_handin, write_atomic
+from grader.arm.jobs import LabSettings, Queue, handin_path, lab_dir, load_handin, write_atomic
+from grader.errors import LabError
 
 RECORD_RATE = 100.0  # [Hz]
 #: The widest band a calibration may set [rad]: wider, any sweep would pass (the arm is not repeatable).
 MAX_BAND = 1.0
 #: How many times a run the lab computer stalled in is run again before it counts as a lab fault.
 STALL_TRIES = 5
-
-
-class Stalled(BackendError):
-    """The lab computer stalled during every try of a run (the goals went out late): the lab's fault."""
 
 
 def _info(robot) -> dict:

@@ -19,20 +19,14 @@ from pathlib import Path
 
 from snakekit.errors import SnakekitError
 
+from grader.files import CommandParser
 from grader.scoring.references import REFERENCES
 
 COURSE = Path("course")
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # argparse exits 2 too; keep one place that says so
-        self.print_usage(sys.stderr)
-        print(f"snakekit grade: {message}", file=sys.stderr)
-        raise SystemExit(2)
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="snakekit grade", description="Grade every submission of an assignment: nbgrader's "
+    p = CommandParser(prog="snakekit grade", description="Grade every submission of an assignment: nbgrader's "
                 "autograde in parallel sandboxes, scored against the reference runs, with feedback.")
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
     p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
@@ -69,7 +63,7 @@ def check_current(args, out) -> list[str]:
     """Problems (each with the command that fixes it) if the release, the gradebook or the
     reference no longer match ``source/<a>``; with ``--regenerate`` they are fixed instead."""
     from grader.course.folder import backup_gradebook, generate, gradebook, release_differences, source_hash
-    from grader.scoring.references import Reference, record
+    from grader.scoring.references import Reference, record_reference
 
     course, a = args.course, args.assignment
     problems = []
@@ -95,7 +89,7 @@ def check_current(args, out) -> list[str]:
         print(f"snakekit grade: {course}/source/{a} or its cases changed since its reference was recorded; "
               "recording it again",
               file=out)
-        record(a, course).save(args.references / f"{a}.npz")
+        record_reference(a, course).save(args.references / f"{a}.npz")
     elif changed:
         what = f"{course}/source/{a}" if ref.meta.get("source_hash") != source_hash(course, a) else \
             f"{course}/cases/{a}.py"
@@ -110,7 +104,7 @@ def check_current(args, out) -> list[str]:
 def interrupted(course: Path, assignment: str, results: list, students: list[str], csv_path: Path) -> int:
     """After a Ctrl-C: the CSV gets the students graded before it (as the gradebook has them), the
     others' rows stay as they were; says who is left and how to grade them. Exit code 130."""
-    from grader.batch import class_rows, read_class_csv, write_csv
+    from grader.course.gradebook import class_rows, read_class_csv, write_csv
     from grader.files import excerpt, uninterrupted
 
     if results:
@@ -132,7 +126,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
     args = build_parser().parse_args(argv)
     course = args.course
     problems = []
-    from grader.course.folder import CourseError, check_assignment
+    from grader.course.folder import check_assignment
+    from grader.errors import CourseError
     from grader.files import check_output, one_line
 
     if not course.is_dir():
@@ -166,11 +161,13 @@ def main(argv: list[str] | None = None, out=None) -> int:
         for p in problems:
             print(f"snakekit grade: {one_line(p)}", file=sys.stderr)
         return 2
-    from grader.batch import Grader, class_rows, read_class_csv, write_csv
+    from grader.arm.keep import HOOKS
+    from grader.batch import Grader
+    from grader.course.gradebook import class_rows, read_class_csv, write_csv
     from grader.course.folder import backup_gradebook
 
     grader = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
-                    memory=args.memory << 20, cell_timeout=args.cell_timeout, seed=args.seed)
+                    memory=args.memory << 20, cell_timeout=args.cell_timeout, seed=args.seed, hooks=HOOKS)
     students = grader.students()
     if args.student:
         missing = [s for s in args.student if s not in students]

@@ -20,10 +20,11 @@ from pathlib import Path
 
 from snakekit.errors import SnakekitError
 
-from grader.course.folder import CourseError
+from grader.errors import CourseError
 from grader.files import check_output, one_line
 from grader.arm import lock
-from grader.arm.jobs import STATES, LabError, Queue, graded_students, lab_dir, ordered, settings, write_atomic
+from grader.arm.jobs import STATES, Queue, graded_students, lab_dir, ordered, settings, write_atomic
+from grader.errors import LabError
 
 
 def parser(calibrating: bool) -> argparse.ArgumentParser:

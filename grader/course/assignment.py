@@ -12,18 +12,15 @@ from pathlib import Path
 
 from snakekit.errors import SnakekitError
 
-from grader.feedback import report as feedback
-from grader.course.folder import CourseError, course_id, db_url, generate
+from grader.markup import visible_part
+from grader.course.folder import course_id, db_url, generate
+from grader.errors import CourseError, GradingError
 from grader.files import MAX_FILE  # the largest notebook or hand-in the grader reads back [bytes]
 from grader.scoring.references import Reference
 
 
-class GradingError(SnakekitError):
-    """The batch cannot be graded (no such assignment, no gradebook entry, bad course...)."""
-
-
 @dataclass
-class _Cell:
+class TestCell:
     grade_id: str
     notebook: str
     max_score: float
@@ -32,10 +29,10 @@ class _Cell:
 
 
 @dataclass
-class _Assignment:
+class Assignment:
     name: str
     notebooks: list[str]
-    tests: dict[str, _Cell]  # autograded test cells by grade id
+    tests: dict[str, TestCell]  # autograded test cells by grade id
     locked: dict[str, dict]  # every grade/locked/solution cell's released facts, by grade id
     max_score: float = 0.0
     reference: Reference | None = None
@@ -100,7 +97,7 @@ def ensure_released(course: Path, assignment: str) -> None:
         raise GradingError(str(e)) from e
 
 
-def load_assignment(course: Path, assignment: str, references: Path | None) -> _Assignment:
+def load_assignment(course: Path, assignment: str, references: Path | None) -> Assignment:
     from nbgrader.api import Gradebook, MissingEntry
 
     ensure_released(course, assignment)
@@ -118,7 +115,7 @@ def load_assignment(course: Path, assignment: str, references: Path | None) -> _
             for g in nb.grade_cells:
                 src = sources[g.name]
                 if g.cell_type == "code" and g.name not in solution:
-                    tests[g.name] = _Cell(g.name, nb.name, float(g.max_score), src.source, g.cell_type)
+                    tests[g.name] = TestCell(g.name, nb.name, float(g.max_score), src.source, g.cell_type)
             for name, src in sources.items():
                 locked[name] = {"notebook": nb.name, "locked": bool(src.locked), "source": src.source,
                                 "grade": name in {g.name for g in nb.grade_cells}, "solution": name in solution,
@@ -131,10 +128,10 @@ def load_assignment(course: Path, assignment: str, references: Path | None) -> _
     src_dir = course / "source" / assignment
     files = [p for p in src_dir.rglob("*") if p.is_file() and p.suffix != ".ipynb"
              and ".ipynb_checkpoints" not in p.parts] if src_dir.is_dir() else []
-    return _Assignment(assignment, notebooks, tests, locked, max_score, ref, cid, files)
+    return Assignment(assignment, notebooks, tests, locked, max_score, ref, cid, files)
 
 
-def _template_gradebook(course: Path, a: _Assignment, dest: Path) -> None:
+def template_gradebook(course: Path, a: Assignment, dest: Path) -> None:
     """A gradebook with this assignment only: no students, no other grades, no free pages."""
     import sqlite3
 
@@ -159,7 +156,7 @@ def _norm(s: str) -> str:
     return "\n".join(line.rstrip() for line in s.splitlines() if line.strip())
 
 
-def tampered_cells(nb, a: _Assignment, notebook: str) -> dict[str, str]:
+def tampered_cells(nb, a: Assignment, notebook: str) -> dict[str, str]:
     """Test cells (and locked cells) that were edited, deleted, duplicated or un-locked."""
     from nbgrader.utils import compute_checksum
 
@@ -181,7 +178,7 @@ def tampered_cells(nb, a: _Assignment, notebook: str) -> dict[str, str]:
             continue
         cell = cells[0]
         meta = cell.metadata.nbgrader
-        want = _norm(feedback.visible_part(info["source"]))
+        want = _norm(visible_part(info["source"]))
         if cell.cell_type != info["cell_type"] or not meta.get("locked", False) and info["locked"]:
             out[gid] = "its nbgrader metadata changed"
         elif gid in a.tests and (not meta.get("grade") or float(meta.get("points", -1)) != a.tests[gid].max_score):

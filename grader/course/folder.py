@@ -18,13 +18,10 @@ import warnings
 from pathlib import Path
 
 from snakekit.errors import SnakekitError
+from grader.errors import CourseError
 
 #: Backups of the gradebook kept in ``<course>/backups/`` (the oldest are removed).
 BACKUPS_KEPT = 20
-
-class CourseError(SnakekitError, ValueError):
-    """A command's arguments name something the course does not have, or a path it must not write."""
-
 
 def config(course: Path):
     """The course's ``nbgrader_config.py`` as a traitlets Config (empty if there is none)."""
@@ -34,12 +31,12 @@ def config(course: Path):
     course = Path(course)
     if not (course / "nbgrader_config.py").exists():
         return Config()
-    with _on_path(course):  # a late-penalty plugin may live beside the config (nbgrader's docs: late.py)
+    with on_path(course):  # a late-penalty plugin may live beside the config (nbgrader's docs: late.py)
         return PyFileConfigLoader("nbgrader_config.py", path=str(course)).load_config()
 
 
 @contextlib.contextmanager
-def _on_path(folder: Path):
+def on_path(folder: Path):
     sys.path.insert(0, str(folder))
     try:
         yield
@@ -167,7 +164,7 @@ def generate(config_dir: Path, root: Path, assignment: str, *, db: str | None = 
     cwd = os.getcwd()
     os.chdir(root)  # nbgrader resolves some paths from the working folder
     try:
-        with _on_path(Path(config_dir).resolve()):
+        with on_path(Path(config_dir).resolve()):
             api = NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
             out = api.generate_assignment(assignment, force=True, create=True)
     finally:

@@ -18,7 +18,7 @@ CSV_COLUMNS = ["student", "assignment", "score", "max_score", "status", "raw_sco
                "detail"]
 
 
-def record(course: Path, a, r, late_plugin=None, lock=None) -> None:
+def write_grade(course: Path, a, r, late_plugin=None, lock=None) -> None:
     """Write one submission's scores to the course's gradebook (one writer: the batch's main
     thread), its late penalty, and what nbgrader's ``release_feedback`` reads beside its page."""
     from nbgrader.api import Gradebook
@@ -52,9 +52,9 @@ def late_penalties(course: Path, assignment: str, student: str, plugin=None) -> 
     ``LateSubmissionPlugin`` or ``AssignLatePenalties.plugin_class``) sets it in autograde."""
     from nbgrader.preprocessors import AssignLatePenalties
 
-    from grader.course.folder import _on_path, config
+    from grader.course.folder import on_path, config
 
-    with _on_path(Path(course)), warnings.catch_warnings():
+    with on_path(Path(course)), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         pre = plugin or AssignLatePenalties(config=config(course))
         with _throwaway_log(pre):

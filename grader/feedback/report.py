@@ -32,24 +32,11 @@ import nbformat
 import numpy as np
 
 from grader.feedback.page import html_page
+from grader.markup import HIDDEN, first_hidden_line, visible_part
 
-HIDDEN = re.compile(r"^[ \t]*#+[ \t]*BEGIN HIDDEN TESTS.*?^[ \t]*#+[ \t]*END HIDDEN TESTS[^\n]*\n?",
-                    re.MULTILINE | re.DOTALL | re.IGNORECASE)
 REMOVED = "[output removed by the grader: it showed hidden test code]"
 
-
-def visible_part(source: str) -> str:
-    """A test cell's source without its hidden-test region(s) (what the released notebook shows).
-
-    >>> print(visible_part("check(f)\\n### BEGIN HIDDEN TESTS\\nsecret(f)\\n### END HIDDEN TESTS\\n"))
-    check(f)
-    <BLANKLINE>
-    """
-    return HIDDEN.sub("", source)
-
-
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
-_BEGIN = re.compile(r"^[ \t]*#+[ \t]*BEGIN HIDDEN TESTS", re.IGNORECASE)
 
 
 def cell_error(cell) -> tuple[str, str, str] | None:
@@ -76,7 +63,7 @@ def cell_error(cell) -> tuple[str, str, str] | None:
     ename = str(err.get("ename", "an error"))[:80]
     evalue = _ANSI.sub("", str(err.get("evalue", "")))[:600]
     lines = str(cell.get("source", "")).splitlines()
-    first_hidden = next((i + 1 for i, line in enumerate(lines) if _BEGIN.match(line)), len(lines) + 1)
+    first_hidden = first_hidden_line(lines)
     tb = _ANSI.sub("", "\n".join(map(str, err.get("traceback", []))))
     count = cell.get("execution_count")
     m = re.search(rf"Cell In\[{count}\], line (\d+)", tb) if count else None
@@ -399,12 +386,12 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
 RECORD = "snakekit_grader"  # the autograded notebook's metadata key; set by the grader only
 
 
-def record(nb, result, *, stopped: int | None = None, timeout: float | None = None):
+def annotate_notebook(nb, result, *, stopped: int | None = None, timeout: float | None = None):
     """The autograded notebook ``nb`` (the TA's copy) with the grader's verdicts in it.
 
     Its metadata keeps what a feedback page is built from (status, every exercise's points,
     message and checks, the plots), so pages can be written again later from the gradebook's
-    scores (:mod:`grader.course.nbgrader_plugins`); each test cell also shows its verdict as an output,
+    scores (:mod:`grader.commands.nbgrader_plugins`); each test cell also shows its verdict as an output,
     where formgrader shows it to the TA. Whatever the submission put under that key is dropped.
     """
     nb = nbformat.from_dict(dict(nb))
@@ -552,7 +539,7 @@ _STYLE = re.compile(r"<style[^>]*>.*?</style>", re.S)
 _CSS_COMMENT = re.compile(r"/\*.*?\*/", re.S)
 
 
-def _exporter():
+def page_exporter():
     """One HTML exporter per thread (its templates load once; an exporter is not shared between threads).
 
     Every page of a class shows the same lesson text and test cells, so the exporter keeps
@@ -576,7 +563,7 @@ def _exporter():
 
 def write_html(nb, path: Path) -> Path:
     """Render the feedback notebook to one self-contained HTML file (images inline)."""
-    body, _ = _exporter().from_notebook_node(nb)
+    body, _ = page_exporter().from_notebook_node(nb)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(body, encoding="utf-8")
     return path

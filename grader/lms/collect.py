@@ -38,7 +38,6 @@ the report), 2 bad arguments.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import datetime as dt
 import json
@@ -51,9 +50,10 @@ from pathlib import Path
 
 from snakekit.errors import SnakekitError
 
-from grader.course.folder import CourseError, default_roster, gradebook, require
-from grader.files import MAX_DOWNLOAD, MAX_FILE, excerpt, file_name, one_line, read_table, size_text, student_id, uninterrupted, unique_in
-from grader.lms.roster import ROSTER_IDS, UNIQUE, Roster, _norm, no_roster_who  # noqa: F401 - the roster's names, as they were here
+from grader.course.folder import default_roster, gradebook, require
+from grader.errors import CourseError
+from grader.files import MAX_DOWNLOAD, MAX_FILE, CommandParser, excerpt, file_name, one_line, read_table, size_text, student_id, uninterrupted, unique_in
+from grader.lms.roster import Roster, no_roster_who, normal_name
 
 COURSE = Path("course")
 MANIFEST_COLUMNS = ["student", "lms", "lms_id", "lms_name", "file", "notebook", "submitted_at", "late", "attempts", "note"]
@@ -214,12 +214,12 @@ def _time_for(student: str, uploads: list[Upload], roster: Roster | None, times)
     keys = {("student", student)}
     for u in uploads:
         keys |= {("canvas_id", u.lms_id), ("moodle_id", u.lms_id), ("Identifier", u.lms_id),
-                 ("name", _norm(u.lms_name)), ("Full name", _norm(u.lms_name))}
+                 ("name", normal_name(u.lms_name)), ("Full name", normal_name(u.lms_name))}
     for col in ("email", "name", "moodle_id", "canvas_id"):
         if row.get(col):
-            keys |= {(col, _norm(row[col]) if col == "name" else row[col])}
-    keys |= {("Email address", row.get("email", "")), ("Full name", _norm(row.get("name", "")))}
-    found = [t for col, value, t in times if (col, _norm(value) if "name" in col.lower() else value) in keys and value]
+            keys |= {(col, normal_name(row[col]) if col == "name" else row[col])}
+    keys |= {("Email address", row.get("email", "")), ("Full name", normal_name(row.get("name", "")))}
+    found = [t for col, value, t in times if (col, normal_name(value) if "name" in col.lower() else value) in keys and value]
     return max(found) if found else None
 
 
@@ -230,7 +230,7 @@ def assignment_cells(course: Path, assignment: str) -> dict[str, set[str]]:
     """Grade ids of the assignment's graded and answer cells, per notebook (from the gradebook)."""
     from nbgrader.api import MissingEntry
 
-    from grader.batch import ensure_released
+    from grader.course.assignment import ensure_released
 
     ensure_released(course, assignment)
     with gradebook(course) as gb:
@@ -447,17 +447,10 @@ def read_manifest(course: Path, assignment: str) -> dict[str, dict]:
 # --- the command ----------------------------------------------------------------------------------
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        self.print_usage(sys.stderr)
-        print(f"{self.prog}: {message}", file=sys.stderr)
-        raise SystemExit(2)
-
-
 def main(argv: list[str] | None = None, out=None) -> int:
     import dateutil.tz
 
-    p = _Parser(prog="snakekit collect", description="Put an LMS's download (Canvas, Moodle, or a folder of "
+    p = CommandParser(prog="snakekit collect", description="Put an LMS's download (Canvas, Moodle, or a folder of "
                 "<student>.ipynb) into the course's submitted/ folder, the newest attempt of each student.")
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
     p.add_argument("--from", dest="source", type=Path, required=True, help="the download: a zip or a folder")

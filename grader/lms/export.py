@@ -43,11 +43,13 @@ import sys
 import zipfile
 from pathlib import Path
 
-from grader.lms.collect import Roster, _Parser, read_manifest
+from grader.lms.collect import read_manifest
+from grader.lms.roster import Roster
 from snakekit.errors import SnakekitError
 
-from grader.course.folder import CourseError, config, course_id, default_roster, gradebook, require
-from grader.files import check_output, excerpt, one_line, uninterrupted
+from grader.course.folder import config, course_id, default_roster, gradebook, require
+from grader.errors import CourseError
+from grader.files import CommandParser, check_output, excerpt, one_line, uninterrupted
 
 COURSE = Path("course")
 CANVAS_PREFIX = re.compile(r"^(?P<prefix>.*?_(?:\d+|anon_[A-Za-z0-9]+)_\d+_)")
@@ -106,7 +108,7 @@ def export(course: Path, lms: str | None, path: Path, roster: Roster | None, ass
 
 def export_main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
-    p = _Parser(prog="snakekit export", description="One row per student, one column per assignment and the "
+    p = CommandParser(prog="snakekit export", description="One row per student, one column per assignment and the "
                 "total (late penalties applied), for Canvas's or Moodle's grade import.")
     p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
     p.add_argument("--lms", choices=["canvas", "moodle"], default=None, help="the LMS's import format")
@@ -258,7 +260,7 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
 
 def return_main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
-    p = _Parser(prog="snakekit return", description="Hand each student's safe feedback page back: to the hub's "
+    p = CommandParser(prog="snakekit return", description="Hand each student's safe feedback page back: to the hub's "
                 "exchange (nbgrader fetch_feedback) or as one zip for the LMS's bulk feedback upload.")
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
     p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")

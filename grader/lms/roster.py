@@ -12,14 +12,14 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from grader.course.folder import CourseError
+from grader.errors import CourseError
 from grader.files import ALLOWED_ID, STUDENT_ID, excerpt, read_table, student_id
 
 COURSE = Path("course")
 ROSTER_IDS = ("canvas_id", "moodle_id", "name", "email", "sis_id", "login_id")
 
 
-def _norm(s: str) -> str:
+def normal_name(s: str) -> str:
     return " ".join(str(s).split()).casefold()
 
 
@@ -73,7 +73,7 @@ class Roster:
                               "(a name may repeat): merge or correct the rows, then run the command again")
         return cls([r for r in rows if r.get("student")], path)
 
-    def find(self, column: str, value: str, *, norm=_norm) -> list[str]:
+    def find(self, column: str, value: str, *, norm=normal_name) -> list[str]:
         return sorted({r["student"] for r in self.rows if r.get(column) and norm(r[column]) == norm(value)})
 
     def row(self, student: str) -> dict:

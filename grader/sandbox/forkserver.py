@@ -35,7 +35,8 @@ import threading
 import time
 from pathlib import Path
 
-from grader.sandbox.namespaces import STOP, TICK, Stopped
+from grader.sandbox.namespaces import STOP, TICK
+from grader.errors import Stopped
 
 CLONE_NEWNS, CLONE_NEWUSER, CLONE_NEWPID, CLONE_NEWNET = 0x00020000, 0x10000000, 0x20000000, 0x40000000
 PR_SET_PDEATHSIG = 1

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from snakekit.errors import SnakekitError
+from grader.errors import SandboxError, Stopped
 
 USER = "snakekit-grader"
 INIT = Path(__file__).resolve().parent / "inside" / "enter.py"
@@ -45,14 +46,6 @@ PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # holds snakekit/ and grader
 STOP = threading.Event()
 #: How often a running sandbox looks at :data:`STOP` [s].
 TICK = 0.2
-
-
-class SandboxError(SnakekitError):
-    """The sandbox cannot be made on this machine (no namespaces, no unshare...)."""
-
-
-class Stopped(SnakekitError):
-    """A sandbox was killed because the batch was interrupted (:data:`STOP`)."""
 
 
 @dataclass(frozen=True)

@@ -52,15 +52,12 @@ import numpy as np
 
 from snakekit.errors import SnakekitError
 from snakekit.handin import decode_results, encode_cases
+from grader.errors import CasesError
 
 __all__ = ["CasesError", "Draw", "CaseServer", "load_module", "draw", "new_seed", "execute", "main"]
 
 #: The longest path a Unix socket may have (``sun_path``, less its terminating zero).
 MAX_SOCKET_PATH = 107
-
-
-class CasesError(SnakekitError):
-    """A cases module is missing, broken, or draws something that cannot be sent."""
 
 
 @dataclass(frozen=True)

@@ -23,9 +23,11 @@ import numpy as np
 
 from snakekit.errors import FileFormatError, SnakekitError
 from snakekit.model import SPEC, SnakeSpec
+from grader.errors import InstructorReferenceError
 
 from grader.scoring import compare
-from grader.scoring.cases import CasesError, Draw, cases_path, checked_tolerances, draw, execute
+from grader.scoring.cases import Draw, cases_path, checked_tolerances, draw, execute
+from grader.errors import CasesError
 from grader.scoring.rules import RULES
 from grader.scoring.score import DEFAULT_TOLERANCES, Expected, handed_in_function, kind_of, score_exercise
 
@@ -70,10 +72,6 @@ OVERRIDES: dict[str, dict[str, dict]] = {
     },
 }
 
-class ReferenceError(SnakekitError):
-    """A reference file is missing, unreadable, stale, or could not be recorded."""
-
-
 def spec_hash(spec: SnakeSpec = SPEC) -> str:
     """A short hash of everything that defines the arm (a reference is only valid for it)."""
     return hashlib.sha256(repr(spec).encode()).hexdigest()[:16]
@@ -112,16 +110,16 @@ class Reference:
     def load(cls, path) -> "Reference":
         path = Path(path)
         if not path.exists():
-            raise ReferenceError(f"no reference for this assignment: {path} does not exist. Record it with "
+            raise InstructorReferenceError(f"no reference for this assignment: {path} does not exist. Record it with "
                                  f"`python -m grader.scoring.references {path.stem}`.")
         try:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["__meta__"]))
         except (OSError, ValueError, KeyError, EOFError) as e:
-            raise ReferenceError(f"{path} is not a readable reference file ({e}); record it again with "
+            raise InstructorReferenceError(f"{path} is not a readable reference file ({e}); record it again with "
                                  f"`python -m grader.scoring.references {path.stem}`") from e
         if meta.get("format") != FORMAT:
-            raise ReferenceError(f"{path} has format {meta.get('format')}, this grader reads {FORMAT}; record it "
+            raise InstructorReferenceError(f"{path} has format {meta.get('format')}, this grader reads {FORMAT}; record it "
                                  f"again with `python -m grader.scoring.references {path.stem}`")
         return cls(meta["assignment"], meta)
 
@@ -139,7 +137,7 @@ class Reference:
     def check_current(self, spec: SnakeSpec = SPEC) -> None:
         """Refuse a reference recorded for another robot spec."""
         if self.meta["spec_hash"] != spec_hash(spec):
-            raise ReferenceError(f"the reference for {self.assignment} was recorded for another robot spec "
+            raise InstructorReferenceError(f"the reference for {self.assignment} was recorded for another robot spec "
                                  f"(hash {self.meta['spec_hash']}, now {spec_hash(spec)}); record it again with "
                                  f"`python -m grader.scoring.references {self.assignment}`")
 
@@ -151,7 +149,7 @@ def expected(ref: Reference, batch: Draw, handins: dict[str, list], *, where: st
              sources: dict | None = None) -> dict[str, Expected]:
     """The batch's expected results from the instructor's hand-ins at ``batch``'s cases.
 
-    Raises :class:`ReferenceError` (the batch cannot be graded) when the instructor solution did
+    Raises :class:`InstructorReferenceError` (the batch cannot be graded) when the instructor solution did
     not hand in a result for every case, handed in what the reference does not describe, or does
     not score full marks against itself. ``sources``: the test cells' sources by grade id (the
     feedback names the function each hands in).
@@ -161,34 +159,34 @@ def expected(ref: Reference, batch: Draw, handins: dict[str, list], *, where: st
         ex = ref.exercises.get(gid)
         results = handins.get(gid)
         if ex is None:
-            raise ReferenceError(f"{batch.assignment}: the cases module draws cases for {gid}, which the "
+            raise InstructorReferenceError(f"{batch.assignment}: the cases module draws cases for {gid}, which the "
                                  f"reference does not describe; record it again (`python -m grader.scoring.references "
                                  f"{batch.assignment}`)")
         if results is None or len(results) != len(cases):
             got = "nothing" if results is None else f"{len(results)} results"
-            raise ReferenceError(f"{where} handed in {got} for {gid}, which has {len(cases)} hidden cases "
+            raise InstructorReferenceError(f"{where} handed in {got} for {gid}, which has {len(cases)} hidden cases "
                                  f"(seed {batch.seed}): its test cell must call ex.hand_in('{gid}', ...)")
         for k, r in enumerate(results):
             if isinstance(r, str) and r.startswith("returned"):
-                raise ReferenceError(f"{where}: {gid} {r} at hidden case {k} {_args(cases[k])} (seed {batch.seed})")
+                raise InstructorReferenceError(f"{where}: {gid} {r} at hidden case {k} {_args(cases[k])} (seed {batch.seed})")
         if results and all(isinstance(r, str) for r in results):
-            raise ReferenceError(f"{where}: {gid} raised at every one of its {len(results)} hidden cases (seed "
+            raise InstructorReferenceError(f"{where}: {gid} raised at every one of its {len(results)} hidden cases (seed "
                                  f"{batch.seed}), the first: {results[0]}; a solution that only raises grades "
                                  "nothing (is something the notebook needs missing on this machine?)")
         kind = kind_of(results)
         names = sorted(set().union(*(r for r in results if isinstance(r, dict))))
         if kind != ex["kind"] or (names and names != ex["outputs"]):
-            raise ReferenceError(f"{where}: {gid} handed in {kind} {names}, the reference describes {ex['kind']} "
+            raise InstructorReferenceError(f"{where}: {gid} handed in {kind} {names}, the reference describes {ex['kind']} "
                                  f"{ex['outputs']}; record it again (`python -m grader.scoring.references "
                                  f"{batch.assignment}`)")
         try:
             tol = checked_tolerances(ex["tolerances"], f"{batch.assignment}'s reference: {gid}")
         except CasesError as bad:
-            raise ReferenceError(f"{bad}; record it again (`python -m grader.scoring.references {batch.assignment}`)") from None
+            raise InstructorReferenceError(f"{bad}; record it again (`python -m grader.scoring.references {batch.assignment}`)") from None
         e = Expected(gid, kind, list(cases), results, tol, handed_in_function(gid, (sources or {}).get(gid, "")))
         own = score_exercise(gid, results, e, 1.0)
         if own.score < 1.0:
-            raise ReferenceError(f"{where}: {gid} scores {own.score:g} of 1 against itself at the cases of seed "
+            raise InstructorReferenceError(f"{where}: {gid} scores {own.score:g} of 1 against itself at the cases of seed "
                                  f"{batch.seed} ({own.message}); fix the solution, the cases or the tolerance")
         out[gid] = e
     return out
@@ -253,24 +251,24 @@ def tolerances(assignment: str, gid: str, kind: str, batch: Draw, runs: list[lis
     return tol
 
 
-def record(assignment: str, course: Path = COURSE, *, repeats: int = 3, seed: int | None = None) -> Reference:
+def record_reference(assignment: str, course: Path = COURSE, *, repeats: int = 3, seed: int | None = None) -> Reference:
     """Execute the instructor solution ``repeats`` times at one draw of the cases; the reference
     describes its hand-ins (kinds, names, tolerances from the spread of its runs)."""
     from grader.course.folder import source_hash
 
     notebook = Path(course) / "source" / assignment / f"{assignment}.ipynb"
     if not notebook.exists():
-        raise ReferenceError(f"no instructor notebook {notebook}")
+        raise InstructorReferenceError(f"no instructor notebook {notebook}")
     try:
         batch = draw(course, assignment, seed)
         runs = [execute(notebook, batch) for _ in range(max(1, repeats))]
     except CasesError as e:
-        raise ReferenceError(str(e)) from e
+        raise InstructorReferenceError(str(e)) from e
     exercises = {}
     for gid in batch.cases:
         results = runs[0].get(gid)
         if results is None:
-            raise ReferenceError(f"{notebook} handed nothing in for {gid} (its test cell must call "
+            raise InstructorReferenceError(f"{notebook} handed nothing in for {gid} (its test cell must call "
                                  f"ex.hand_in('{gid}', ...))")
         kind = kind_of(results)
         exercises[gid] = {"kind": kind, "outputs": sorted(set().union(*(r for r in results if isinstance(r, dict)))),
@@ -284,7 +282,7 @@ def record(assignment: str, course: Path = COURSE, *, repeats: int = 3, seed: in
                     continue
                 sc = score_exercise(gid, other.get(gid), e, 1.0)
                 if sc.score < 1.0:
-                    raise ReferenceError(f"{gid}: the instructor's results differ between two runs at the same "
+                    raise InstructorReferenceError(f"{gid}: the instructor's results differ between two runs at the same "
                                          f"cases (seed {batch.seed}) by more than the tolerance ({sc.message}); "
                                          "widen it (the cases module's TOLERANCES) or make the exercise repeatable")
                 exercises[gid]["repeatable"] = False
@@ -361,18 +359,18 @@ def main(argv: list[str] | None = None) -> int:
             if args.check:
                 old = Reference.load(path)
                 repeats = args.repeats or check_repeats(old)
-                diff = differences(old, record(name, args.course, repeats=repeats))
+                diff = differences(old, record_reference(name, args.course, repeats=repeats))
                 if diff:
                     stale += 1
                     print(f"{path} is stale:\n  " + "\n  ".join(diff), file=sys.stderr)
                 else:
                     print(f"{path} is current")
             else:
-                new = record(name, args.course, repeats=args.repeats or 3)
+                new = record_reference(name, args.course, repeats=args.repeats or 3)
                 args.out.mkdir(parents=True, exist_ok=True)
                 new.save(path)
                 print(f"wrote {path} ({len(new.exercises)} exercises: {', '.join(sorted(new.exercises))})")
-    except (ReferenceError, FileFormatError) as e:
+    except (InstructorReferenceError, FileFormatError) as e:
         print(f"grader.scoring.references: {e}", file=sys.stderr)
         return 1
     if stale:

@@ -18,12 +18,10 @@ import re
 
 import nbformat
 
+from grader.markup import without_solution_markers
 from grader.scoring.score import ExerciseScore
 
 __all__ = ["needed", "with_answers", "better"]
-
-_MARKERS = re.compile(r"^[ \t]*### (BEGIN|END) SOLUTION[ \t]*\n?", re.M)
-
 
 def exercise(grade_id: str) -> str:
     """'ex06_3_task2_test' -> '6.3' (the exercise a cell belongs to; the grade id if it names none).
@@ -68,7 +66,7 @@ def with_answers(nbs: dict, source: dict, cells: set) -> dict:
     for nb in source.values():
         for c in nb.cells:
             if _grade_id(c) in cells:
-                theirs[_grade_id(c)] = _MARKERS.sub("", c.source)
+                theirs[_grade_id(c)] = without_solution_markers(c.source)
     out = {}
     for name, nb in nbs.items():
         nb = nbformat.from_dict(nb)

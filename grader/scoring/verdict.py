@@ -16,8 +16,7 @@ import nbformat
 from grader.feedback import report as feedback
 from grader.scoring import rerun
 from grader.course.assignment import read_inside
-from grader.arm.feedback import update_pages
-from grader.arm.keep import keep_for_lab
+from grader.hooks import NO_HOOKS, BatchHooks
 from grader.scoring.score import ExerciseScore, read_handin, score_exercise
 
 
@@ -43,8 +42,9 @@ class Verdicts:
     (set once the reference run is in); test cells without them keep nbgrader's verdict.
     """
 
-    def __init__(self, course: Path, a, base: Path, *, timeout: float, cell_timeout: float, memory: int):
-        self.course, self.a, self.base = course, a, base
+    def __init__(self, course: Path, a, base: Path, *, timeout: float, cell_timeout: float, memory: int,
+                 hooks: BatchHooks = NO_HOOKS):
+        self.course, self.a, self.base, self.hooks = course, a, base, hooks
         self.timeout, self.cell_timeout, self.memory = timeout, cell_timeout, memory
         self.expected: dict = {}
         self.draw = None  # the batch's cases (set with the expected results)
@@ -148,10 +148,10 @@ class Verdicts:
             dest.mkdir(parents=True)
             for name, nb in executed.items():
                 mine = [s for s in scores if a.tests[s.grade_id].notebook == name]
-                nbformat.write(feedback.record(nb, dataclasses.replace(result, exercises=tuple(mine)),
+                nbformat.write(feedback.annotate_notebook(nb, dataclasses.replace(result, exercises=tuple(mine)),
                                                stopped=stopped.get(name), timeout=self.timeout), dest / f"{name}.ipynb")
             if self.draw is not None:  # the trajectory at the spec's values, for `snakekit lab`
-                keep_for_lab(self.course, a.name, student, work, self.draw)
+                self.hooks.graded(self.course, a.name, student, work, self.draw)
         return self.feedback(result, nbs, executed, stopped)
 
     def zero(self, student, status, detail, t0) -> SubmissionResult:
@@ -179,7 +179,7 @@ class Verdicts:
                                 stopped=(stopped or {}).get(name), timeout=self.timeout,
                                 hide_paths={str(self.base): "<sandbox>"})
             written = feedback.write_html(fb, path / f"{name}.html")
-        update_pages(self.course, a.name, result.student)  # the lab's result, when the lab ran the student's sweep
+        self.hooks.pages(self.course, a.name, result.student)  # the lab's result, when the lab ran the student's sweep
         return SubmissionResult(**{**result.__dict__, "feedback": written})
 
 

@@ -57,7 +57,7 @@ class SafeFeedbackExporter(HTMLExporter):
         course_id = getattr(getattr(self.parent, "coursedir", None), "course_id", None) or "default_course"
         page = regenerate(nb, student=student, assignment=assignment, notebook=notebook,
                           db_url=info.get("db_url"), course_id=course_id)
-        body, _ = feedback._exporter().from_notebook_node(page)
+        body, _ = feedback.page_exporter().from_notebook_node(page)
         root = getattr(getattr(self.parent, "coursedir", None), "root", None)
         if root and student and assignment:  # the lab's result, when the lab ran the student's sweep
             body = lab_feedback.add_to(body, Path(root), assignment, student)
@@ -75,7 +75,7 @@ def regenerate(nb, *, student: str, assignment: str, notebook: str, db_url: str,
     """
     from nbgrader.api import Gradebook, MissingEntry
 
-    from grader.batch import SubmissionResult
+    from grader.scoring.verdict import SubmissionResult
 
     kept = feedback.recorded(nb)
     status, detail, stopped, timeout, exercises, plots = kept or ("graded", "", None, None, [], {})
