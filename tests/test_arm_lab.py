@@ -170,12 +170,16 @@ def test_a_class_is_gated_run_and_graded_and_a_second_start_has_nothing_left(cal
 
     for st in ("alice", "bob", "carol", "dan", "erin"):
         d = course / "lab" / A / "results" / st
-        assert sorted(p.name for p in d.iterdir()) == ["info.json", "plot.png", "report.json", "run.npz"]
+        assert sorted(p.name for p in d.iterdir()) == ["info.json", "plot.png", "report.json", "run.bag", "run.mcap",
+                                                       "run.npz"]
         report = json.loads((d / "report.json").read_text())
         info = json.loads((d / "info.json").read_text())
         with np.load(d / "run.npz") as z:
-            measured = z["measured_positions"]
+            measured, efforts = z["measured_positions"], z["efforts"]
             assert np.array_equal(z["commanded_positions"], CLASS[st][0].positions)
+        for bag in ("run.mcap", "run.bag"):  # the same run as ROS bags
+            back = snakekit.Run.load(d / bag)
+            assert np.array_equal(back.measured.positions, measured) and np.array_equal(back.efforts, efforts)
         with np.load(course / "lab" / A / "reference.npz") as z:
             t, ref = z["times"], z["positions"]
             with np.load(d / "run.npz") as r:  # on the sweep's clock: the host's stalls taken out
