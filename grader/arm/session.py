@@ -204,7 +204,8 @@ def plot(path: Path, run, trajectory, checked, ref_t, ref_q) -> None:
 
 
 def write_result(course: Path, s: LabSettings, student: str, run, trajectory, checked, info, result, ref) -> Path:
-    """The job's folder: run.npz, info.json, plot.png, then report.json (last: the folder is complete)."""
+    """The job's folder: run.npz (with run.mcap and run.bag, the same run as ROS bags), info.json,
+    plot.png, then report.json (last: the folder is complete)."""
     d = lab_dir(course, s.assignment) / "results" / student
     d.mkdir(parents=True, exist_ok=True)
     (d / "report.json").unlink(missing_ok=True)
@@ -212,6 +213,8 @@ def write_result(course: Path, s: LabSettings, student: str, run, trajectory, ch
              measured_times=run.measured.times, measured_positions=run.measured.positions,
              measured_velocities=run.measured.velocities, efforts=run.efforts,
              sim_times=checked.sim_times, sim_positions=checked.sim_positions)
+    for bag in ("run.mcap", "run.bag"):  # the run as ROS 2 and ROS 1 bags, for RViz, Foxglove, rosbag
+        run.save(d / bag)
     write_atomic(d / "info.json", json.dumps(info, indent=1))
     plot(d / "plot.png", run, trajectory, checked, *ref)
     report = {"student": student, "assignment": s.assignment, "state": "graded", **result}
