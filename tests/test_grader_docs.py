@@ -67,7 +67,7 @@ def test_the_layouts_table_has_an_example_for_each_layout():
 
 @pytest.mark.parametrize("layout,example", layouts())
 def test_each_example_download_name_is_read_as_its_row_says(layout, example):
-    from grader.download import classify
+    from grader.lms.download import classify
 
     u = classify(example, b"")
     assert (u.lms, u.lms_id, u.late) == SAYS[layout]
@@ -134,7 +134,7 @@ def canvas(path: Path, files: dict[str, bytes]) -> None:
 
 
 def test_a_week_runs_block_by_block_as_written(tmp_path):
-    from grader.course import gradebook
+    from grader.course.folder import gradebook
 
     need_program("unshare")
     need_program("bash")

@@ -58,7 +58,7 @@ def snakekit(*args, cwd=REPO):
 
 
 def test_every_rule_in_the_help_is_read_as_it_says():
-    from grader.late import parse
+    from grader.commands.late import parse
 
     assert parse("per-hour:1").penalty(7, 1) == 1 and parse("per-hour:1").penalty(7, 3601) == 2
     assert parse("per-day:10%").penalty(5, 86400) == 0.5 and parse("per-week:2").penalty(7, 1) == 2
@@ -68,7 +68,7 @@ def test_every_rule_in_the_help_is_read_as_it_says():
 
 @pytest.mark.parametrize("rule", sorted(RULES))
 def test_a_late_notebook_loses_what_the_rule_says(course, tmp_path, rule):
-    from grader.course import gradebook
+    from grader.course.folder import gradebook
 
     need_program("unshare")
     late_by, penalty = RULES[rule]
@@ -106,8 +106,8 @@ def test_a_late_notebook_loses_what_the_rule_says(course, tmp_path, rule):
 
 
 def test_a_second_release_keeps_the_other_assignments_rules(course):
-    from grader.course import config
-    from grader.release import with_rules
+    from grader.course.folder import config
+    from grader.commands.release import with_rules
 
     text = with_rules((course / "nbgrader_config.py").read_text(), {"other_lesson": "per-day:5"})
     (course / "nbgrader_config.py").write_text(text)
