@@ -105,6 +105,18 @@ def test_a_late_notebook_loses_what_the_rule_says(course, tmp_path, rule):
                          ["Bob Jones", "102", "", "bj2", "A", want, want]]
 
 
+def test_exchange_releases_the_student_version_for_nbgraders_fetch(course, tmp_path):
+    exchange = tmp_path / "exchange"
+    exchange.mkdir()
+    r = snakekit("release", A, "--course", course, "--exchange", exchange)
+    assert r.returncode == 0, r.stdout + r.stderr
+    from grader.course.folder import course_id
+
+    outbound = exchange / course_id(course) / "outbound" / A / f"{A}.ipynb"
+    assert outbound.read_bytes() == (course / "release" / A / f"{A}.ipynb").read_bytes()
+    assert f"{A}: released to the exchange" in r.stdout
+
+
 def test_a_second_release_keeps_the_other_assignments_rules(course):
     from grader.course.folder import config
     from grader.commands.release import with_rules
