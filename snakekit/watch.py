@@ -2,8 +2,8 @@
 
 The course's checks and demonstrations call the student's functions through wrappers of their
 own (a loop that calls the student's step, a check that runs the student's task on a fresh
-arm). Two things are seen from outside through :func:`sys.setprofile`, leaving every name in
-place: the arguments of each call (:func:`calls_to`, to draw the steps a loop took) and a call
+arm). Two things are seen from outside through :func:`sys.settrace` (on that function's frames
+only), leaving every name in place: the arguments of each call (:func:`calls_to`, to draw the steps a loop took) and a call
 that returned None (:func:`returns_none`: a forgotten ``return``, named as such wherever the
 wrapper then stumbles). :func:`forgot_return` is the one message for it, locally and graded.
 """
@@ -33,19 +33,29 @@ def forgot_return(name: str, where: str = "") -> str:
 
 
 @contextlib.contextmanager
-def _profile(hook):
-    before = sys.getprofile()
+def _trace(code, on_call=None, on_return=None):
+    """While the block runs, call ``on_call(frame)`` when a frame of ``code`` starts and
+    ``on_return(frame, value)`` when it returns (a trace function for that code's frames only:
+    every other call costs one cheap check, and a tracer already set keeps tracing them)."""
+    before = sys.gettrace()
 
-    def chained(frame, event, arg):
-        hook(frame, event, arg)
-        if before is not None:
-            before(frame, event, arg)
+    def local(frame, event, arg):
+        if event == "return" and on_return is not None:
+            on_return(frame, arg)
+        return local
 
-    sys.setprofile(chained)
+    def starts(frame, event, arg):
+        if frame.f_code is code:
+            if on_call is not None:
+                on_call(frame)
+            return local if on_return is not None else None
+        return before(frame, event, arg) if before is not None else None
+
+    sys.settrace(starts)
     try:
         yield
     finally:
-        sys.setprofile(before)
+        sys.settrace(before)
 
 
 @contextlib.contextmanager
@@ -64,12 +74,11 @@ def calls_to(fn):
     """
     code, calls = fn.__code__, []
 
-    def note(frame, event, arg):
-        if event == "call" and frame.f_code is code:
-            args = (frame.f_locals[n] for n in code.co_varnames[:code.co_argcount])
-            calls.append(tuple(np.array(v) if isinstance(v, np.ndarray) else v for v in args))
+    def note(frame):
+        args = (frame.f_locals[n] for n in code.co_varnames[:code.co_argcount])
+        calls.append(tuple(np.array(v) if isinstance(v, np.ndarray) else v for v in args))
 
-    with _profile(note):
+    with _trace(code, on_call=note):
         yield calls
 
 
@@ -90,13 +99,12 @@ def returns_none(fn):
     """
     code, seen = getattr(fn, "__code__", None), []
 
-    def note(frame, event, arg):
-        if event == "return" and arg is None and frame.f_code is code \
-                and frame.f_code.co_code[frame.f_lasti] in _RETURNS:
+    def note(frame, value):   # a return while an exception unwinds the frame is at another opcode
+        if value is None and frame.f_code.co_code[frame.f_lasti] in _RETURNS:
             seen.append(frame.f_code.co_name)
 
     if code is None:
         yield seen
         return
-    with _profile(note):
+    with _trace(code, on_return=note):
         yield seen
