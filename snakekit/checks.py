@@ -161,8 +161,12 @@ class Exercise:
         """The arguments of a call, as a message shows them."""
         if where is not None:
             return str(where)
+        def shown(a):   # an object without a readable repr (a ControlPanel, a robot) by its type
+            text = repr(a)
+            return f"a {type(a).__name__}" if text.startswith("<") and " at 0x" in text else text
+
         return ", ".join(_fmt_array(a) if isinstance(a, (np.ndarray, list, tuple)) else
-                         (getattr(a, "__name__", type(a).__name__) if callable(a) else repr(a)) for a in args)
+                         (getattr(a, "__name__", type(a).__name__) if callable(a) else shown(a)) for a in args)
 
     def raises(self, error: type, fn, *args, where=None, why: str = "") -> None:
         """Check that the student's ``fn(*args)`` raises ``error`` (a ``ValueError`` for a target
