@@ -148,9 +148,14 @@ CLAIMS = {
          1e-12),
         # the bus runs in real time: on a loaded machine a goal may leave a cycle late, and the peak moves a little
         ("it peaks at about 0.5 N m on every joint", "np.abs(home_run.efforts).max(axis=0)", [0.5] * 5, 0.1),
+        # mid-move, where the joints turn fastest: the load's peak and the speed's are at most a few samples apart
+        ("on every joint mid-move, where the joints turn fastest",
+         "np.abs(home_run.measured.times[np.abs(home_run.efforts).argmax(axis=0)]"
+         " - home_run.measured.times[np.abs(home_run.measured.velocities).argmax(axis=0)]).max()", (0.0, 0.1), None),
         ("is almost 0 once the arm holds still at home", "np.abs(home_run.efforts[-10:]).max()", (0.0, 0.06), None),
-        ("Similar, and usually a little larger on the bus",
-         "(run.tracking_error() / sim_run.tracking_error()).mean()", (0.9, 2.0), None),
+        # 12 runs on a busy machine: 0.90 to 1.04, larger than the simulator's in 5 of them
+        ("About the same: within about 10 % of the simulator's",
+         "(run.tracking_error() / sim_run.tracking_error()).mean()", (0.85, 1.15), None),
     ],
 }
 # names the expressions use, defined in the kernel after the lesson has run
