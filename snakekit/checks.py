@@ -49,9 +49,10 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
-from .handin import encode_results, fetch_cases
+from .handin import ReturnedNone, encode_results, fetch_cases
+from .watch import calls_to, forgot_return, returns_none
 
-__all__ = ["CheckFailed", "ShortcutError", "Exercise", "forbid", "quick", "waiting_for"]
+__all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "quick", "waiting_for"]
 
 _HERE = os.path.abspath(__file__)
 
@@ -127,8 +128,7 @@ class Exercise:
 
     def fail(self, message: str, hint: str = "", student_frames: str = ""):
         """Raise :class:`CheckFailed` with ``message`` (and a hint line)."""
-        text = f"{self.prefix}: {message}" + (f"\nHint: {hint}" if hint else "")
-        raise _shorten(CheckFailed(text, student_frames)) from None
+        raise _shorten(CheckFailed(CheckFailed.compose(f"{self.prefix}: {message}", hint), student_frames)) from None
 
     def __call__(self, fn, *args, where=None, **kwargs):
         """Run the student's ``fn(*args, **kwargs)``; turn a stub or a crash into a clear message."""
@@ -136,7 +136,8 @@ class Exercise:
             self.fail(f"`{self.name}` should be a function, got {type(fn).__name__}; "
                       "run the answer cell above (it defines it), then this check")
         try:
-            result = fn(*args, **kwargs)
+            with returns_none(_student_function(self.name)) as none:
+                result = fn(*args, **kwargs)
         except NotImplementedError as e:
             self.fail(f"`{self.name}` is not written yet (it raises NotImplementedError"
                       f"{': ' + str(e) if str(e) else ''}). Write it in the answer cell above, run that cell, "
@@ -147,11 +148,12 @@ class Exercise:
         except CheckFailed as e:
             raise _shorten(e) from None
         except Exception as e:
+            if none:   # the student's function gave back None, and the check stumbled on it
+                self.fail(forgot_return(self.name, self._call(args, where)))
             self.fail(f"`{self.name}` raised {type(e).__name__} when called with {self._call(args, where)}: {e}",
                       student_frames=_student_frames(e.__traceback__))
-        if result is None:
-            self.fail(f"`{self.name}` returned None (nothing) when called with {self._call(args, where)}: a function "
-                      "gives its result with a `return` line; is it missing, or does the function stop before it?")
+        if result is None or none:
+            self.fail(forgot_return(self.name, self._call(args, where)))
         return result
 
     @staticmethod
@@ -159,8 +161,12 @@ class Exercise:
         """The arguments of a call, as a message shows them."""
         if where is not None:
             return str(where)
+        def shown(a):   # an object without a readable repr (a ControlPanel, a robot) by its type
+            text = repr(a)
+            return f"a {type(a).__name__}" if text.startswith("<") and " at 0x" in text else text
+
         return ", ".join(_fmt_array(a) if isinstance(a, (np.ndarray, list, tuple)) else
-                         (getattr(a, "__name__", type(a).__name__) if callable(a) else repr(a)) for a in args)
+                         (getattr(a, "__name__", type(a).__name__) if callable(a) else shown(a)) for a in args)
 
     def raises(self, error: type, fn, *args, where=None, why: str = "") -> None:
         """Check that the student's ``fn(*args)`` raises ``error`` (a ``ValueError`` for a target
@@ -210,7 +216,7 @@ class Exercise:
         """
         exp = np.asarray(expected, dtype=float)
         if got is None:
-            self.fail(f"{what}{_where(where)} is None: the function returned nothing; give the result with `return`.")
+            self.fail(forgot_return(self.name, str(where) if where is not None else ""))
         if array and isinstance(got, (list, tuple)):
             self.fail(f"{what}{_where(where)} is a Python {type(got).__name__}, not a numpy array: return "
                       f"np.array(...) (the cells below use array operations on it, such as [:, 0]).")
@@ -279,11 +285,14 @@ class Exercise:
                 stack.enter_context(globals()["forbid"](*forbid, what=what or self.name))
             for args in cases:
                 try:
-                    results.append(fn(*args))
+                    with returns_none(_student_function(self.name)) as none:
+                        results.append(fn(*args))
                 except BaseException as e:  # noqa: BLE001 - a student's SystemExit is a result too
                     if isinstance(e, KeyboardInterrupt):
                         raise
                     results.append(e)
+                if none:   # named as the forgotten `return` it is, whatever the wrapper made of the None
+                    results[-1] = ReturnedNone(self.name)
         path = Path(folder) / f"{grade_id}.npz"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(encode_results(results))
@@ -292,6 +301,12 @@ class Exercise:
     def done(self, note: str = "") -> None:
         """Print that the checks passed (the last line of a test cell)."""
         print(f"exercise {self.number} {self.name}: {self.checked} check(s) passed" + (f"; {note}" if note else ""))
+
+
+def _student_function(name: str):
+    """The student's function ``name`` in the notebook's namespace (None outside a notebook)."""
+    fn = getattr(sys.modules.get("__main__"), name, None)
+    return fn if getattr(fn, "__code__", None) is not None else None
 
 
 def _shape_hint(arr: np.ndarray, exp: np.ndarray) -> str:
@@ -305,14 +320,32 @@ def _shape_hint(arr: np.ndarray, exp: np.ndarray) -> str:
     return f"return an array of shape {exp.shape}."
 
 
+class either(tuple):
+    """The answers one known mistake may give (a value of :meth:`Exercise.close`'s ``mistakes``):
+    its hint is shown when the result is near any of them.
+
+    >>> ex = Exercise("9.9", "halve")
+    >>> try:
+    ...     ex.close(2.0, 0.5, what="result", mistakes={"this is doubled or quadrupled.": either(1.0, 2.0)})
+    ... except CheckFailed as e:
+    ...     print(str(e).splitlines()[1])
+    Hint: this is doubled or quadrupled.
+    """
+
+    def __new__(cls, *values):
+        return super().__new__(cls, values)
+
+
 def _mistake_hint(arr, exp, unit, mistakes, *, tol: float) -> str:
     def near(a, b):
         b = np.asarray(b, dtype=float)
         return b.shape == a.shape and bool(np.allclose(a, b, rtol=1e-6, atol=tol))
 
     for hint, value in (mistakes or {}).items():
-        if near(arr, value):
+        if any(near(arr, v) for v in (value if isinstance(value, either) else (value,))):
             return hint
+    if arr.ndim == 2 and exp.ndim == 2 and near(arr, exp.T):   # a square array, built the other way round
+        return "rows and columns are swapped: this is the transpose of the expected array."
     units = set(unit) if isinstance(unit, (tuple, list)) else {unit}
     if np.abs(exp).max() > 1e-6:
         if "rad" in units and near(arr, np.degrees(exp)):

@@ -5,6 +5,7 @@
     snakekit bridge PORT [--listen HOST:PORT]   (serve the arm's serial port over TCP)
     snakekit generate [--check]      (the URDF and MJCF from the robot spec)
     snakekit check LESSON.ipynb      (run a lesson's exercise checks: one row per exercise)
+    snakekit progress [FOLDER]       (your exercises passed and points across the lessons, and what is next)
     snakekit start [...]             (check this system, then JupyterLab on the lessons: `make lab`)
     snakekit release ASSIGNMENT [--due TIME] [--late-penalty RULE]  (nbgrader's release, due date, penalty)
     snakekit collect ASSIGNMENT --from DOWNLOAD  (an LMS's download into the course; grader/README.md)
@@ -171,6 +172,12 @@ def _check(args, out) -> int:
         return 2
 
 
+def _progress(args, out) -> int:
+    from .lesson_progress import progress_report
+
+    return progress_report(args.folder, out=out)
+
+
 def _seconds(text: str) -> float:
     """``--timeout``'s value: seconds > 0, at most a day (nbclient takes 0 as "no limit")."""
     from .validate import number, quote
@@ -222,6 +229,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("generate", help="write the URDF and MJCF from the robot spec")
     p.add_argument("--check", action="store_true", help="only check that the committed files are current")
     p.set_defaults(func=_generate)
+    p = sub.add_parser("progress", help="your exercises passed and points across the lessons (from the saved "
+                       "notebooks), and what is next")
+    p.add_argument("folder", nargs="?", type=Path, default=None,
+                   help="the folder of the lesson notebooks (default: this one if it holds them, else notebooks/)")
+    p.set_defaults(func=_progress)
     p = sub.add_parser("check", help="run a lesson's exercise checks: one row per exercise, exit 1 on a failure")
     p.add_argument("notebook", help="the lesson notebook, e.g. notebooks/03_inverse_kinematics.ipynb")
     p.add_argument("--timeout", type=_seconds, default=300.0, help="seconds a cell may run (default: 300)")

@@ -127,6 +127,23 @@ class ViewerError(SnakekitError, RuntimeError):
     """The 3D viewer's server could not be started, or stopped answering, or is closed."""
 
 
+def wrap_lines(text: str, width: int) -> list[str]:
+    """``text`` in lines of at most ``width`` characters, each line broken at spaces (a longer
+    word, such as a file's path, is split); an indented line's continuations keep its indent.
+
+    >>> wrap_lines("tool x is 0.3 m, expected 0.2 m\\n  Hint: metres", 16)
+    ['tool x is 0.3 m,', 'expected 0.2 m', '  Hint: metres']
+    """
+    import textwrap
+
+    out = []
+    for line in text.split("\n"):
+        indent = line[:len(line) - len(line.lstrip(" "))]
+        out += textwrap.wrap(line, width, subsequent_indent=indent, break_on_hyphens=False,
+                             drop_whitespace=True) or [""]
+    return out
+
+
 class CheckFailed(SnakekitError, AssertionError):
     """A course check failed (:mod:`snakekit.checks`). The message says what, where and by how much.
 
@@ -142,13 +159,38 @@ class CheckFailed(SnakekitError, AssertionError):
     def __str__(self) -> str:
         return self.args[0] if self.args else ""
 
+    #: what separates a check's message from its hint (one line, after the message)
+    HINT = "\nHint: "
+
+    @classmethod
+    def compose(cls, message: str, hint: str = "") -> str:
+        """A check's text: the message, then its hint when there is one."""
+        return message + (f"{cls.HINT}{hint}" if hint else "")
+
+    @classmethod
+    def hint_of(cls, text: str) -> str:
+        """The hint of a check's text (what :meth:`compose` wrote), "" when it has none.
+
+        >>> CheckFailed.hint_of(CheckFailed.compose("tool x is 1 m, expected 0.3 m", "millimetres?"))
+        'millimetres?'
+        """
+        return text.partition(cls.HINT)[2].strip()
+
+    #: the widest line of a rendered check message: nbgrader's Validate cuts lines longer than
+    #: its ``Validator.width`` (90) less its indent (4) and a "..." (3); wrapped here, at word
+    #: boundaries, every line of a message arrives whole
+    WIDTH = 80
+
     def _render_traceback_(self) -> list[str]:
-        """What IPython shows instead of a traceback: the message (and the student's frames)."""
+        """What IPython shows instead of a traceback: the message (and the student's frames),
+        wrapped to :attr:`WIDTH` columns."""
         red, bold, reset = "\x1b[31m", "\x1b[1m", "\x1b[0m"
         title = "Shortcut" if isinstance(self, ShortcutError) else "Check failed"
-        lines = [f"{red}{bold}{title}{reset}: {self}"]
+        text = f"{title}: {self}"
         if self.student_frames:
-            lines += ["", "Where, in your code:", self.student_frames.rstrip()]
+            text += "\n\nWhere, in your code:\n" + self.student_frames.rstrip()
+        lines = wrap_lines(text, self.WIDTH)
+        lines[0] = f"{red}{bold}{title}{reset}" + lines[0][len(title):]
         return lines
 
 

@@ -78,12 +78,24 @@ def _recv(s, size: int) -> bytes:
     return b"".join(chunks)
 
 
+class ReturnedNone:
+    """A case at which the student's function ``name`` returned None (a forgotten ``return``),
+    whatever the code that called it made of that: handed in as ``"returned None from <name>"``."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+
 def encode_results(results) -> bytes:
     """One entry per case: ``<k>/value`` (an array), ``<k>/<name>`` (a dict's arrays), or
     ``<k>/__error__`` (an exception raised, ``"<type>: <message>"``; a result that is not numbers
-    is one too: ``"returned None"``, ``"returned str"``)."""
+    is one too: ``"returned None"``, ``"returned str"``; a :class:`ReturnedNone`:
+    ``"returned None from <name>"``)."""
     arrays = {"__cases__": np.array(len(results))}
     for k, r in enumerate(results):
+        if isinstance(r, ReturnedNone):
+            arrays[f"{k}/__error__"] = np.array(f"returned None from {r.name}")
+            continue
         if isinstance(r, BaseException):
             arrays[f"{k}/__error__"] = np.array(f"{type(r).__name__}: {str(r)[:500]}")
             continue

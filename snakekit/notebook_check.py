@@ -148,9 +148,9 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
                 got += points
                 rows.append((meta["grade_id"], points, "passed", ""))
         elif errors and not meta.get("solution"):
-            others.append(f"cell {index + 1}: {errors[0].ename}: {str(errors[0].evalue).strip()[:120]}")
+            others.append(f"cell {index + 1}: {errors[0].ename}: {str(errors[0].evalue).strip()}")
         elif errors:
-            others.append(f"answer cell {meta.get('grade_id')}: {errors[0].ename}: {str(errors[0].evalue).strip()[:120]}")
+            others.append(f"answer cell {meta.get('grade_id')}: {errors[0].ename}: {str(errors[0].evalue).strip()}")
     width = max(len(r[0]) for r in rows)
     print(f"{path.name}", file=out)
     for grade_id, points, status, message in rows:
@@ -159,8 +159,11 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
         for line in more:   # the rest of the message (its hint), under the first line
             print(f"  {'':<{width}}  {'':>2}     {'':<6}  {line}".rstrip(), file=out)
     print(f"  {len(rows) - failed} of {len(rows)} exercises passed, {got:g} of {total:g} points", file=out)
-    for line in others:
-        print(f"  also failed: {line}", file=out)
+    for message in others:   # whole: the first line after "also failed:", the rest under it
+        first, *more = message.splitlines()
+        print(f"  also failed: {first}", file=out)
+        for line in more:
+            print(f"               {line}".rstrip(), file=out)
     if stopped:
         print(f"  stopped: {stopped}", file=out)
     return 0 if failed == 0 else 1

@@ -243,7 +243,7 @@ class ControlPanel:
             self.execute_button.disabled = False
         self.last_run = run
         self.runs.append(run)
-        self._view("animate", run)
+        self._view("play", run)
         if self.show_plot:
             fig = plot_move(run, title=f"move {len(self.runs)}: commanded vs measured ({run.backend})")
             self.last_figure = fig

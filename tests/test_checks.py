@@ -27,8 +27,30 @@ def test_a_function_without_return_is_said_to_return_none():
         2 * x     # noqa: B018 - the slip: no return
 
     said = message(lambda: ex(double, 0.5))
-    assert said == ("exercise 9.1 double: `double` returned None (nothing) when called with 0.5: a function gives its "
-                    "result with a `return` line; is it missing, or does the function stop before it?")
+    assert said == ("exercise 9.1 double: double returned None when called with 0.5: did you forget `return`? A "
+                    "function gives its result with a `return` line; is it missing, or does the function stop before "
+                    "it?")
+
+
+def test_a_wrapper_that_stumbles_on_a_none_names_the_forgotten_return():
+    """A check that runs the student's function inside its own code (a fresh arm, a loop) says
+    "returned None", not the error its code met on the None."""
+    import __main__
+
+    ex = checks.Exercise("9.1", "double")
+
+    def double(x):
+        2 * x     # noqa: B018 - the slip: no return
+
+    def graded(x):
+        return {"value": double(x)[0]}     # TypeError on the None
+
+    __main__.double = double
+    try:
+        said = message(lambda: ex(graded, 0.5))
+    finally:
+        del __main__.double
+    assert said.startswith("exercise 9.1 double: double returned None when called with 0.5: did you forget `return`?")
 
 
 def test_a_list_where_an_array_is_asked_says_to_return_an_array():

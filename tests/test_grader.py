@@ -162,7 +162,9 @@ def test_values_scored_case_by_case_naming_the_call(xy_cases):
 
 def test_a_forgotten_return_and_an_error_are_said_in_plain_words(xy_cases):
     s = score_exercise("ex1_tool_xy_test", ["returned None"] * 4, xy_cases, 2.0)
-    assert s.score == 0 and "your function returned None: it has no `return`" in s.message
+    assert s.score == 0 and "tool_xy returned None: did you forget `return`?" in s.message
+    s = score_exercise("ex1_tool_xy_test", ["returned None from tool_xy"] * 4, xy_cases, 2.0)
+    assert s.score == 0 and "tool_xy returned None: did you forget `return`?" in s.message
     s = score_exercise("ex1_tool_xy_test", ["IndexError: index 5 is out of bounds"] * 4, xy_cases, 2.0)
     assert "your function raised IndexError: index 5 is out of bounds" in s.message
     s = score_exercise("ex1_tool_xy_test", ["ShortcutError: this exercise asks you to write it yourself"] * 4,

@@ -213,7 +213,7 @@ MISTAKES = {
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
          "    return float(np.hypot(x - target[0], y - target[1]))", "this looks like metres"),
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
-         "    d = 1000 * float(np.hypot(x - target[0], y - target[1]))", "returned None (nothing)", True),
+         "    d = 1000 * float(np.hypot(x - target[0], y - target[1]))", "returned None when called with", True),
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
          "    return 1000 * ((x - target[0]) ** 2 + (y - target[1]) ** 2)", "the squared distance"),
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
@@ -249,7 +249,7 @@ MISTAKES = {
         ("ex01_1_planar_fk_test", "def planar_fk(q):\n    return snakekit.tool_pose_2d(q)",
          "`snakekit.tool_pose_2d` was called", True),
         ("ex01_1_planar_fk_test", "def planar_fk(q):\n" + _FK +
-         "    np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), phi[-1]])", "returned None (nothing)", True),
+         "    np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi)), phi[-1]])", "returned None when called with", True),
         ("ex01_2_joint_positions_test", "def joint_positions(q):\n"
          "    steps = spec.lengths[:, None] * np.column_stack([np.cos(q), np.sin(q)])\n"
          "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])", "a joint angle is not accumulated"),
@@ -305,6 +305,10 @@ MISTAKES = {
          "    steps = L[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])\n"
          "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)]).T", "the transpose of the expected shape")],
     "02_jacobian": [
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
+         "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
+         "    return np.vstack([down(L * np.sin(phi)), down(L * np.cos(phi)), np.ones(len(q))])",
+         "the x row's sign is flipped"),
         ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
          "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
          "    return np.vstack([down(L * np.sin(phi)), down(-L * np.cos(phi)), np.ones(len(q))])",
@@ -462,7 +466,40 @@ MISTAKES = {
         ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
          "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
          "    if distance >= v * v / a:\n        return distance / v + v / a\n    return 2 * np.sqrt(distance / a)",
-         "take abs(distance)")],
+         "take abs(distance)"),
+        # the unit slips, each in an otherwise right answer
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
+         "    d = abs(distance)\n    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)",
+         "the velocity unit is 0.229 rev/min"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 2 * np.pi / 60\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
+         "    d = abs(distance)\n    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)",
+         "the velocity unit is 0.229 rev/min"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 * 2 * np.pi\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
+         "    d = abs(distance)\n    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)",
+         "the velocity unit is 0.229 rev/min"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 / 60\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
+         "    d = abs(distance)\n    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)",
+         "the velocity unit is 0.229 rev/min"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 214.577\n"
+         "    d = abs(distance)\n    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)",
+         "the acceleration unit is 214.577 rev/min^2"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 2 * np.pi / 3600\n"
+         "    d = abs(distance)\n    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)",
+         "the acceleration unit is 214.577 rev/min^2"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 214.577 / 3600\n"
+         "    d = abs(distance)\n    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)",
+         "the acceleration unit is 214.577 rev/min^2"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 214.577 * 2 * np.pi / 60\n"
+         "    d = abs(distance)\n    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)",
+         "the acceleration unit is 214.577 rev/min^2")],
     "06_coded_sweep": [
         ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(1, points + 1) / rate",
          "the times start at 1/rate"),
@@ -475,6 +512,12 @@ MISTAKES = {
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
          "    angle = amplitude * np.cos(2 * np.pi * sweeps * times / times[-1])\n"
          "    return np.repeat(angle[:, None], 5, axis=1)", "use sin"),
+        ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
+         "    angle = amplitude * np.cos(2 * np.pi * sweeps * times / times[-1])\n    angle[-1] = 0.0\n"
+         "    return np.repeat(angle[:, None], 5, axis=1)", "use sin"),
+        ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
+         "    angle = amplitude * np.sin(2 * np.pi * sweeps * times / times[-1])\n    angle[-1] = 0.0\n"
+         "    return np.repeat(angle[None, :], 5, axis=0)", "rows and columns are swapped"),
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
          "    angle = amplitude * np.sin(2 * np.pi * sweeps * times / times[-1])\n"
          "    return np.repeat(angle[:, None], 5, axis=1)", "the last row is not exactly home"),

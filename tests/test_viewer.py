@@ -157,6 +157,37 @@ def test_animation_replays_the_motion_at_real_speed(viewer):
     assert viewer.q == pytest.approx(tr.positions[-1])
 
 
+def test_play_holds_every_frame_of_a_run_at_its_time_in_the_saved_page(viewer, tmp_path):
+    """Each frame k of the animation is the run's measured pose at t0 + k / fps: every link where
+    forward kinematics puts it, read back from the page save_html writes."""
+    with snakekit.make_robot("sim") as robot:
+        run = robot.move_to([0.5, 0.2, -0.3, 0.0, 0.1], duration=1.0)
+    fps = 20.0
+    frames = viewer.play(run, fps=fps)
+    m = run.measured
+    assert frames == int(np.ceil(m.duration * fps - 1e-9)) + 1
+    page = viewer.save_html(tmp_path / "run.html").read_text()
+    blobs = re.findall(r'data:application/octet-binary;base64,([A-Za-z0-9+/=]+)"', page)
+    anim = [c for c in map(lambda b: umsgpack.unpackb(base64.b64decode(b)), blobs) if c["type"] == "set_animation"][-1]
+    clips = {a["path"]: a["clip"] for a in anim["animations"]}
+    times = m.times[0] + np.arange(frames) / fps
+    # the measured angles at those times, interpolated here joint by joint (not by the kit's sampling)
+    q = np.column_stack([np.interp(times, m.times, m.positions[:, j]) for j in range(5)])
+    for i in range(5):
+        clip = clips[f"/meshcat/snake/robot/link{i + 1}"]
+        assert clip["fps"] == fps
+        keys = next(t for t in clip["tracks"] if t["name"] == ".position")["keys"]
+        assert [k["time"] for k in keys] == list(range(frames))
+        want = np.array([snakekit.joint_frames(qk)[i][:3, 3] for qk in q])
+        assert np.abs(np.array([k["value"] for k in keys]) - want).max() < 1e-9, f"link{i + 1}"
+    assert viewer.q == pytest.approx(m.positions[-1])
+
+
+def test_play_says_what_it_takes(viewer):
+    with pytest.raises(snakekit.SnakekitError, match=r"play\(\) takes a snakekit Run or Trajectory .*got ndarray"):
+        viewer.play(np.zeros((10, 5)))
+
+
 def test_animate_a_run_draws_its_measured_tool_path(viewer):
     with snakekit.make_robot("sim") as robot:
         run = robot.move_to([0.5, 0.2, -0.3, 0.0, 0.1])

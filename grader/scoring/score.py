@@ -25,6 +25,7 @@ import numpy as np
 
 from snakekit.errors import SnakekitError
 from snakekit.handin import decode_results
+from snakekit.watch import forgot_return
 from snakekit.trajectory import Trajectory
 
 from grader.scoring import compare
@@ -133,15 +134,23 @@ def call(name: str, args) -> str:
     return f"{name}({', '.join(describe(a, 48) for a in args)})"
 
 
-def explain_error(text: str) -> str:
-    """What went wrong in the student's function at a case, in plain words."""
+def explain_error(text: str, name: str = "your function") -> str:
+    """What went wrong in the student's function ``name`` at a case, in plain words; a forgotten
+    ``return`` in the words the notebook's own check uses (:func:`snakekit.watch.forgot_return`).
+
+    >>> explain_error("returned None from task1", "graded_task1")[:52]
+    'task1 returned None: did you forget `return`? A func'
+    """
+    m = re.match(r"returned None from (\w+)$", text)
+    if m:
+        return forgot_return(m.group(1))
     m = re.match(r"returned (\w+)(?: for (\w+))?$", text)
     if m:
         what, part = m.groups()
-        where = f"the '{part}' of your result" if part else "your function"
         if what == "None":
-            return (f"{where} returned None: it has no `return` (or a path that reaches its end without one); "
-                    "return the result.")
+            return forgot_return(name) if not part else \
+                f"the '{part}' of the result of {name} is None: " + forgot_return(name).split(": ", 1)[1]
+        where = f"the '{part}' of your result" if part else "your function"
         return f"{where} returned a {what}, not numbers or an array."
     if text.startswith("ShortcutError:"):
         return text.split(":", 1)[1].strip()
@@ -168,7 +177,7 @@ def _raised_as_expected(fn, args, got, want: str) -> tuple[bool, str]:
     etype = want.split(":", 1)[0]
     if isinstance(got, str) and got.split(":", 1)[0] == etype:
         return True, ""
-    did = explain_error(got) if isinstance(got, str) else "your function returned a result"
+    did = explain_error(got, fn) if isinstance(got, str) else "your function returned a result"
     return False, f"{call(fn, args)} must raise {etype} (the exercise asks for it there); {did}"
 
 
@@ -204,7 +213,7 @@ def _score_values(gid, handin, expected: Expected, max_score) -> ExerciseScore:
         if isinstance(want, str):
             right, msg = _raised_as_expected(fn, args, got, want)
         elif isinstance(got, str):
-            right, msg = False, f"{call(fn, args)}: {explain_error(got)}"
+            right, msg = False, f"{call(fn, args)}: {explain_error(got, fn)}"
         elif rule is not None:  # judged by a property (grader.scoring.rules), not closeness
             right, msg = rule(args, got, tol)
             msg = f"{call(fn, args)}: {msg}" if msg else ""
@@ -296,7 +305,7 @@ def _score_motion(gid, handin, expected: Expected, max_score) -> ExerciseScore:
             continue
         try:
             if isinstance(got, str):
-                raise ValueError(explain_error(got))
+                raise ValueError(explain_error(got, fn))
             checks, c = _motion_checks(got, want, expected.kind, tol)
         except ValueError as e:
             rows.append((where, f"{where}: {e}"))

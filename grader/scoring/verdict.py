@@ -13,6 +13,8 @@ from pathlib import Path
 
 import nbformat
 
+from snakekit.errors import CheckFailed
+
 from grader.feedback import report as feedback
 from grader.scoring import rerun
 from grader.course.assignment import read_inside
@@ -108,6 +110,8 @@ class Verdicts:
                 if sc.status == "missing":
                     sc = dataclasses.replace(sc, message=why_missing(find_cell(executed.get(cell.notebook), gid),
                                                                      sc.message))
+                elif sc.score < sc.max_score:
+                    sc = with_local_hint(sc, find_cell(executed.get(cell.notebook), gid))
                 scores.append(sc)
             else:
                 scores.append(kernel_score(gid, cell, executed.get(cell.notebook)))
@@ -207,6 +211,26 @@ def kernel_score(gid, cell, nb) -> ExerciseScore:
         msg = (f"a hidden test failed ({ename}). Test your code on more cases than the visible checks use: "
                "other inputs, edge cases.")
     return ExerciseScore(gid, 0.0, cell.max_score, "scored", msg)
+
+
+def with_local_hint(sc: ExerciseScore, cell) -> ExerciseScore:
+    """``sc`` with the hint of the notebook's own check, when that check failed with one in the
+    graded run: the student reads the same hint graded as in the notebook.
+
+    >>> from nbformat.v4 import new_code_cell, new_output
+    >>> c = new_code_cell("ex.close(...)")
+    >>> c.outputs = [new_output("error", ename="CheckFailed", traceback=[],
+    ...              evalue="exercise 1.1 planar_fk: tool x is 331.5 m, expected 0.3315 m.\\nHint: millimetres?")]
+    >>> with_local_hint(ExerciseScore("ex01_1_planar_fk_test", 0.0, 3.0, "scored", "0 of 6 right."), c).message
+    '0 of 6 right. The check in your notebook adds: millimetres?'
+    """
+    err = next((o for o in (cell or {}).get("outputs", []) if o.get("output_type") == "error"), None)
+    if err is None or err.get("ename") not in ("CheckFailed", "ShortcutError"):
+        return sc
+    hint = CheckFailed.hint_of(feedback.neutral(str(err.get("evalue", "")), feedback.machine_paths()))
+    if not hint or hint in sc.message:
+        return sc
+    return dataclasses.replace(sc, message=f"{sc.message} The check in your notebook adds: {hint}")
 
 
 def stopped_cells(reported, executed: dict) -> dict[str, int]:

@@ -334,12 +334,14 @@ class Viewer:
 
     # --- playback --------------------------------------------------------------------------
 
-    def animate(self, motion, *, fps: float = 30.0, play: bool = True, repetitions: int = 1,
-                path: bool = True) -> int:
-        """Play a trajectory or a run back in the view, with meshcat's animation controls.
+    def play(self, motion, *, fps: float = 30.0, play: bool = True, repetitions: int = 1,
+             path: bool = True) -> int:
+        """Play a run or a trajectory back in the view, with meshcat's animation controls.
 
-        The controls (play, pause, reset, time scrubber, speed) are in the view's
-        "Open Controls" menu under "Animations". A run plays its measured motion.
+        The motion becomes a meshcat animation (every frame's link poses, by forward kinematics),
+        kept in the scene: replayed from the view's "Open Controls" menu under "Animations"
+        (play, pause, reset, time scrubber, speed), and in a page saved with :meth:`save_html`.
+        A run plays its measured motion, a trajectory its goals.
 
         Args:
             motion: a :class:`~snakekit.trajectory.Trajectory` or :class:`~snakekit.robot.Run`.
@@ -354,7 +356,8 @@ class Viewer:
         self._check_open()
         traj = motion.measured if isinstance(motion, Run) else motion
         if not isinstance(traj, Trajectory):
-            raise InputTypeError(f"animate() takes a snakekit Trajectory or Run, got {type(motion).__name__}")
+            raise InputTypeError(f"play() takes a snakekit Run or Trajectory (what robot.run, robot.move_to or "
+                                 f"snakekit.joint_trajectory give), got {type(motion).__name__}")
         if not fps > 0:
             raise ConfigurationError(f"fps must be > 0 [Hz], got {fps}")
         count = int(np.ceil(traj.duration * fps - 1e-9)) + 1  # the last frame holds the end pose
@@ -372,6 +375,8 @@ class Viewer:
         # Where the arm ends is where later show() calls start from.
         self.q = np.array(qs[-1])
         return count
+
+    animate = play   # its earlier name
 
     # --- export ----------------------------------------------------------------------------
 
