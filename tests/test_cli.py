@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -92,7 +93,13 @@ def test_emulator_command_prints_a_port_the_sdk_can_use():
         assert port.openPort() and port.setBaudRate(4_000_000)
         packet = sdk.PacketHandler(2.0)
         for dxl_id in (1, 2, 3, 4, 5):
-            model, result, error = packet.ping(port, dxl_id)
+            # the SDK waits 34 ms for a reply: on a busy machine the emulator's process may not be
+            # scheduled within it, so a ping is sent again (up to 10 s: a bound for a hang)
+            deadline = time.monotonic() + 10
+            while True:
+                model, result, error = packet.ping(port, dxl_id)
+                if result != sdk.COMM_RX_TIMEOUT or time.monotonic() > deadline:
+                    break
             assert (model, result, error) == (30, sdk.COMM_SUCCESS, 0)
         port.closePort()
     finally:
