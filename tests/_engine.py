@@ -14,9 +14,12 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import IN_CI, need, need_program
+from tests.conftest import ENGINE_GROUP, IN_CI, need, need_program
 
 ROOT = Path(__file__).resolve().parents[1]
+#: A test that runs a script here: one such test at a time in a parallel run (the scripts also
+#: take the engine's lock, so two runs of the suite on one machine wait for each other).
+on_engine = pytest.mark.xdist_group(ENGINE_GROUP)
 
 
 def run_on_engine(script: str, capsys, *, what: str, show: tuple[str, ...], timeout_min: int,

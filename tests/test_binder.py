@@ -10,9 +10,12 @@ import os
 import re
 from pathlib import Path
 
-from tests._engine import run_on_engine
+import pytest
+
+from tests._engine import on_engine, run_on_engine
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.system  # the Binder image, on the private Docker engine: not in `make test-quick`
 
 
 def test_binder_builds_the_containers_dockerfile():
@@ -30,6 +33,7 @@ def test_binder_builds_the_containers_dockerfile():
     assert not others, others
 
 
+@on_engine
 def test_binder_image_builds_with_repo2docker_and_opens_a_lesson(capsys):
     """binder/test.sh: repo2docker --no-run, then the image as Binder runs it: /lab, the lessons, a cell run."""
     out = run_on_engine("binder/test.sh", capsys, what="the Binder test", timeout_min=30,

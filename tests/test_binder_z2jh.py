@@ -22,6 +22,7 @@ import pytest
 from tests.conftest import need
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.system  # the hub's Kubernetes configuration: not in `make test-quick`
 HUB = ROOT / "docker/hub"
 CHART = HUB / "z2jh-4.4.0"
 

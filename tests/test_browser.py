@@ -29,6 +29,7 @@ import pytest
 from tests.conftest import free_port, need, need_program
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.system  # JupyterLab in headless Chromium: not in `make test-quick`
 ARTIFACTS = ROOT / "artifacts"
 LESSON = "00_meet_the_arm.ipynb"
 # What a student writes for exercise 0.1 (its answer cell, as handed out, raises NotImplementedError).

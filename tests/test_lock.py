@@ -4,11 +4,13 @@ import re
 import tomllib
 from pathlib import Path
 
+import pytest
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 from packaging.version import Version
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.system  # the lock against pyproject.toml: not in `make test-quick`
 # "name==version \" or, for a package only some systems need, "name==version ; marker \"
 ENTRY = re.compile(r"^([A-Za-z0-9_.\-]+)==([^\s;]+)(?: ; ([^\\\n]+))? \\$", re.M)
 

@@ -17,6 +17,7 @@ from snakekit import host
 from tests.conftest import IN_CI, need
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.system  # Linux, macOS and Windows: not in `make test-quick`
 
 
 def as_if_on(tmp_path: Path, platform: str, machine: str, **env: str) -> dict:
