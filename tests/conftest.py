@@ -131,6 +131,7 @@ def pytest_collection_modifyitems(config, items):
 
             item._id = NodeId.parse(f"{item.nodeid}@{group}")
 
+
 # --- every run's durations, in artifacts/test-durations.txt --------------------------------------
 # Every phase of every test, the longest first (what --durations=0 prints), with the run's wall
 # time: kept where the terminal's 30 slowest scroll away. Written by the main process (with xdist,
