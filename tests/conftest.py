@@ -59,7 +59,7 @@ def free_port() -> int:
 # A test module whose module-scoped fixture builds something expensive (a graded class, an
 # instructor run) runs on one worker, so the fixture is built once: its tests that use such a
 # fixture form one group (one per parameter of a parametrized one). The tests that start the
-# private Docker engine form the group ENGINE_GROUP (tests/_engine.py): one engine at a time.
+# private Docker engine form the group ENGINE_GROUP (tests/system/_engine.py): one engine at a time.
 # Groups start before the single tests, the longest first (by the last run's durations when
 # artifacts/test-durations.txt has them), so no long group starts last.
 
