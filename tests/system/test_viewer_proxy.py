@@ -26,7 +26,9 @@ import pytest
 
 from tests.conftest import need, need_program
 from tests.system.test_browser import (ARTIFACTS, CHROMIUM_FLAGS, KERNEL_IDLE, ROOT, JupyterLab, changed_fraction,
-                                drag_slider, pixels, port_open, steady_screenshot)
+                                       drag_slider, pixels, port_open, steady_screenshot)
+
+pytestmark = pytest.mark.system  # the 3D view through JupyterLab, in headless Chromium: not in `make test-quick`
 
 BASE_URL = "/user/ana/"
 NOTEBOOK = "proxied_view.ipynb"
