@@ -9,7 +9,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # MUJOCO_GL: the kit picks it for each system when it is imported (snakekit.host): EGL on Linux,
 # MuJoCo's own default on macOS. A MUJOCO_GL set in the environment is kept.
 
-.PHONY: setup lab test bench lock generate student check-generated clean references
+.PHONY: setup lab test test-quick bench lock generate student check-generated clean references
 
 setup:
 	@tools/setup
@@ -20,8 +20,20 @@ setup:
 lab: setup
 	$(VENV)/bin/snakekit start --ip=$(LAB_IP) --port=$(LAB_PORT)
 
+# The suite runs in parallel (pytest-xdist): one worker more than the cores, since most of its
+# time is spent waiting on subprocesses, the Docker engine and browsers (TEST_WORKERS=0: one
+# process). Tests that share an expensive module fixture, or the Docker engine, stay on one
+# worker (tests/conftest.py). Each run's durations: artifacts/test-durations.txt.
+TEST_WORKERS ?= $(shell echo $$(( $$(getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1) + 1 )))
+PARALLEL := -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder
+
 test: setup
-	$(PY) -m pytest -q $(PYTEST_ARGS)
+	$(PY) -m pytest -q $(PARALLEL) $(PYTEST_ARGS)
+
+# The contributor's loop: everything but the `system` tests (Docker, Binder, the hub, browsers,
+# the lock's resolution, other platforms; tests/system/).
+test-quick: setup
+	$(PY) -m pytest -q $(PARALLEL) -m "not system" $(PYTEST_ARGS)
 
 # Every benchmark under bench/, into bench/RESULTS.md and its plots (BENCH_ARGS: e.g. --only sim).
 bench: setup

@@ -7,7 +7,7 @@
 # teacher's tools in the page either) and runs that cell from the page
 # (screenshot in artifacts/).
 #
-#   binder/test.sh            (as root; tests/test_binder.py runs it within `make test`)
+#   binder/test.sh            (as root; tests/system/test_binder.py runs it within `make test`)
 #
 # repo2docker finds binder/Dockerfile, a link to docker/Dockerfile (its Dockerfile route), so
 # Binder builds the same image as `docker compose build lab`; its buildpacks (environment.yml,

@@ -2,7 +2,7 @@
 # The container test: a real Docker engine (Debian's docker.io) builds snakekit's image on a
 # base made here with debootstrap, then runs the compose services and checks what users meet.
 #
-#   docker/test.sh            (as root; tests/test_docker.py runs it within `make test`)
+#   docker/test.sh            (as root; tests/system/test_docker.py runs it within `make test`)
 #
 # Steps: install docker.io, debootstrap (apt) when missing; start dockerd with its own data
 # root and socket; make debian:bookworm-slim with debootstrap + docker import (cached);

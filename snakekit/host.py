@@ -9,7 +9,7 @@ One place decides what differs between Linux, macOS and Windows:
 - :func:`missing`: what this system lacks to run the lessons natively, each with what to
   install on this system. ``snakekit start`` (what ``make lab`` runs) prints them.
 
-The platform table in README.md says which system runs what; ``tests/test_platform.py``
+The platform table in README.md says which system runs what; ``tests/system/test_platform.py``
 keeps it true. Only the standard library is used here, so the checks run even when the
 locked packages are not installed.
 """

@@ -11,6 +11,7 @@ import os
 import shutil
 import signal
 import socket
+import time
 
 import pytest
 
@@ -52,3 +53,113 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+# --- the suite in parallel (`make test`: pytest-xdist, --dist loadgroup) ----------------------------
+# A test module whose module-scoped fixture builds something expensive (a graded class, an
+# instructor run) runs on one worker, so the fixture is built once: its tests that use such a
+# fixture form one group (one per parameter of a parametrized one). The tests that start the
+# private Docker engine form the group ENGINE_GROUP (tests/system/_engine.py): one engine at a time.
+# Groups start before the single tests, the longest first (by the last run's durations when
+# artifacts/test-durations.txt has them), so no long group starts last.
+
+#: The xdist group of the tests that run a script on the private Docker engine (docker/engine.sh).
+ENGINE_GROUP = "docker-engine"
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DURATIONS = os.path.join(ROOT, "artifacts", "test-durations.txt")
+
+
+def _module_group(item) -> str | None:
+    """The group of a test that uses a module-scoped fixture of its own module, else None."""
+    info = getattr(item, "_fixtureinfo", None)
+    module = item.nodeid.split("::")[0]
+    if info is None:
+        return None
+    params = getattr(getattr(item, "callspec", None), "params", {})
+    keys = []
+    for name in info.names_closure:
+        for fixturedef in info.name2fixturedefs.get(name, ()):
+            if fixturedef.scope == "module" and fixturedef.baseid == module:
+                keys.append(f"{name}={params[name]}" if name in params else "")
+    if not keys:
+        return None
+    # no brackets: xdist reads the group after the last "@" only when no "]" follows it
+    return ":".join([module, *sorted(k for k in set(keys) if k)])
+
+
+def _last_durations() -> dict[str, float]:
+    """Seconds per test (setup + call + teardown) from the last run's artifacts/test-durations.txt."""
+    seconds: dict[str, float] = {}
+    try:
+        with open(DURATIONS) as f:
+            for line in f:
+                parts = line.rstrip("\n").split(None, 2)
+                if len(parts) == 3 and parts[0].endswith("s") and parts[1] in ("setup", "call", "teardown"):
+                    nodeid = parts[2].split("@")[0]
+                    seconds[nodeid] = seconds.get(nodeid, 0.0) + float(parts[0][:-1])
+    except (OSError, ValueError):
+        pass
+    return seconds
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the xdist_group marks
+def pytest_collection_modifyitems(config, items):
+    groups = {}
+    for item in items:
+        group = _module_group(item)
+        if group and not any(m.args[:1] for m in item.iter_markers("xdist_group")):
+            item.add_marker(pytest.mark.xdist_group(group))
+        names = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+                        for m in item.iter_markers("xdist_group")})
+        if names:
+            groups[item] = "_".join(names)
+    if not config.getoption("loadgroup", False):  # set on xdist's workers under --dist loadgroup
+        return
+    last = _last_durations()
+    weight: dict[str, float] = {}
+    for item, group in groups.items():
+        weight[group] = weight.get(group, 0.0) + last.get(item.nodeid, 1.0)
+    weight[ENGINE_GROUP] = float("inf") if not last else weight.get(ENGINE_GROUP, 0.0)
+    # stable: inside a group and among the single tests the order of the files stays
+    items.sort(key=lambda item: (item not in groups, -weight.get(groups.get(item), 0.0)))
+    for item, group in groups.items():
+        # xdist sends a group's tests to one worker by the "@group" it appends to their node ids;
+        # pytest 9.2 keeps the id in item._id, where xdist 3.8 does not write it (pytest-xdist
+        # issue 1386): written here, the same suffix xdist would write
+        if hasattr(item, "_id") and "@" not in item.nodeid:
+            from _pytest.nodeid import NodeId
+
+            item._id = NodeId.parse(f"{item.nodeid}@{group}")
+
+
+# --- every run's durations, in artifacts/test-durations.txt --------------------------------------
+# Every phase of every test, the longest first (what --durations=0 prints), with the run's wall
+# time: kept where the terminal's 30 slowest scroll away. Written by the main process (with xdist,
+# the workers' reports reach it); a run that ran no test (--collect-only) leaves the last file.
+
+_reports: list[tuple[float, str, str, str]] = []
+_started = time.time()
+
+
+def pytest_runtest_logreport(report):
+    _reports.append((report.duration, report.when, report.nodeid, report.outcome))
+
+
+def pytest_sessionfinish(session, exitstatus):
+    if hasattr(session.config, "workerinput") or not _reports:
+        return
+    outcomes: dict[str, int] = {}
+    for _, when, _, outcome in _reports:
+        if when == "call" or outcome != "passed":
+            outcomes[outcome] = outcomes.get(outcome, 0) + 1
+    workers = getattr(session.config.option, "numprocesses", None)
+    lines = [f"# pytest {' '.join(session.config.invocation_params.args)}",
+             f"# {time.strftime('%Y-%m-%d %H:%M:%S %Z', time.localtime(_started))}: {time.time() - _started:.1f} s wall, "
+             f"exit {int(exitstatus)}, {', '.join(f'{n} {o}' for o, n in sorted(outcomes.items()))}"
+             f"{f', {workers} workers' if workers else ''}",
+             "# seconds phase test"]
+    lines += [f"{d:.2f}s {when:<8} {nodeid}" for d, when, nodeid, _ in sorted(_reports, key=lambda r: -r[0])]
+    os.makedirs(os.path.dirname(DURATIONS), exist_ok=True)
+    with open(DURATIONS + ".tmp", "w") as f:
+        f.write("\n".join(lines) + "\n")
+    os.replace(DURATIONS + ".tmp", DURATIONS)

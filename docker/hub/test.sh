@@ -2,7 +2,7 @@
 # The hub test: the class's JupyterHub (docker/hub/up) on the private engine of
 # docker/engine.sh, and a week of the class through it (docker/hub/loop.py).
 #
-#   docker/hub/test.sh            (as root; tests/test_hub.py runs it within `make test`)
+#   docker/hub/test.sh            (as root; tests/system/test_hub.py runs it within `make test`)
 #
 # Steps: the engine (its own data root, the same cache as docker/test.sh, so the image that
 # test built is reused); the base and snakekit's image (built only when missing or stale:

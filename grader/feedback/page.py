@@ -4,7 +4,7 @@ nbconvert's ``HTMLExporter.from_notebook_node`` ends by parsing the whole page w
 BeautifulSoup and writing it out again, only to give every image without one an ``alt`` text
 and the cells' input and output areas a ``tabindex`` (accessibility): about 0.3 s a page, most of
 a feedback page's time. :func:`html_page` adds the same two attributes to the template's tags by
-pattern instead; parsed, the page is nbconvert's (``tests/test_grader.py`` checks it).
+pattern instead; parsed, the page is nbconvert's (``tests/grader/test_grader.py`` checks it).
 """
 
 from __future__ import annotations

@@ -1,0 +1,310 @@
+"""What a student and a TA see after grading: the notebook's deadline, offline pages, nbgrader's own buttons.
+
+One small batch of the test course (a good submission, an edited test cell, an infinite loop,
+a widget and a library error) graded in-process; then nbgrader's ``generate_feedback`` on it,
+a lesson's page opened in headless Chromium with the network off, and formgrader's Autograde
+and Generate Feedback buttons pressed in Chromium on a tampered submission.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+
+from conftest import need, need_program
+from grader_corpus import _edit
+from grader_helpers import ASSIGNMENT, FIXTURE, GOOD, REFERENCES, make_course, submit
+from tests.system.test_browser import CHROMIUM_FLAGS, JupyterLab
+
+REPO = Path(__file__).resolve().parents[2]
+ARTIFACTS = REPO / "artifacts"
+TIMEOUT = 20  # each notebook's wall clock [s]: a bound for a hang, 5x what one of these notebooks needs
+LOOP = {"ex1_tool_xy": 'print("before the loop")\n' + GOOD["ex1_tool_xy"], "ex2_sweep": "while True:\n    pass"}
+EXTRAS = {"ex1_tool_xy": "import ipywidgets\ndisplay(ipywidgets.VBox([ipywidgets.IntSlider(description='q1')]))\n"
+                         + GOOD["ex1_tool_xy"],
+          "ex3_peak_speed": "import numpy\nnumpy.linalg.inv(numpy.zeros((2, 2)))"}
+
+
+def _use_safe_grading(course: Path) -> None:
+    """The course's nbgrader config, as course/nbgrader_config.py does it, with the test course's references."""
+    with open(course / "nbgrader_config.py", "a") as f:
+        f.write("\nfrom grader.commands.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n"
+                f"c.SnakekitGrade.references = {str(REFERENCES)!r}\nc.SnakekitGrade.timeout = {TIMEOUT}\n")
+
+
+def _page(course: Path, student: str) -> str:
+    return (course / "feedback" / student / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
+
+
+def _secret_lines() -> set[str]:
+    """What no page may show: the instructor's solution lines that no student here wrote (there
+    are no hidden tests any more), and the lines of the hidden cases' module."""
+    src = nbformat.read(FIXTURE / "source" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
+    written = {line.strip() for v in GOOD.values() for line in v.splitlines()}
+    lines = {line.strip() for c in src.cells if c.metadata.get("nbgrader", {}).get("solution")
+             for line in c.source.splitlines() if "=" in line and line.strip() not in written}
+    lines |= {line.strip() for line in (FIXTURE / "cases" / f"{ASSIGNMENT}.py").read_text().splitlines()
+              if line.strip().startswith(("def ", "rate =", "points =", "return"))}
+    assert "angle = amplitude * np.sin(2 * np.pi * t / (t[-1] / sweeps))" in lines
+    return lines
+
+
+def _loads_nothing(page: str) -> None:
+    assert "http" not in page  # no address at all: nothing to load, nothing to follow
+    assert not re.search(r"<(script|link|iframe|img)[^>]+(src|href)=[\"'](?!data:)", page)
+
+
+@pytest.fixture(scope="module")
+def graded(tmp_path_factory):
+    need_program("unshare")
+    from grader.batch import INSTRUCTOR, Grader
+    from grader.sandbox.runner import Runner
+
+    course = make_course(tmp_path_factory.mktemp("feedback"))
+    _use_safe_grading(course)
+    submit(course, "alice")
+    submit(course, "edited", edit=_edit)
+    submit(course, "loop", LOOP)
+    submit(course, "extras", EXTRAS)
+    submit(course, "flaky")  # a right submission whose first run the machine stalls (below)
+    grader = Grader(course, ASSIGNMENT, jobs=2, timeout=TIMEOUT, references=REFERENCES)
+    stage, first = Runner.stage, set()
+
+    def stalled_once(self, student, src, nbs, tampered):
+        """flaky's first run, and the instructor notebook's, stall in their first answer cell as a
+        stuck machine would; their second runs go as handed in."""
+        work = stage(self, student, src, nbs, tampered)
+        if student in ("flaky", INSTRUCTOR) and student not in first:
+            first.add(student)
+            for name, nb in nbs.items():
+                nb = nbformat.from_dict(copy.deepcopy(nb))
+                cell = next(c for c in nb.cells if c.metadata.get("nbgrader", {}).get("solution"))
+                cell.source = "import time\ntime.sleep(10**6)\n" + cell.source
+                nbformat.write(nb, work / "course" / "submitted" / student / ASSIGNMENT / f"{name}.ipynb")
+        return work
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Runner, "stage", stalled_once)
+        results = {r.student: r for r in grader.run()}
+    assert first == {"flaky", INSTRUCTOR}, first
+
+    return course, results
+
+
+def test_an_infinite_loop_costs_the_batch_only_twice_the_notebooks_timeout(graded):
+    _, results = graded
+    loop = results["loop"]
+    nb = nbformat.read(graded[0] / "submitted" / "loop" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", 4)
+    cell = 1 + next(i for i, c in enumerate(nb.cells) if "while True" in c.source)  # counted from the top, as a TA would
+    assert (loop.status, loop.detail) == ("timeout", f"the notebook ran longer than {TIMEOUT} s and was stopped in cell "
+                                          f"{cell} (in both of its runs: a notebook stopped by the clock is run once "
+                                          "more before it counts)")
+    # each of its two sandboxes was stopped by the notebook's clock (the detail above says so; the
+    # backstop, TIMEOUT + 30 s, or one limit per cell would say otherwise): at least TIMEOUT s each
+    assert loop.wall >= 2 * TIMEOUT, loop.wall
+    assert [(e.grade_id, e.score) for e in loop.exercises] == [
+        ("ex1_tool_xy_test", 2.0), ("ex2_sweep_test", 0.0), ("ex3_peak_speed_test", 0.0)]
+
+
+def test_a_notebook_the_machine_stalled_once_is_graded_on_its_second_run(graded):
+    """(The instructor notebook's first run, which gives the batch its expected results, stalled too.)"""
+    course, results = graded
+    flaky, alice = results["flaky"], results["alice"]
+    assert (flaky.status, flaky.score) == ("graded", alice.score) and alice.score == alice.max_score
+    assert flaky.detail == "graded on its second run: the first was stopped by the clock, so it ran once more from the start"
+    assert flaky.wall >= TIMEOUT, flaky.wall   # the stalled run, then the right one
+    page = re.sub(r"<[^>]+>", "", _page(course, "flaky"))
+    assert "graded on its second run" in page and "stopped here" not in page and "time.sleep" not in page
+
+
+def test_a_stopped_notebooks_page_keeps_its_outputs_up_to_the_stopped_cell(graded):
+    course, _ = graded
+    page = _page(course, "loop")
+    text = re.sub(r"<[^>]+>", "", page)  # as read (the code is highlighted span by span)
+    before = text.index("before the loop")  # printed by the cell before the loop
+    note = text.index(f"stopped here: the notebook ran longer than {TIMEOUT} s")
+    loop_cell = text.index("while True")
+    assert before < loop_cell < note  # the note follows the cell that was stopped
+    assert page.count("stopped here") == 1
+    assert "Grader: ex1_tool_xy_test: 2 / 2 points" in page
+    # the test cell after it never ran: the student is told why
+    assert "Grader: ex2_sweep_test: 0 / 4 points" in page and "nothing was handed in" in page
+    ran = nbformat.read(course / "autograded" / "loop" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
+    stopped = [i for i, c in enumerate(ran.cells) if c.cell_type == "code" and "while True" in c.source][0]
+    after = [c for c in ran.cells[stopped + 1:] if c.cell_type == "code"]
+    assert after and all(c.get("execution_count") is None for c in after)
+    # nothing of the kernel's after the stop: only the grader's verdicts, which the TA's copy shows at each test cell
+    assert all("snakekit_grader" in o.get("metadata", {}) for c in after for o in c.get("outputs", []))
+
+
+def test_no_feedback_page_loads_anything_from_the_network(graded):
+    course, _ = graded
+    pages = sorted((course / "feedback").glob(f"*/{ASSIGNMENT}/*.html"))
+    assert len(pages) == 5
+    for page in pages:
+        _loads_nothing(page.read_text())
+
+
+def test_a_widget_is_one_line_and_no_machine_path_is_shown(graded):
+    course, _ = graded
+    page = _page(course, "extras")
+    assert "[an interactive widget (VBox): it works in the running notebook, not in this page]" in page
+    assert "VBox(children" not in page and "IntSlider(" not in page
+    assert "LinAlgError" in page and "&lt;site-packages&gt;/numpy/linalg/" in page  # the traceback, neutral paths
+    for path in (sys.prefix, str(REPO), "/tmp/snakekit-grade-", str(course), os.path.expanduser("~") + "/"):
+        assert path not in page, path
+
+
+def test_nbgrader_generate_feedback_writes_the_graders_pages_with_the_tas_scores(graded):
+    course, _ = graded
+    from nbgrader.api import Gradebook
+
+    written = {s: _page(course, s) for s in ("alice", "edited", "loop", "extras")}
+    r = subprocess.run([sys.executable, "-m", "nbgrader", "generate_feedback", ASSIGNMENT, "--force"], cwd=course,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert {s: _page(course, s) for s in written} == written  # nbgrader's command writes the same safe pages
+
+    # a TA corrects a score and comments in the gradebook (as formgrader does), then regenerates
+    with Gradebook(f"sqlite:///{course / 'gradebook.db'}", "snakekit-test-course") as gb:
+        gb.find_grade("ex2_sweep_test", ASSIGNMENT, ASSIGNMENT, "edited").manual_score = 1.5
+        gb.find_comment("ex2_sweep", ASSIGNMENT, ASSIGNMENT, "edited").manual_comment = "Put the check back."
+        gb.db.commit()
+    r = subprocess.run([sys.executable, "-m", "nbgrader", "generate_feedback", ASSIGNMENT, "--student", "edited",
+                        "--force"], cwd=course, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    page = _page(course, "edited")
+    assert "Score: <strong>4.5 / 7</strong> (tests tampered)" in page  # 3 from the grader + 1.5 by hand
+    assert "Grader: ex2_sweep_test: 1.5 / 4 points" in page
+    assert "Your teacher set the points to 1.5 (the grader gave 0)" in page
+    assert "Comment from your teacher:</strong> Put the check back." in page
+    assert "BEGIN HIDDEN TESTS" not in page and not [line for line in _secret_lines() if line in page]
+    _loads_nothing(page)
+
+
+def test_a_page_opened_offline_in_chromium_shows_typeset_math():
+    sync_api = need("playwright.sync_api")
+    chromium = need_program("chromium")
+    from grader.feedback import report as feedback
+    from grader.scoring.verdict import SubmissionResult
+
+    ARTIFACTS.mkdir(exist_ok=True)
+    lesson = "01_forward_kinematics"
+    nb = nbformat.read(REPO / "course" / "source" / lesson / f"{lesson}.ipynb", as_version=4)
+    tex = [m for c in nb.cells if c.cell_type == "markdown" for m in re.findall(r"\$\$.+?\$\$|\$[^$\n]+\$", c.source)]
+    assert len(tex) > 20
+    result = SubmissionResult("ann", lesson, 8.0, 8.0, "graded")
+    path = feedback.write_html(feedback.build(nb, student="ann", assignment=lesson, result=result, test_sources={}),
+                               ARTIFACTS / "feedback_offline_math.html")
+    _loads_nothing(path.read_text())
+    requested = []
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_FLAGS)
+        try:
+            context = browser.new_context(offline=True, viewport={"width": 1200, "height": 900})
+            context.route("**/*", lambda route: (requested.append(route.request.url),
+                                                 route.continue_() if route.request.url.startswith(("file:", "data:"))
+                                                 else route.abort()))
+            page = context.new_page()
+            page.goto(path.as_uri(), wait_until="load")
+            sizes = page.evaluate("() => [...document.querySelectorAll('.jp-MarkdownCell math')].map(m => {"
+                                  " const r = m.getBoundingClientRect(); return [r.width, r.height]; })")
+            text = page.evaluate("() => document.body.innerText")
+            page.locator("math[display='block']").first.scroll_into_view_if_needed()
+            page.screenshot(path=str(ARTIFACTS / "feedback_offline_math.png"))
+        finally:
+            browser.close()
+    assert [u for u in requested if not u.startswith(("file:", "data:"))] == []
+    assert len(sizes) == len(tex), (len(sizes), len(tex))
+    assert all(w > 0 and h > 0 for w, h in sizes)  # laid out as math by the browser
+    assert "$" not in text and "\\frac" not in text and "\\sum" not in text  # no raw TeX left
+
+
+# --- formgrader's buttons, pressed in Chromium ------------------------------------------------
+
+
+def _press(page, student: str, button: str, done: str):
+    row = page.locator("table tbody tr", has=page.locator("td.student-id", has_text=student))
+    row.locator(f"td.{button} a").click()
+    modal = page.locator("#success-modal, #error-modal").first
+    modal.wait_for(state="visible", timeout=300_000)
+    text = modal.text_content()  # the log too, folded away in the dialog
+    assert modal.get_attribute("id") == "success-modal", text
+    assert done in text, text
+    modal.locator(".modal-footer button").first.click()
+    modal.wait_for(state="detached", timeout=10_000)
+    return text
+
+
+def test_formgraders_autograde_and_feedback_buttons_give_the_graders_results(tmp_path):
+    need_program("unshare")
+    sync_api = need("playwright.sync_api")
+    chromium = need_program("chromium")
+    from nbgrader.api import Gradebook
+
+    course = make_course(tmp_path)
+    _use_safe_grading(course)
+    submit(course, "edited", edit=_edit)  # ex2's test cell replaced: nbgrader alone gives it 7 / 7
+    home = tmp_path / "home"
+    home.mkdir()
+    server = JupyterLab(course, home)  # in the course folder, as a TA starts it: formgrader reads its config
+    blocked = []
+    try:
+        with sync_api.sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_FLAGS)
+            try:
+                context = browser.new_context(viewport={"width": 1400, "height": 900},
+                                              extra_http_headers={"Authorization": f"token {server.token}"})
+                context.route("**/*", lambda route: route.continue_() if route.request.url.startswith(server.url)
+                              else (blocked.append(route.request.url), route.abort()))
+                page = context.new_page()
+                page.goto(f"{server.url}/formgrader/manage_submissions/{ASSIGNMENT}")
+                page.locator("td.student-id", has_text="edited").wait_for(timeout=60_000)
+                log = _press(page, "edited", "autograde", f"Successfully autograded '{ASSIGNMENT}' for student 'edited'")
+                assert "tests tampered" in log
+                score = page.locator("table tbody tr", has=page.locator("td.student-id", has_text="edited"))
+                page.wait_for_function("() => [...document.querySelectorAll('td.score')].some(td => "
+                                       "td.textContent.trim() === '3 / 7')", timeout=30_000)
+                assert score.locator("td.score").inner_text().strip() == "3 / 7"
+                page.screenshot(path=str(tmp_path / "formgrader_autograded.png"))
+
+                # the TA sets a score by hand in formgrader (its grade API, as its score box does)
+                page.evaluate("""async ([assignment]) => {
+                    const headers = {'Content-Type': 'application/json'};  // the token header authenticates
+                    const nbs = await (await fetch(base_url + '/formgrader/api/submitted_notebooks/' + assignment + '/'
+                                                   + assignment, {headers})).json();
+                    const nb = nbs.find(n => n.student === 'edited');
+                    const grades = await (await fetch(base_url + '/formgrader/api/grades?submission_id=' + nb.id,
+                                                      {headers})).json();
+                    const g = grades.find(g => g.name === 'ex2_sweep_test');
+                    await fetch(base_url + '/formgrader/api/grade/' + g.id,
+                                {method: 'PUT', headers, body: JSON.stringify({manual_score: 2})});
+                }""", [ASSIGNMENT])
+                _press(page, "edited", "generate-feedback",
+                       f"Successfully generated feedback for '{ASSIGNMENT}' for student 'edited'")
+            finally:
+                browser.close()
+    finally:
+        server.stop()
+    assert blocked == []
+    with Gradebook(f"sqlite:///{course / 'gradebook.db'}", "snakekit-test-course") as gb:
+        sub = gb.find_submission(ASSIGNMENT, "edited")
+        assert sub.score == 5.0  # the grader's 3 (ex2 tampered: 0 of 4) + the TA's 2 for ex2
+        assert gb.find_grade("ex2_sweep_test", ASSIGNMENT, ASSIGNMENT, "edited").auto_score == 0.0
+        assert sub.notebooks[0].flagged  # formgrader shows the flag: this one is not plainly "graded"
+    ran = nbformat.read(course / "autograded" / "edited" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
+    test = next(c for c in ran.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex2_sweep_test")
+    shown = [o["data"]["text/html"] for o in test.outputs if "snakekit_grader" in o.get("metadata", {})]
+    assert len(shown) == 1 and "tests tampered: this test cell was edited" in shown[0]  # the TA sees why, at the cell
+    page = _page(course, "edited")
+    assert "Score: <strong>5 / 7</strong> (tests tampered)" in page
+    assert "Grader: ex2_sweep_test: 2 / 4 points" in page and "Your teacher set the points to 2" in page
+    assert "BEGIN HIDDEN TESTS" not in page and not [line for line in _secret_lines() if line in page]
+    _loads_nothing(page)
