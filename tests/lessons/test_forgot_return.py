@@ -23,7 +23,7 @@ import pytest
 
 from tests.conftest import need, need_program
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 LESSONS = sorted(p.name for p in (REPO / "course" / "source").iterdir() if (p / f"{p.name}.ipynb").exists())
 ANSI = re.compile(r"\x1b\[[0-9;]*m")
 

@@ -12,7 +12,7 @@ import pytest
 
 from tests.conftest import need
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 L0, L1 = "00_meet_the_arm", "01_forward_kinematics"
 
 
