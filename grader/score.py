@@ -142,6 +142,9 @@ def explain_error(text: str) -> str:
         if what == "None":
             return (f"{where} returned None: it has no `return` (or a path that reaches its end without one); "
                     "return the result.")
+        if what in ("list", "tuple"):
+            return (f"{where} returned a Python {what}, not a numpy array: return np.array(...) (the exercise asks "
+                    "for an array, as its check says).")
         return f"{where} returned a {what}, not numbers or an array."
     if text.startswith("ShortcutError:"):
         return text.split(":", 1)[1].strip()

@@ -78,10 +78,12 @@ def _recv(s, size: int) -> bytes:
     return b"".join(chunks)
 
 
-def encode_results(results) -> bytes:
+def encode_results(results, *, array: bool = False) -> bytes:
     """One entry per case: ``<k>/value`` (an array), ``<k>/<name>`` (a dict's arrays), or
     ``<k>/__error__`` (an exception raised, ``"<type>: <message>"``; a result that is not numbers
-    is one too: ``"returned None"``, ``"returned str"``)."""
+    is one too: ``"returned None"``, ``"returned str"``). With ``array`` (the exercise asks for a
+    numpy array, as its check's ``close(..., array=True)``), a Python list or tuple where a result
+    is expected is one too (``"returned list"``): the grader then judges as the local check does."""
     arrays = {"__cases__": np.array(len(results))}
     for k, r in enumerate(results):
         if isinstance(r, BaseException):
@@ -94,7 +96,7 @@ def encode_results(results) -> bytes:
                 a = None if v is None else np.asarray(v)
             except Exception:  # noqa: BLE001 - a student's object that numpy cannot read
                 a = None
-            if a is None or a.dtype == object or a.dtype.kind not in "biuf":
+            if a is None or a.dtype == object or a.dtype.kind not in "biuf" or (array and isinstance(v, (list, tuple))):
                 what = "None" if v is None else type(v).__name__
                 entry = {"__error__": np.array(f"returned {what}" + ("" if name == "value" else f" for {name}"))}
                 break
