@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from grader.rerun import exercise
+from grader.scoring.rerun import exercise
 from snakekit import checks
 from tests.conftest import need
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grader.score import DEFAULT_TOLERANCES, Expected, score_exercise
+from grader.scoring.score import DEFAULT_TOLERANCES, Expected, score_exercise
 from snakekit import SPEC, checks
 from snakekit.handin import decode_results, encode_results
 from tests.conftest import need

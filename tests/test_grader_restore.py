@@ -15,8 +15,8 @@ import nbformat
 import pytest
 
 from conftest import need_program
-from grader.assignment import load_assignment, tampered_cells
-from grader.restore import release_order, restore
+from grader.course.assignment import load_assignment, tampered_cells
+from grader.course.restore import release_order, restore
 from grader_helpers import ASSIGNMENT, GOOD, make_course, read_csv, submit
 
 REPO = Path(__file__).resolve().parent.parent
@@ -37,7 +37,7 @@ def lessons(tmp_path_factory):
     """Every lesson of the course released into a scratch copy: (course, {lesson: released notebook})."""
     import shutil
 
-    from grader.course import generate
+    from grader.course.folder import generate
 
     root = tmp_path_factory.mktemp("lessons") / "course"
     shutil.copytree(REPO / "course", root, ignore=shutil.ignore_patterns(
