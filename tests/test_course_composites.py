@@ -107,3 +107,39 @@ def test_a_composite_whose_parts_pass_fails_on_its_own_words():
         composite.close([2.0], [1.0], what="sweep")
     assert str(failed.value) == ("exercise 8.5 sweep: sweep[0] is 2, expected 1: off by 1 "
                                  "(tolerance 1e-09: exact math, 1e-9 relative).")
+
+
+def _assigned(tree) -> set[str]:
+    out = set()
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            out.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign, ast.AugAssign)):
+            for t in node.targets if isinstance(node, ast.Assign) else [node.target]:
+                out |= {n.id for n in ast.walk(t) if isinstance(n, ast.Name)}
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            out |= {(a.asname or a.name).split(".")[0] for a in node.names}
+    return out
+
+
+@pytest.mark.parametrize("lesson", LESSONS)
+def test_a_composites_check_cell_needs_nothing_another_check_or_demonstration_defines(lesson):
+    """Graded with the lesson's own parts, the second run runs the cells before the first exercise,
+    the answers and the composite's own check cell only (grader.sandbox.inside.worker.runs_cell): a
+    name the check takes from another cell would be undefined there, and the second run worth nothing."""
+    nbformat = need("nbformat")
+    nb = nbformat.read(COURSE / "source" / lesson / f"{lesson}.ipynb", as_version=4)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    first = next(i for i, c in enumerate(code) if c.metadata.get("nbgrader", {}).get("grade_id"))
+    runs = set().union(*(_assigned(ast.parse(c.source.replace("%matplotlib inline", ""))) for c in code[:first]))
+    runs |= {name for c in code if c.metadata.get("nbgrader", {}).get("solution") for name in _assigned(ast.parse(c.source))}
+    for gid in composites(lesson):
+        cell = next(c for c in code if c.metadata.get("nbgrader", {}).get("grade_id") == gid)
+        others = set().union(*(_assigned(ast.parse(c.source.replace("%matplotlib inline", ""))) for c in code
+                               if c is not cell)) - runs - _assigned(ast.parse(cell.source))
+        tree = ast.parse(cell.source)
+        bound = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and not isinstance(n.ctx, ast.Load)}
+        bound |= {n.arg for n in ast.walk(tree) if isinstance(n, ast.arg)}
+        bound |= {n.name for n in ast.walk(tree) if isinstance(n, ast.ExceptHandler) and n.name}
+        used = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)} - bound
+        assert not used & others, f"{gid} uses {sorted(used & others)}, defined in another check or demonstration cell"
