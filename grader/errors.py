@@ -13,6 +13,10 @@ class CourseError(SnakekitError, ValueError):
     """A command's arguments name something the course does not have, or a path it must not write."""
 
 
+class LateRuleError(CourseError):
+    """A late-penalty rule that is not one of the forms :func:`grader.commands.late.parse` reads."""
+
+
 class GradingError(SnakekitError):
     """The batch cannot be graded (no such assignment, no gradebook entry, bad course...)."""
 

@@ -6,6 +6,7 @@
     snakekit generate [--check]      (the URDF and MJCF from the robot spec)
     snakekit check LESSON.ipynb      (run a lesson's exercise checks: one row per exercise)
     snakekit start [...]             (check this system, then JupyterLab on the lessons: `make lab`)
+    snakekit release ASSIGNMENT [--due TIME] [--late-penalty RULE]  (nbgrader's release, due date, penalty)
     snakekit collect ASSIGNMENT --from DOWNLOAD  (an LMS's download into the course; grader/README.md)
     snakekit grade ASSIGNMENT [...]  (grade a class's submissions; see grader/README.md)
     snakekit return ASSIGNMENT       (the feedback pages back: hub exchange or an LMS zip)
@@ -209,6 +210,8 @@ def build_parser() -> argparse.ArgumentParser:
                                   "computer (snakekit bridge --help for its options)", add_help=False)
     sub.add_parser("start", help="check this system, then open the lessons in JupyterLab (what `make lab` runs; "
                                  "snakekit start --help for its options)", add_help=False)
+    sub.add_parser("release", help="release an assignment with its due date and late penalty "
+                                   "(snakekit release --help)", add_help=False)
     sub.add_parser("collect", help="put an LMS's download (Canvas, Moodle, a folder) into the course "
                                    "(snakekit collect --help)", add_help=False)
     sub.add_parser("grade", help="grade a class's submissions of an assignment "
@@ -228,7 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: Commands another installed package provides (the grader's), by the entry point group they are in.
 PLUGIN_GROUP = "snakekit.commands"
-PLUGIN_COMMANDS = ("grade", "collect", "return", "export", "lab")
+PLUGIN_COMMANDS = ("grade", "release", "collect", "return", "export", "lab")
 
 
 def plugin_command(name: str):

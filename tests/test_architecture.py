@@ -231,9 +231,15 @@ def test_snakekit_grade_reaches_the_grader_through_its_entry_point():
     import grader.lms.collect
     import grader.lms.export
 
+    import grader.commands.nbgrader_plugins
+    import grader.commands.release
+
     assert cli.plugin_command("grade") is grader.commands.grade.main
+    assert cli.plugin_command("release") is grader.commands.release.main
     assert cli.plugin_command("collect") is grader.lms.collect.main
-    assert (cli.plugin_command("return"), cli.plugin_command("export")) == (grader.lms.export.return_main, grader.lms.export.export_main)
+    # return writes the pages of hand-set scores again (a command may reach the feedback's lab part), then hands back
+    assert (cli.plugin_command("return"), cli.plugin_command("export")) == (grader.commands.nbgrader_plugins.return_main,
+                                                                            grader.lms.export.export_main)
     import grader.commands.lab
 
     assert cli.plugin_command("lab") is grader.commands.lab.main

@@ -493,9 +493,9 @@ def test_a_zip_bomb_is_not_unpacked(course, tmp_path):
 
 
 def test_a_download_over_its_bound_is_refused_before_anything_is_read(course, tmp_path, capsys, monkeypatch):
-    import grader.lms.collect
+    import grader.lms.download
 
-    monkeypatch.setattr(grader.lms.collect, "MAX_DOWNLOAD", 3 << 20)
+    monkeypatch.setattr(grader.lms.download, "MAX_DOWNLOAD", 3 << 20)
     dl = tmp_path / "elsewhere" / "big.zip"
     with zipfile.ZipFile(dl, "w", zipfile.ZIP_DEFLATED) as z:
         for k in range(4):

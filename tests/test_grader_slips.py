@@ -308,6 +308,74 @@ def test_another_assignments_download_is_refused_naming_it(course, tmp_path, cap
     assert tree(course) == before  # the manifest's rows, the notebooks, their times: as they were
 
 
+# --- what a second download changes, said -------------------------------------------------------------
+
+
+def scratch() -> bytes:
+    import nbformat
+
+    return nbformat.writes(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("print('notes')")])).encode()
+
+
+def test_a_download_without_a_students_notebook_keeps_the_one_collected_before(course, tmp_path, capsys):
+    (course / "roster.csv").write_text("student,canvas_id\nann,101\nben,102\n")
+    ann, ben = notebook(course, "ann"), notebook(course, "ben")
+    first = canvas_zip(tmp_path / "monday.zip", {f"leeann_101_5001_{A}.ipynb": ann, f"odeben_102_5002_{A}.ipynb": ben})
+    assert run(capsys, "collect", A, "--course", course, "--from", first).returncode == 0
+    rows = manifest(course)
+    # Wednesday's download: ann uploaded only her notes this time (Canvas keeps the newest upload only)
+    notes = scratch()
+    second = canvas_zip(tmp_path / "wednesday.zip", {"leeann_101_5003_notes.ipynb": notes,
+                                                     f"odeben_102_5002_{A}.ipynb": ben})
+    r = run(capsys, "collect", A, "--course", course, "--from", second)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert manifest(course) == rows  # ann's row (her notebook's Canvas file id 5001) stays
+    assert (course / "submitted" / "ann" / A / f"{A}.ipynb").read_bytes() == ann
+    assert (course / "submitted" / "ann" / A / "attempts" / "leeann_101_5003_notes.ipynb").read_bytes() == notes
+    assert (f"no notebook of {A} in this download for 1 student(s): ann (leeann_101_5003_notes.ipynb); their files "
+            "are kept in attempts/, and the notebook collected before stays, to be graded, with its row in the "
+            "manifest") in r.stdout
+
+
+def test_collect_names_each_notebook_it_moves_aside(course, tmp_path, capsys):
+    (course / "roster.csv").write_text("student,canvas_id\nann,101\n")
+    ann = notebook(course, "ann")
+    first = canvas_zip(tmp_path / "monday.zip", {f"leeann_101_5001_{A}.ipynb": ann})
+    assert run(capsys, "collect", A, "--course", course, "--from", first).returncode == 0
+    second = canvas_zip(tmp_path / "wednesday.zip", {f"leeann_101_5001_{A}.ipynb": ann,
+                                                     f"leeann_101_5004_{A}-1.ipynb": notebook(course, "ann again")})
+    r = run(capsys, "collect", A, "--course", course, "--from", second)
+    assert r.returncode == 0, r.stdout + r.stderr
+    attempts = course / "submitted" / "ann" / A / "attempts"
+    assert (attempts / f"previously-collected-1-{A}.ipynb").read_bytes() == ann
+    assert (attempts / f"leeann_101_5001_{A}.ipynb").read_bytes() == ann
+    line = next(x for x in r.stdout.splitlines() if x.startswith("ann "))
+    assert f"the {A}.ipynb collected before moved to attempts/previously-collected-1-{A}.ipynb" in line
+    assert f"1 earlier or other file(s) kept in attempts/, not graded: leeann_101_5001_{A}.ipynb" in line
+    assert manifest(course)["ann"]["note"] in line
+
+
+#: Several files of the same name from one student, in each layout that can hold them.
+TWINS = {
+    "canvas": {f"leeann_101_5001_{A}.ipynb": "first", f"leeann_101_5007_{A}.ipynb": "second"},
+    "moodle": {f"Ann Lee_201_assignsubmission_file_/{A}.ipynb": "first",
+               f"Ann Lee_201_assignsubmission_file_/old/{A}.ipynb": "second"},
+    "folder": {f"monday/ann/{A}.ipynb": "first", f"wednesday/ann/{A}.ipynb": "second"},
+}
+
+
+@pytest.mark.parametrize("layout", sorted(TWINS))
+def test_the_report_names_which_of_several_same_name_files_is_graded(course, tmp_path, layout, capsys):
+    (course / "roster.csv").write_text("student,name,canvas_id,moodle_id\nann,Ann Lee,101,201\n")
+    files = {entry: notebook(course, note) for entry, note in TWINS[layout].items()}
+    r = run(capsys, "collect", A, "--course", course, "--from", canvas_zip(tmp_path / "dl.zip", files))
+    graded = (course / "submitted" / "ann" / A / f"{A}.ipynb").read_bytes()
+    entry = next(e for e, data in files.items() if data == graded)
+    said = f"graded {entry} (the newest of 2 files named {A}.ipynb)"
+    assert said in next(x for x in r.stdout.splitlines() if x.startswith("ann ")), r.stdout
+    assert said in manifest(course)["ann"]["note"]
+
+
 # --- student data never lands in git -----------------------------------------------------------------
 
 

@@ -55,15 +55,54 @@ class SafeFeedbackExporter(HTMLExporter):
         info = (resources or {}).get("nbgrader") or {}
         student, assignment, notebook = info.get("student"), info.get("assignment"), info.get("notebook")
         course_id = getattr(getattr(self.parent, "coursedir", None), "course_id", None) or "default_course"
-        page = regenerate(nb, student=student, assignment=assignment, notebook=notebook,
-                          db_url=info.get("db_url"), course_id=course_id)
-        body, _ = feedback.page_exporter().from_notebook_node(page)
         root = getattr(getattr(self.parent, "coursedir", None), "root", None)
-        if root and student and assignment:  # the lab's result, when the lab ran the student's sweep
-            body = lab_feedback.add_to(body, Path(root), assignment, student)
+        body = safe_page(nb, root=root, student=student, assignment=assignment, notebook=notebook,
+                         db_url=info.get("db_url"), course_id=course_id)
         resources = dict(resources or {})
         resources["output_extension"] = ".html"
         return body, resources
+
+
+def safe_page(nb, *, root, student: str, assignment: str, notebook: str, db_url: str, course_id: str) -> str:
+    """The grader's page of an autograded notebook, from the gradebook's scores and comments (and
+    the lab's result, when the lab ran the student's sweep)."""
+    page = regenerate(nb, student=student, assignment=assignment, notebook=notebook, db_url=db_url, course_id=course_id)
+    body, _ = feedback.page_exporter().from_notebook_node(page)
+    if root and student and assignment:
+        body = lab_feedback.add_to(body, Path(root), assignment, student)
+    return body
+
+
+def rewrite_hand_set(course: Path, assignment: str, out) -> list[str]:
+    """The feedback pages of the students with a score or comment set in formgrader, written again
+    from the gradebook (what formgrader's Generate Feedback does with the course's config), so the
+    page ``snakekit return`` hands back says the score the student gets."""
+    import nbformat
+
+    from grader.course.folder import course_id, db_url
+    from grader.lms.export import hand_set
+
+    students = [s for s in hand_set(course, assignment) if (course / "autograded" / s / assignment).is_dir()]
+    for s in students:
+        for graded in sorted((course / "autograded" / s / assignment).glob("*.ipynb")):
+            page = safe_page(nbformat.read(graded, as_version=4), root=course, student=s, assignment=assignment,
+                             notebook=graded.stem, db_url=db_url(course), course_id=course_id(course))
+            folder = course / "feedback" / s / assignment
+            folder.mkdir(parents=True, exist_ok=True)
+            tmp = folder / f".{graded.stem}.html.tmp"
+            tmp.write_text(page)
+            os.replace(tmp, folder / f"{graded.stem}.html")
+    if students:
+        print(f"feedback pages written again with the scores and comments set in formgrader: {', '.join(students)}",
+              file=out)
+    return students
+
+
+def return_main(argv: list[str] | None = None, out=None) -> int:
+    """``snakekit return``: :func:`grader.lms.export.return_main`, the pages of hand-set scores written again first."""
+    from grader.lms.export import return_main as hand_back
+
+    return hand_back(argv, out, before=rewrite_hand_set)
 
 
 def regenerate(nb, *, student: str, assignment: str, notebook: str, db_url: str, course_id: str):

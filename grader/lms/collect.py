@@ -41,28 +41,21 @@ from __future__ import annotations
 import csv
 import datetime as dt
 import json
-import re
 import shutil
 import sys
-import zipfile
-from dataclasses import dataclass, replace
 from pathlib import Path
 
 from snakekit.errors import SnakekitError
 
 from grader.course.folder import default_roster, gradebook, require
 from grader.errors import CourseError
-from grader.files import MAX_DOWNLOAD, MAX_FILE, CommandParser, excerpt, file_name, one_line, read_table, size_text, student_id, uninterrupted, unique_in
+from grader.files import CommandParser, excerpt, file_name, one_line, read_table, student_id, uninterrupted, unique_in
+from grader.lms.download import RESUBMISSION, Upload, read_download
 from grader.lms.roster import Roster, no_roster_who, normal_name
 
 COURSE = Path("course")
 MANIFEST_COLUMNS = ["student", "lms", "lms_id", "lms_name", "file", "notebook", "submitted_at", "late", "attempts", "note"]
 
-CANVAS = re.compile(r"^(?:(?P<name>.*?)_)??(?:(?P<late>late)_)?(?P<uid>\d+|anon_[A-Za-z0-9]+)_(?P<fid>\d+)_(?P<file>.+)$",
-                    re.I | re.S)
-MOODLE_DIR = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_[a-z]+_?$")
-MOODLE_FLAT = re.compile(r"^(?P<name>.+?)_(?P<pid>\d+)_assignsubmission_file_(?P<file>.+)$", re.S)
-RESUBMISSION = re.compile(r"^(?P<stem>.*?)-(?P<n>\d+)$")
 
 
 class Interrupted(KeyboardInterrupt):
@@ -71,107 +64,6 @@ class Interrupted(KeyboardInterrupt):
     def __init__(self, placed: int, total: int):
         super().__init__(f"{placed} of {total}")
         self.placed, self.total = placed, total
-
-
-@dataclass(frozen=True)
-class Upload:
-    """One notebook file of the download, and what its name says."""
-
-    lms: str                 # canvas, moodle, folder
-    lms_id: str              # Canvas user id, Moodle participant id, or the file's student name
-    lms_name: str            # the name the LMS wrote (Canvas: doejane; Moodle: Jane Doe)
-    file: str                # the student's own file name
-    entry: str               # where it is in the download
-    data: bytes
-    late: bool = False
-    order: tuple = ()        # larger is newer: (Canvas file id, resubmission number)
-
-
-def _name_order(filename: str) -> int:
-    m = RESUBMISSION.match(Path(filename).stem)
-    return int(m.group("n")) if m else 0
-
-
-def classify(entry: str, data: bytes) -> Upload | None:
-    """What a file of the download is (None: not a notebook)."""
-    parts = [p for p in entry.replace("\\", "/").split("/") if p]
-    if not parts or not parts[-1].lower().endswith(".ipynb") or any(p.startswith((".", "__MACOSX")) for p in parts):
-        return None
-    base = parts[-1]
-    for folder in parts[:-1]:
-        m = MOODLE_DIR.match(folder)
-        if m:
-            return Upload("moodle", m["pid"], m["name"], base, entry, data, order=(0, _name_order(base)))
-    m = MOODLE_FLAT.match(base)
-    if m:
-        return Upload("moodle", m["pid"], m["name"], m["file"], entry, data, order=(0, _name_order(m["file"])))
-    m = CANVAS.match(base)
-    if m:
-        return Upload("canvas", m["uid"], m["name"] or "", m["file"], entry, data, late=bool(m["late"]),
-                      order=(int(m["fid"]), _name_order(m["file"])))
-    who = parts[-2] if len(parts) >= 2 else Path(base).stem
-    return Upload("folder", who, who, base, entry, data, order=(0, _name_order(base)))
-
-
-def read_download(source: Path) -> tuple[list[Upload], list[str]]:
-    """Every notebook in a zip or a folder, classified; and the problems of those not read.
-
-    Sizes are checked before anything is read: a notebook over :data:`MAX_FILE` bytes (as the
-    zip declares it, and as it really unpacks) is not read, nor a download whose notebooks
-    declare more than :data:`MAX_DOWNLOAD` bytes together; an entry that does not unpack (a
-    damaged or encrypted one) is a problem of its own and the others are read.
-    """
-    out, problems = [], []
-
-    def too_big(entry: str, size: int) -> bool:
-        if size > MAX_FILE:
-            problems.append(f"{excerpt(entry, quote=False)}: {size_text(size)} uncompressed, more than the "
-                            f"{size_text(MAX_FILE)} a notebook may have; not read (ask the student for the notebook "
-                            "without its outputs)")
-        return size > MAX_FILE
-
-    def climbs(entry: str) -> bool:
-        parts = entry.replace("\\", "/").split("/")
-        if ".." in parts and parts[-1].lower().endswith(".ipynb"):
-            problems.append(f"{excerpt(entry, quote=False)}: a name that climbs out of the download (..); not read")
-        return ".." in parts
-
-    def at_most(total: int) -> None:
-        if total > MAX_DOWNLOAD:
-            raise CourseError(f"{source}: its notebooks hold {size_text(total)}, more than the "
-                              f"{size_text(MAX_DOWNLOAD)} a download may hold; nothing was read (download the "
-                              "submissions in parts, or check the download)")
-
-    if source.is_dir():
-        found = [(p, u) for p in sorted(source.rglob("*")) if p.is_file() and not p.is_symlink()
-                 for u in [classify(str(p.relative_to(source)), b"")] if u is not None]
-        at_most(sum(p.stat().st_size for p, _ in found))
-        for p, u in found:
-            if not too_big(u.entry, p.stat().st_size):
-                out.append(replace(u, data=p.read_bytes()))
-        return out, problems
-    try:
-        with zipfile.ZipFile(source) as z:
-            found = [(info, u) for info in z.infolist() if not info.is_dir() and not climbs(info.filename)
-                     for u in [classify(info.filename, b"")] if u is not None]
-            at_most(sum(info.file_size for info, _ in found))
-            for info, u in found:
-                if too_big(u.entry, info.file_size):
-                    continue
-                try:
-                    with z.open(info) as f:
-                        data = f.read(MAX_FILE + 1)
-                except Exception as e:  # noqa: BLE001 - BadZipFile, zlib.error, EOFError, an encrypted entry...
-                    problems.append(f"{excerpt(u.entry, quote=False)}: cannot be unpacked ({type(e).__name__}: "
-                                    f"{excerpt(e, 100)}); not read (download it again, or ask the student to upload "
-                                    "it again)")
-                    continue
-                if not too_big(u.entry, len(data)):
-                    out.append(replace(u, data=data))
-    except zipfile.BadZipFile as e:
-        raise CourseError(f"{source} is not a zip file ({excerpt(e, 100)}); give the LMS's download or the folder it "
-                          "unpacked into") from None
-    return out, problems
 
 
 # --- submission times ---------------------------------------------------------------------------
@@ -314,16 +206,22 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
             unmatched.append(u)
         else:
             by_student.setdefault(student, []).append(u)
-    rows = []
+    rows, known = [], []
     try:
         for student, ups in sorted(by_student.items()):
             with uninterrupted():  # a Ctrl-C stops between two students, never inside one's folder
-                rows.append(_place(course, assignment, student, ups, cells, due, _time_for(student, ups, roster, times)))
+                row = _place(course, assignment, student, ups, cells, due, _time_for(student, ups, roster, times))
+                if not row["notebook"] and old.get(student, {}).get("notebook"):  # nothing new to grade: keep what was
+                    known.append(f"{student} ({excerpt(row['file'], quote=False)})")
+                    row = {**old[student], "untimed": False}
+                rows.append(row)
     except KeyboardInterrupt:
         with uninterrupted():
             _write_manifest(course, assignment, rows, old)  # the students placed before it are listed
         raise Interrupted(len(rows), len(by_student)) from None
     _write_manifest(course, assignment, rows, old)
+    if roster is not None:  # formgrader lists them by name
+        roster.into_gradebook(course, [r["student"] for r in rows])
     width = max([len(r["student"]) for r in rows] + [7])
     for r in rows:
         print(f"{r['student']:<{width}}  {r['notebook'] or 'missing notebook':<24} "
@@ -333,6 +231,10 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
         print(f"no submission time for the new file(s) of {len(untimed)} student(s): "
               f"{excerpt(', '.join(untimed), quote=False)} (the download has none; times collected before stay with "
               "the files they belong to); for their real times collect again with --times TIMES.csv", file=out)
+    if known:
+        print(f"no notebook of {assignment} in this download for {len(known)} student(s): "
+              f"{excerpt(', '.join(known), quote=False)}; their files are kept in attempts/, and the notebook "
+              "collected before stays, to be graded, with its row in the manifest", file=out)
     for p in problems:
         print(f"not collected: {p}", file=out)
     print(f"collected {len(rows)} student(s) of {assignment} into {course}/submitted/ from {source}"
@@ -360,18 +262,27 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
     for nb, u in newest.items():
         dest = folder / f"{nb}.ipynb"
         if dest.exists() and dest.read_bytes() != u.data:  # collected before: the earlier one is kept, not graded
-            _keep(dest, attempts, "previously-collected")
+            notes.append(f"the {dest.name} collected before moved to attempts/"
+                         f"{_keep(dest, attempts, 'previously-collected')}")
             if (folder / "timestamp.txt").exists():
                 _keep(folder / "timestamp.txt", attempts, "previously-collected")
         dest.write_bytes(u.data)
+        twins = [x for x, _ in ours if x is not u and Path(x.file).name == Path(u.file).name]
+        if twins:  # several files of that name: say which one is graded
+            notes.append(f"graded {excerpt(u.entry, quote=False)} (the newest of {len(twins) + 1} files named "
+                         f"{excerpt(Path(u.file).name, quote=False)})")
         if Path(u.file).name != dest.name:
             notes.append(f"{excerpt(u.file, quote=False)} saved as {dest.name}")
     older = [u for u, nb in ours if nb is None or newest.get(nb) is not u]
+    kept = []
     for u in older:
         attempts.mkdir(exist_ok=True)
-        unique_in(attempts, Path(u.entry.replace("\\", "/")).name, u.data).write_bytes(u.data)
+        path = unique_in(attempts, Path(u.entry.replace("\\", "/")).name, u.data)
+        path.write_bytes(u.data)
+        kept.append(path.name)
     if older:
-        notes.append(f"{len(older)} earlier or other file(s) kept in attempts/, not graded")
+        notes.append(f"{len(older)} earlier or other file(s) kept in attempts/, not graded: "
+                     + excerpt(", ".join(kept), quote=False))
     late = any(u.late for u in newest.values())
     stamp = None
     if when is not None:
@@ -412,12 +323,14 @@ def _read_stamp(path: Path) -> dt.datetime | None:
     return t if t.tzinfo is not None else t.replace(tzinfo=dt.timezone.utc)
 
 
-def _keep(path: Path, attempts: Path, tag: str) -> None:
+def _keep(path: Path, attempts: Path, tag: str) -> str:
+    """Move ``path`` into ``attempts`` under a name of its own; return that name."""
     attempts.mkdir(exist_ok=True)
     n = 1
     while (attempts / f"{tag}-{n}-{path.name}").exists():
         n += 1
     shutil.move(str(path), attempts / f"{tag}-{n}-{path.name}")
+    return f"{tag}-{n}-{path.name}"
 
 
 def _write_manifest(course: Path, assignment: str, rows: list[dict], old: dict[str, dict]) -> Path:

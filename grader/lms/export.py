@@ -148,20 +148,16 @@ def _pages(course: Path, assignment: str) -> dict[str, list[Path]]:
     return out
 
 
-def release_to_exchange(course: Path, assignment: str, student: str, exchange: Path | None) -> str:
-    """nbgrader's own release_feedback for one student (after the files it needs are beside the page)."""
+def nbgrader_api(course: Path, exchange: Path | None):
+    """nbgrader's API as its own commands see the course: the Jupyter config folders'
+    ``nbgrader_config.py`` (on a hub's server, the hub's exchange: docker/hub/nbgrader_config.py),
+    then the course's; ``exchange`` (if given) as the exchange's root."""
     from jupyter_core.paths import jupyter_config_path
     from nbgrader.apps import NbGraderAPI
     from nbgrader.coursedir import CourseDirectory
     from traitlets.config import Config
     from traitlets.config.loader import ConfigFileNotFound, PyFileConfigLoader
 
-    src = course / "submitted" / student / assignment
-    fb = course / "feedback" / student / assignment
-    for name in ("timestamp.txt", "submission_secret.txt"):
-        shutil.copyfile(src / name, fb / name)
-    # as nbgrader's own release_feedback: the Jupyter config folders' nbgrader_config.py (on a
-    # hub's server, the hub's exchange: docker/hub/nbgrader_config.py), then the course's
     cfg = Config()
     for folder in reversed(jupyter_config_path()):
         with contextlib.suppress(ConfigFileNotFound):
@@ -170,8 +166,16 @@ def release_to_exchange(course: Path, assignment: str, student: str, exchange: P
     cfg.merge(Config({"CourseDirectory": {"root": str(course), "course_id": course_id(course)}}))
     if exchange is not None:
         cfg.merge(Config({"Exchange": {"root": str(exchange)}}))
-    api = NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
-    result = api.release_feedback(assignment, student)
+    return NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
+
+
+def release_to_exchange(course: Path, assignment: str, student: str, exchange: Path | None) -> str:
+    """nbgrader's own release_feedback for one student (after the files it needs are beside the page)."""
+    src = course / "submitted" / student / assignment
+    fb = course / "feedback" / student / assignment
+    for name in ("timestamp.txt", "submission_secret.txt"):
+        shutil.copyfile(src / name, fb / name)
+    result = nbgrader_api(course, exchange).release_feedback(assignment, student)
     if not result.get("success"):
         raise CourseError(f"nbgrader release_feedback for {student} failed: "
                           f"{(result.get('error') or result.get('log') or '').strip()[-500:]}")
@@ -198,7 +202,28 @@ class Interrupted(KeyboardInterrupt):
         self.released, self.zips = released, list(zips or [])
 
 
-def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip_path: Path | None, out) -> tuple[int, list]:
+def hand_set(course: Path, assignment: str) -> list[str]:
+    """Students with a score or a comment a TA set in formgrader on a graded submission of ``assignment``."""
+    from nbgrader.api import MissingEntry
+
+    if not (course / "gradebook.db").is_file():
+        return []
+    with gradebook(course) as gb:
+        try:
+            subs = gb.find_assignment(assignment).submissions
+        except MissingEntry:
+            return []
+        return sorted({sub.student.id for sub in subs for nb in sub.notebooks
+                       if any(g.manual_score is not None for g in nb.grades)
+                       or any(c.manual_comment for c in nb.comments)})
+
+
+def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip_path: Path | None, out,
+                    before=None) -> tuple[int, list]:
+    """Hand the pages back; ``before(course, assignment, out)`` runs first (``snakekit return`` writes
+    the pages of hand-set scores again there: :func:`grader.commands.nbgrader_plugins.return_main`)."""
+    if before is not None:
+        before(course, assignment, out)
     pages = _pages(course, assignment)
     if not pages:
         raise CourseError(f"no feedback pages of {assignment} in {course}/feedback/<student>/{assignment}/; "
@@ -258,7 +283,8 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
     return done["exchange"] + done["zip"], problems
 
 
-def return_main(argv: list[str] | None = None, out=None) -> int:
+def return_main(argv: list[str] | None = None, out=None, *, before=None) -> int:
+    """``snakekit return``; ``before`` as :func:`return_feedback`'s."""
     out = out or sys.stdout
     p = CommandParser(prog="snakekit return", description="Hand each student's safe feedback page back: to the hub's "
                 "exchange (nbgrader fetch_feedback) or as one zip for the LMS's bulk feedback upload.")
@@ -276,7 +302,7 @@ def return_main(argv: list[str] | None = None, out=None) -> int:
         if args.exchange is not None and not args.exchange.is_dir():
             raise CourseError(f"--exchange {args.exchange} is not a folder")
         n, problems = return_feedback(course.resolve(), args.assignment, exchange=args.exchange,
-                                      zip_path=args.out, out=out)
+                                      zip_path=args.out, out=out, before=before)
     except (SnakekitError, OSError) as e:
         print(f"snakekit return: {one_line(e)}", file=sys.stderr)
         return 2

@@ -79,6 +79,30 @@ class Roster:
     def row(self, student: str) -> dict:
         return next((r for r in self.rows if r["student"] == student), {"student": student})
 
+    def names(self, student: str) -> dict[str, str]:
+        """nbgrader's ``first_name``, ``last_name`` and ``email`` of a student, as far as the roster
+        has them: its ``first_name``/``last_name`` columns, else its ``name`` split as the LMS writes
+        it ("Alice Smith": the last word is the last name; "Smith, Alice": the part before the comma)."""
+        r = self.row(student)
+        first, last = (r.get("first_name") or "").strip(), (r.get("last_name") or "").strip()
+        name = " ".join((r.get("name") or "").split())
+        if not (first or last) and "," in name:
+            last, first = (x.strip() for x in name.split(",", 1))
+        elif not (first or last) and name:
+            first, _, last = name.rpartition(" ")
+        out = {"first_name": first, "last_name": last, "email": (r.get("email") or "").strip()}
+        return {k: v for k, v in out.items() if v}
+
+    def into_gradebook(self, course: Path, students) -> None:
+        """The roster's names and e-mails of ``students`` into nbgrader's student table, so formgrader
+        lists them by name (a student the roster has nothing for is left as nbgrader has them)."""
+        from grader.course.folder import gradebook
+
+        with gradebook(course) as gb:
+            for s in students:
+                if self.names(s):
+                    gb.update_or_create_student(s, **self.names(s))
+
     def who(self, u) -> tuple[str | None, str]:
         """The student id of an upload (a :class:`grader.lms.collect.Upload`), or None and why not."""
         if u.lms == "canvas":
