@@ -3,8 +3,10 @@
 For each ``<course>/submitted/<student>/<assignment>/`` the grader
 
 1. reads the notebook (not valid JSON / nbformat -> ``invalid notebook``, nothing runs) and
-   compares each autograded test cell with the released one (edited, deleted or duplicated
-   -> those cells score 0, status ``tests tampered``) (:mod:`grader.course.assignment`);
+   puts every test cell back as released (edited, deleted, duplicated, un-locked, or its
+   metadata stripped by an editor -> run as released, status ``tests restored``, no points
+   lost) (:mod:`grader.course.restore`); what still differs from the release scores 0 (``tests
+   tampered``, :mod:`grader.course.assignment`);
 2. copies the submission into a fresh folder with a gradebook that holds only this
    assignment, and runs nbgrader's ``autograde`` there in a sandbox (:mod:`grader.sandbox.runner`,
    :mod:`grader.sandbox.namespaces`), with the batch's hidden cases served on a socket in that folder
@@ -46,6 +48,7 @@ from grader.scoring.references import REFERENCES, expected
 from grader.sandbox.runner import Runner
 from grader.scoring.verdict import SubmissionResult, Verdicts
 from grader.scoring.score import read_handin
+from grader.course.restore import release_order, restore
 
 #: The student id the instructor notebook runs under in its sandbox (never a row of the gradebook).
 INSTRUCTOR = "_instructor_reference"
@@ -59,6 +62,14 @@ class Interrupted(KeyboardInterrupt):
         self.results = results
 
 
+#: One cell's default share of the notebook's wall clock. The slowest cells of the course take about 6 s
+#: each on a loaded 2-core machine without their hidden cases (lesson 07's 7.2 check, whose moves run on
+#: the bus emulator in real time, and lesson 06's Task 2 run), two to three times that with them; a
+#: third of the default 120 s (40 s) holds them, and a cell that runs away is interrupted with two
+#: thirds of the notebook's time left for the exercises after it.
+CELL_SHARE = 1 / 3
+
+
 class Grader:
     """Grades every submission of ``assignment`` in ``course``; see :func:`grade`."""
 
@@ -66,7 +77,8 @@ class Grader:
                  references: Path | None = REFERENCES, memory: int = 4 << 30, progress=None,
                  workroot: Path | None = None, use_sandbox: bool = True, cell_timeout: float | None = None,
                  seed: int | None = None, retry_timeouts: bool = True, hooks: BatchHooks = NO_HOOKS):
-        """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: ``timeout``);
+        """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: a third of
+        ``timeout``, :data:`CELL_SHARE`: a runaway cell is interrupted and the exercises after it still run);
         ``seed``: the batch's hidden cases (default: drawn from ``os.urandom``, printed);
         ``retry_timeouts``: a submission stopped by a clock runs once more before the timeout counts;
         ``hooks``: what an optional part adds (the arm's lab: :data:`grader.arm.keep.HOOKS`, given by the command)."""
@@ -75,7 +87,7 @@ class Grader:
         self.hooks = hooks
         self.jobs = jobs or default_jobs()
         self.timeout = float(timeout)
-        self.cell_timeout = min(float(cell_timeout or timeout), self.timeout)
+        self.cell_timeout = min(float(cell_timeout or timeout * CELL_SHARE), self.timeout)
         self.references = references
         self.memory = memory
         self.limits = sandbox.Limits(wall=self.timeout + 30, cpu=self.timeout * 2 + 30, memory=memory)
@@ -262,7 +274,7 @@ class Grader:
         t0 = time.monotonic()
         a = self.a
         src = self.course / "submitted" / student / a.name
-        nbs, tampered, problems = {}, {}, []
+        nbs, tampered, problems, restored = {}, {}, [], {}
         for name in a.notebooks:
             raw = read_inside(src, f"{name}.ipynb")
             if raw is None:
@@ -280,8 +292,9 @@ class Grader:
                 msg = str(e).splitlines()[0][:200] if str(e) else type(e).__name__
                 return self.verdicts.zero(student, "invalid notebook", f"{name}.ipynb is not a valid notebook: {msg}",
                                           t0)
-            nbs[name] = nb
-            tampered.update(tampered_cells(nb, a, name))
+            nbs[name], repaired = restore(nb, a, name, release_order(self.course, a.name, name))
+            restored.update(repaired)
+            tampered.update(tampered_cells(nbs[name], a, name))
         if not nbs:  # nothing of the assignment to run: say so, and what the folder does hold
             others = sorted(p.name for p in src.glob("*.ipynb"))
             detail = "; ".join(problems) + (f" (the folder has {', '.join(others)}; `snakekit collect {a.name} --from "
@@ -298,7 +311,8 @@ class Grader:
                 if again:  # run once more with the lesson's own parts, in the pool; score both then
                     keep = True
                     return Again(lambda: self._run_again(student, src, nbs, tampered, again, finish))
-                return self.verdicts.collect(work, student, nbs, tampered, problems, outcome, t0, second, runs)
+                return self.verdicts.collect(work, student, nbs, tampered, problems, outcome, t0, second, runs,
+                                             restored=restored)
             finally:
                 if not keep:
                     shutil.rmtree(work, ignore_errors=True)

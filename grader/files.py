@@ -151,7 +151,8 @@ OWNED = {
 KEPT = {"source": "the instructor's sources", "release": "nbgrader's release", "submitted": "the submissions",
         "autograded": "the graded copies", "feedback": "the feedback pages", "exchange": "nbgrader's exchange",
         "backups": "the gradebook's backups", "collected": "snakekit collect's manifests",
-        "lab": "snakekit lab's queues and results", "cases": "the hidden test cases"}
+        "lab": "snakekit lab's queues and results", "cases": "the hidden test cases",
+        "draws": "the hidden cases each attempt met"}
 #: Files of a course no command's output may be.
 COURSE_FILES = {"gradebook.db": "the gradebook", "roster.csv": "the roster", "nbgrader_config.py": "the configuration"}
 

@@ -109,6 +109,29 @@ def _where(where) -> str:
 
 # --- the exercise object ---------------------------------------------------------------
 
+#: The absolute floor of every closeness check [unit of the value]: a result within it of the
+#: expected one passes (a last row of 3.9e-16 where the text asks exactly 0), locally as graded
+#: (``grader.score.DEFAULT_TOLERANCES``: atol 1e-12).
+ZERO = 1e-12
+
+#: exercise number -> whether its check cell passed, in this kernel (a composite reads its parts').
+_VERDICTS: dict[str, bool] = {}
+
+
+def composite_note(number: str, parts: list) -> str:
+    """What a composite's failed check adds when parts it builds on fail their own checks: the one
+    rule of the course, the same locally and graded.
+
+    >>> print(composite_note("6.3", ["6.1"]))
+    6.3 uses your 6.1, which fails its check: fix 6.1 first; graded, 6.3 is run with the lesson's own 6.1.
+    >>> print(composite_note("6.3", ["6.1", "6.2"]))
+    6.3 uses your 6.1 and 6.2, which fail their checks: fix them first; graded, 6.3 is run with the lesson's own 6.1 and 6.2.
+    """
+    names = " and ".join(parts)
+    fails, fix = ("fails its check", f"fix {names}") if len(parts) == 1 else ("fail their checks", "fix them")
+    return f"{number} uses your {names}, which {fails}: {fix} first; graded, {number} is run with the lesson's own {names}."
+
+
 
 class Exercise:
     """The checks of one exercise: every message starts with its number and name.
@@ -118,17 +141,28 @@ class Exercise:
         name: the name of what the student writes, e.g. ``"planar_fk"``.
     """
 
-    def __init__(self, number: str, name: str):
+    def __init__(self, number: str, name: str, *, builds_on: tuple = ()):
         self.number, self.name = number, name
+        self.builds_on = tuple(builds_on)
         self.checked = 0
+        _VERDICTS.pop(number, None)      # run again: its verdict is this run's
 
     @property
     def prefix(self) -> str:
         return f"exercise {self.number} {self.name}"
 
     def fail(self, message: str, hint: str = "", student_frames: str = ""):
-        """Raise :class:`CheckFailed` with ``message`` (and a hint line)."""
-        raise _shorten(CheckFailed(CheckFailed.compose(f"{self.prefix}: {message}", hint), student_frames)) from None
+        """Raise :class:`CheckFailed` with ``message`` (and a hint line, and, for a composite
+        whose parts fail their own checks, which parts to fix first)."""
+        _VERDICTS[self.number] = False
+        text = CheckFailed.compose(f"{self.prefix}: {message}", hint) + self._parts_note()
+        raise _shorten(CheckFailed(text, student_frames)) from None
+
+    def _parts_note(self) -> str:
+        """For an exercise built on earlier ones: the line naming the parts whose own checks failed
+        (or have not passed yet), since a slip there shows up here too."""
+        weak = [n for n in self.builds_on if not _VERDICTS.get(n, False)]
+        return "\n" + composite_note(self.number, weak) if weak else ""
 
     def __call__(self, fn, *args, where=None, **kwargs):
         """Run the student's ``fn(*args, **kwargs)``; turn a stub or a crash into a clear message."""
@@ -231,7 +265,8 @@ class Exercise:
         if not np.isfinite(arr).all():
             idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
             self.fail(f"{what}{_where(where)} holds {arr[idx]} at index {idx}; every value must be finite.")
-        bound = tol + rtol * np.abs(exp)
+        # near zero is zero: what is within ZERO of an exact 0 passes, as the grader's own floor
+        bound = np.maximum(tol + rtol * np.abs(exp), ZERO)
         diff = np.abs(arr - exp)
         if (diff <= bound).all():
             self.checked += 1
@@ -254,7 +289,7 @@ class Exercise:
         self.fail(f"{name}{_where(where)} is {_fmt(float(arr[i]), u)}, expected {_fmt(float(exp[i]), u)}: "
                   f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
 
-    def hand_in(self, grade_id: str, fn, *, forbid: tuple = (), what: str = "") -> int:
+    def hand_in(self, grade_id: str, fn, *, forbid: tuple = (), what: str = "", array: bool = False) -> int:
         """Hand in ``fn``'s results at the grader's hidden cases of this exercise.
 
         While a notebook is graded, ``SNAKEKIT_CASES`` names the grader's socket: the grader
@@ -267,6 +302,9 @@ class Exercise:
         It prints nothing and raises nothing (a test cell calls it first, so a visible check
         that fails after it does not lose what the hidden cases earn). ``forbid``: library
         functions that raise :class:`ShortcutError` while ``fn`` runs (see :func:`forbid`).
+        ``array``: the exercise asks for a numpy array (its checks use ``close(..., array=True)``):
+        a list or tuple returned is handed in as such, and the grader counts it wrong, as the
+        visible check does.
         Outside grading it does nothing. Returns the number of cases handed in.
         """
         folder, socket_path = os.environ.get("SNAKEKIT_HANDIN_DIR"), os.environ.get("SNAKEKIT_CASES")
@@ -295,11 +333,12 @@ class Exercise:
                     results[-1] = ReturnedNone(self.name)
         path = Path(folder) / f"{grade_id}.npz"
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(encode_results(results))
+        path.write_bytes(encode_results(results, array=array))
         return len(results)
 
     def done(self, note: str = "") -> None:
         """Print that the checks passed (the last line of a test cell)."""
+        _VERDICTS[self.number] = True
         print(f"exercise {self.number} {self.name}: {self.checked} check(s) passed" + (f"; {note}" if note else ""))
 
 

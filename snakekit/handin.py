@@ -86,11 +86,13 @@ class ReturnedNone:
         self.name = name
 
 
-def encode_results(results) -> bytes:
+def encode_results(results, *, array: bool = False) -> bytes:
     """One entry per case: ``<k>/value`` (an array), ``<k>/<name>`` (a dict's arrays), or
     ``<k>/__error__`` (an exception raised, ``"<type>: <message>"``; a result that is not numbers
     is one too: ``"returned None"``, ``"returned str"``; a :class:`ReturnedNone`:
-    ``"returned None from <name>"``)."""
+    ``"returned None from <name>"``). With ``array`` (the exercise asks for a numpy array, as its
+    check's ``close(..., array=True)``), a Python list or tuple where a result is expected is one
+    too (``"returned list"``): the grader then judges as the local check does."""
     arrays = {"__cases__": np.array(len(results))}
     for k, r in enumerate(results):
         if isinstance(r, ReturnedNone):
@@ -106,7 +108,7 @@ def encode_results(results) -> bytes:
                 a = None if v is None else np.asarray(v)
             except Exception:  # noqa: BLE001 - a student's object that numpy cannot read
                 a = None
-            if a is None or a.dtype == object or a.dtype.kind not in "biuf":
+            if a is None or a.dtype == object or a.dtype.kind not in "biuf" or (array and isinstance(v, (list, tuple))):
                 what = "None" if v is None else type(v).__name__
                 entry = {"__error__": np.array(f"returned {what}" + ("" if name == "value" else f" for {name}"))}
                 break

@@ -29,9 +29,11 @@ def ex02_2_numerical_jacobian_test(rng, spec):
 
 
 def ex02_3_manipulability_test(rng, spec):
-    """manipulability(q): 9 cases, random poses, the straight arm and the straight arm turned by
-    joint 1 alone (singular: w = 0, up to rounding), and the arm bent at joint 5 alone (w small)."""
+    """manipulability(q): 10 cases, random poses, the straight arm and the straight arm turned by
+    joint 1 alone (singular: w = 0, up to rounding), one of them where det(J J^T) rounds below 0 (the
+    visible check's 0.55 rad: an unclipped square root is nan there, so it is wrong graded as locally),
+    and the arm bent at joint 5 alone (w small)."""
     q = list(rng.uniform(spec.lower, spec.upper, (6, spec.n_joints)))
-    first, last = np.zeros(spec.n_joints), np.zeros(spec.n_joints)
-    first[0], last[-1] = rng.uniform(-1.5, 1.5), rng.uniform(0.5, 1.5)
-    return [(x,) for x in q + [np.zeros(spec.n_joints), first, last]]
+    first, below, last = np.zeros(spec.n_joints), np.zeros(spec.n_joints), np.zeros(spec.n_joints)
+    first[0], below[0], last[-1] = rng.uniform(-1.5, 1.5), 0.55, rng.uniform(0.5, 1.5)
+    return [(x,) for x in q + [np.zeros(spec.n_joints), first, below, last]]

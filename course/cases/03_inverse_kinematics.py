@@ -22,8 +22,10 @@ DEPENDS = {"ex03_3_ik_loop_test": ["ex03_2_dls_step"]}
 
 
 def ex03_1_two_link_ik_test(rng, spec):
-    """two_link_ik(x, y, l1, l2): 9 cases; reachable targets of random links, a fully stretched
-    arm (both elbows coincide), and two targets out of reach (too far, too near)."""
+    """two_link_ik(x, y, l1, l2): 10 cases; reachable targets of random links, two fully stretched
+    arms (both elbows coincide), one of them where the cosine of q2 rounds above 1 (the visible check's
+    (0.1, 0, 0.07, 0.03): an unclipped arccos is nan there, wrong graded as locally), and two targets
+    out of reach (too far, too near)."""
     cases = []
     for _ in range(6):
         l1, l2 = rng.uniform(0.05, 0.2, 2)
@@ -33,6 +35,7 @@ def ex03_1_two_link_ik_test(rng, spec):
     l1, l2 = rng.uniform(0.05, 0.2, 2)
     a = rng.uniform(-3.0, 3.0)
     cases.append((float((l1 + l2) * np.cos(a)), float((l1 + l2) * np.sin(a)), float(l1), float(l2)))
+    cases.append((0.1, 0.0, 0.07, 0.03))
     far = (l1 + l2) * rng.uniform(1.1, 2.0)
     cases.append((float(far * np.cos(a)), float(far * np.sin(a)), float(l1), float(l2)))
     l2 = l1 * rng.uniform(0.3, 0.6)                 # a target inside the inner circle: too near

@@ -6,6 +6,9 @@ tuple of the positional arguments the test cell's hand-in calls (see grader/READ
 
 import numpy as np
 
+#: 4.3's move is timed by 4.1's quintic: a slip there is graded again with the lesson's own.
+DEPENDS = {"ex04_3_sample_10hz_test": ["ex04_1_quintic"]}
+
 
 def ex04_1_quintic_test(rng, spec):
     """quintic(T, t): 5 durations with 20 times each (before 0, inside, after T), and a scalar t."""
@@ -28,9 +31,15 @@ def ex04_2_trapezoid_test(rng, spec):
 
 
 def ex04_3_sample_10hz_test(rng, spec):
-    """sample_move(q_start, q_end, duration, rate): 4 moves at 10, 10, 25 and 5 Hz."""
-    return [(rng.uniform(-1.0, 1.0, 5), rng.uniform(-1.0, 1.0, 5), float(T), rate)
-            for T, rate in zip(rng.uniform(0.5, 4.0, 4), (10.0, 10.0, 25.0, 5.0))]
+    """sample_move(q_start, q_end, duration, rate): 4 moves at 10, 10, 25 and 5 Hz, 0.5 to 4 s, none a whole
+    number of goal periods: two a little over one (round(T f) rounds down: the last goal before the end),
+    two a little under (it rounds up: the last goal after the end, where the quintic must be clipped)."""
+    cases = []
+    for rate, part in zip((10.0, 10.0, 25.0, 5.0), (rng.uniform(0.1, 0.4), rng.uniform(0.6, 0.9),
+                                                    rng.uniform(0.1, 0.4), rng.uniform(0.6, 0.9))):
+        periods = int(rng.integers(int(0.5 * rate), int(4.0 * rate)))
+        cases.append((rng.uniform(-1.0, 1.0, 5), rng.uniform(-1.0, 1.0, 5), float((periods + part) / rate), rate))
+    return cases
 
 
 def _random_walk(rng, n, step):

@@ -21,6 +21,7 @@ from snakekit.errors import SnakekitError
 
 from grader.files import CommandParser
 from grader.scoring.references import REFERENCES
+from grader.scoring import draws
 
 COURSE = Path("course")
 
@@ -36,15 +37,17 @@ def build_parser() -> argparse.ArgumentParser:
                         "cells after it do not run; a submission stopped by a clock runs once more from the start "
                         "and the timeout counts only if it comes again (default: 120)")
     p.add_argument("--cell-timeout", type=float, default=None,
-                   help="wall-clock limit of one cell [s]: that cell is interrupted and the notebook goes on "
-                        "(default: the --timeout)")
+                   help="wall-clock limit of one cell [s]: that cell is interrupted (the kernel lives on), it "
+                        "costs only its exercise, and the cells after it still run and hand in (default: a third "
+                        "of --timeout, 40 s at the default 120: the slowest cell of the course takes about 15 s)")
     p.add_argument("--memory", type=int, default=4096, help="memory limit per process [MB] (default: 4096)")
     p.add_argument("--csv", type=Path, default=None, help="write the grades here (default: <course>/grades-<assignment>.csv)")
     p.add_argument("--references", type=Path, default=REFERENCES, help="reference runs folder (default: grader/references/)")
     p.add_argument("--student", action="append", default=None,
                    help="grade only this student (repeatable); the other rows of the CSV are kept")
-    p.add_argument("--seed", type=int, default=None, help="draw the hidden cases of an earlier batch again (its "
-                   "seed is printed when it starts; default: a fresh draw from the system's randomness)")
+    p.add_argument("--seed", type=int, default=None, help="grade every student at the hidden cases of this seed "
+                   "(printed when a batch starts; default: each attempt graded before and unchanged meets the cases "
+                   "it met then, kept in <course>/draws/<assignment>.json, and a new attempt a fresh draw)")
     p.add_argument("--regenerate", action="store_true", help="if the release or the reference no longer matches "
                    "the source, regenerate them (nbgrader generate_assignment --force; grader.scoring.references) first")
     return p
@@ -99,6 +102,12 @@ def check_current(args, out) -> list[str]:
         print(f"snakekit grade: {args.references}/{a}.npz does not say which source it was recorded from; "
               f"`{_refs_command(args, a)} --check` tells whether it is current", file=sys.stderr)
     return problems
+
+
+def _keep_draw(course: Path, assignment: str, batch, results: list, notebooks: list[str]) -> None:
+    """Keep the seed each graded attempt met (:mod:`grader.scoring.draws`), so a regrade meets it again."""
+    if batch.draw is not None and results:
+        draws.keep(course, assignment, batch.draw.seed, [r.student for r in results], notebooks)
 
 
 def interrupted(course: Path, assignment: str, results: list, students: list[str], csv_path: Path) -> int:
@@ -203,13 +212,25 @@ def main(argv: list[str] | None = None, out=None) -> int:
         print(f"snakekit grade: {one_line(e)}; nothing was graded", file=sys.stderr)
         return 2
     backup = backup_gradebook(course)
+    # an attempt graded before and unchanged meets the cases it met then; a new attempt, a fresh draw
+    notebooks = sorted(p.stem for p in (course / "source" / args.assignment).glob("*.ipynb"))
+    results = []
     try:
-        results = grader.run(students)
+        for seed, group in draws.groups(course, args.assignment, students, notebooks, args.seed):
+            batch = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
+                           memory=args.memory << 20, cell_timeout=args.cell_timeout, seed=seed, hooks=HOOKS)
+            try:
+                done = batch.run(group)
+            except KeyboardInterrupt as e:
+                _keep_draw(course, args.assignment, batch, getattr(e, "results", []), notebooks)
+                raise
+            _keep_draw(course, args.assignment, batch, done, notebooks)
+            results += done
     except SnakekitError as e:
         print(f"snakekit grade: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt as e:
-        return interrupted(course, args.assignment, getattr(e, "results", []), students, csv_path)
+        return interrupted(course, args.assignment, results + getattr(e, "results", []), students, csv_path)
     rows = class_rows(course, args.assignment, results, read_class_csv(csv_path))
     write_csv(rows, csv_path)
     failed = [r for r in results if r.status != "graded"]

@@ -40,19 +40,18 @@ class Runner:
         shutil.copytree(src, course / "submitted" / student / a.name, symlinks=True,
                         ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
         for name, nb in nbs.items():
-            if any(why.startswith("duplicated") for why in tampered.values()):
-                # nbgrader refuses a notebook with a grade id twice: run it with the first copy only
-                # (the duplicated cells score 0 anyway), so the other exercises are still graded
-                seen, cells = set(), []
-                for cell in nb.cells:
-                    gid = cell.get("metadata", {}).get("nbgrader", {}).get("grade_id")
-                    if gid not in seen:
-                        cells.append(cell)
-                    if gid:
-                        seen.add(gid)
-                dst = course / "submitted" / student / a.name / f"{name}.ipynb"
-                dst.unlink()
-                nbformat.write(nbformat.from_dict({**nb, "cells": cells}), dst)
+            # the notebook as the grader read it: its test cells as released, once each (grader.course.restore;
+            # nbgrader refuses a notebook with a grade id twice)
+            seen, cells = set(), []
+            for cell in nb.cells:
+                gid = cell.get("metadata", {}).get("nbgrader", {}).get("grade_id")
+                if gid not in seen:
+                    cells.append(cell)
+                if gid:
+                    seen.add(gid)
+            dst = course / "submitted" / student / a.name / f"{name}.ipynb"
+            dst.unlink(missing_ok=True)
+            nbformat.write(nbformat.from_dict({**nb, "cells": cells}), dst)
         for f in a.source_files:
             dst = course / "source" / a.name / f.relative_to(self.course / "source" / a.name)
             dst.parent.mkdir(parents=True, exist_ok=True)

@@ -151,6 +151,9 @@ def explain_error(text: str, name: str = "your function") -> str:
             return forgot_return(name) if not part else \
                 f"the '{part}' of the result of {name} is None: " + forgot_return(name).split(": ", 1)[1]
         where = f"the '{part}' of your result" if part else "your function"
+        if what in ("list", "tuple"):
+            return (f"{where} returned a Python {what}, not a numpy array: return np.array(...) (the exercise asks "
+                    "for an array, as its check says).")
         return f"{where} returned a {what}, not numbers or an array."
     if text.startswith("ShortcutError:"):
         return text.split(":", 1)[1].strip()

@@ -64,10 +64,13 @@ class Verdicts:
                 out[gid] = score_exercise(gid, handin, e, self.a.tests[gid].max_score)
         return out
 
-    def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None, runs=1) -> SubmissionResult:
+    def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None, runs=1,
+                restored=None) -> SubmissionResult:
         """``second``: grade id -> (its hand-in, the answer cells replaced) from a second run with the
         instructor's answers in those cells (:mod:`grader.scoring.rerun`); the better score counts. ``runs``: 2
-        when the first run was stopped by a clock and this is the run from scratch after it."""
+        when the first run was stopped by a clock and this is the run from scratch after it.
+        ``restored``: test cells put back as released before the run (:mod:`grader.course.restore`): no
+        points lost, the status says so for the TA."""
         a = self.a
         raw = read_inside(work, "result.json", limit=1 << 20)
         try:
@@ -129,6 +132,10 @@ class Verdicts:
         elif tampered:
             status = "tests tampered"
             detail = "; ".join(f"{g}: {why}" for g, why in sorted(tampered.items()))
+        elif restored:
+            status = "tests restored"
+            detail = "; ".join(f"{g}: {why}" for g, why in sorted(restored.items())) + \
+                " (the released tests gave the points)"
         elif not executed:
             last = (str(worker.get("error", "")).strip().splitlines() or ["no result"])[-1][:300]
             status = "kernel died" if outcome.returncode not in (0, 3) else "autograde failed"

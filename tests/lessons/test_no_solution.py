@@ -519,9 +519,6 @@ MISTAKES = {
          "    angle = amplitude * np.sin(2 * np.pi * sweeps * times / times[-1])\n    angle[-1] = 0.0\n"
          "    return np.repeat(angle[None, :], 5, axis=0)", "rows and columns are swapped"),
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
-         "    angle = amplitude * np.sin(2 * np.pi * sweeps * times / times[-1])\n"
-         "    return np.repeat(angle[:, None], 5, axis=1)", "the last row is not exactly home"),
-        ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
          "    angle = amplitude * np.sin(2 * np.pi * sweeps * times / (times[-1] + times[1] - times[0]))\n"
          "    return np.repeat(angle[:, None], 5, axis=1)", "the sweeps do not fill the run"),
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"

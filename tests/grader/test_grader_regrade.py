@@ -1,0 +1,71 @@
+"""A regrade is reproducible: the same attempt always meets the same hidden cases; a new attempt, new ones.
+
+A class graded twice and one student regraded with ``--student`` give identical scores, CSV rows and
+pages, though no ``--seed`` is given: each attempt's seed is kept in ``<course>/draws/<a>.json``. A
+partly right submission (right for half the joint angles) shows it: its score depends on the cases
+it meets. A student who hands in again meets a fresh draw, and the others keep theirs.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import need_program
+from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, make_course, submit
+
+REPO = Path(__file__).resolve().parents[2]
+#: right where joint 1 is at or above 0, wrong below: its score is the share of such cases it meets
+HALF_RIGHT = GOOD["ex1_tool_xy"].replace("    phi = np.cumsum(q)", "    phi = np.cumsum(q) if q[0] >= 0 else q")
+
+
+def _grade(course, *extra):
+    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
+                        "--references", str(REFERENCES), "--timeout", "120", *extra], capture_output=True, text=True,
+                       timeout=900, cwd=REPO)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return r
+
+
+def _state(course):
+    csv = (course / f"grades-{ASSIGNMENT}.csv").read_text()
+    pages = {p.parent.parent.name: p.read_bytes() for p in (course / "feedback").glob(f"*/{ASSIGNMENT}/*.html")}
+    return csv, pages
+
+
+def _seeds(course):
+    return {s: v["seed"] for s, v in json.loads((course / "draws" / f"{ASSIGNMENT}.json").read_text()).items()}
+
+
+@pytest.fixture(scope="module")
+def course(tmp_path_factory):
+    need_program("unshare")
+    course = make_course(tmp_path_factory.mktemp("regrade"))
+    submit(course, "good")
+    submit(course, "half", {"ex1_tool_xy": HALF_RIGHT})
+    submit(course, "slip", {"ex1_tool_xy": GOOD["ex1_tool_xy"].replace("np.cos(phi)", "np.sin(phi)")})
+    return course
+
+
+def test_a_class_graded_twice_and_one_student_regraded_get_the_same_scores_and_pages(course):
+    _grade(course)
+    first, seeds = _state(course), _seeds(course)
+    assert set(seeds) == {"good", "half", "slip"} and len(set(seeds.values())) == 1
+    _grade(course)
+    assert _state(course) == first and _seeds(course) == seeds
+    _grade(course, "--student", "half")
+    assert _state(course) == first and _seeds(course) == seeds
+
+
+def test_a_new_attempt_meets_a_fresh_draw_and_the_others_keep_theirs(course):
+    before = _seeds(course)
+    submit(course, "half", {"ex1_tool_xy": HALF_RIGHT + "\n# handed in again"})
+    r = _grade(course)
+    after = _seeds(course)
+    assert after["half"] != before["half"]
+    assert {s: after[s] for s in ("good", "slip")} == {s: before[s] for s in ("good", "slip")}
+    assert r.stderr.count("hidden cases drawn with seed") == 2   # the kept seed's batch, then the new attempt's

@@ -1,0 +1,113 @@
+"""One verdict locally and graded: the check cell and the grader accept and refuse the same results.
+
+The rules hold for every exercise, so they are tested over every check cell of the course: a list
+where an array is asked is refused by both; a value within 1e-12 of an exact 0 passes both; nan
+fails both, and the hidden cases hold the visible check's edge cases where nan comes out; the
+hidden cases of 4.3 are durations that are not a whole number of goal periods, and its visible
+check holds such durations too.
+"""
+
+from __future__ import annotations
+
+import re
+import runpy
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grader.scoring.score import DEFAULT_TOLERANCES, Expected, score_exercise
+from snakekit import SPEC, checks
+from snakekit.handin import decode_results, encode_results
+from tests.conftest import need
+
+ROOT = Path(__file__).resolve().parents[2]
+COURSE = ROOT / "course"
+LESSONS = sorted(p.name for p in (COURSE / "source").iterdir() if (p / f"{p.name}.ipynb").exists())
+
+
+def test_cells():
+    nbformat = need("nbformat")
+    out = []
+    for lesson in LESSONS:
+        nb = nbformat.read(COURSE / "source" / lesson / f"{lesson}.ipynb", as_version=4)
+        out += [(lesson, c.metadata["nbgrader"]["grade_id"], c.source) for c in nb.cells
+                if c.metadata.get("nbgrader", {}).get("grade")]
+    return out
+
+
+CELLS = test_cells()
+
+
+@pytest.mark.parametrize("lesson, grade_id, source", CELLS, ids=[c[1] for c in CELLS])
+def test_an_exercise_whose_check_asks_an_array_hands_in_with_the_same_rule(lesson, grade_id, source):
+    asks_array = "array=True" in source.split("ex.hand_in(")[-1] or re.search(r"dict\([^)]*array=True", source)
+    hand_in = re.search(r"ex\.hand_in\(([^()]|\([^()]*\))*\)", source)
+    assert hand_in, f"{grade_id} hands nothing in"
+    assert bool(asks_array) == ("array=True" in hand_in.group(0)), (
+        f"{grade_id}: its visible check {'refuses' if asks_array else 'accepts'} a list, so its hand_in must say "
+        f"array={bool(asks_array)}")
+
+
+def _expected(results, *, tol=None):
+    return Expected("ex9_9_f_test", "values", cases=[(0,)] * len(results),
+                    results=[{"value": np.asarray(r, dtype=float)} for r in results],
+                    tolerances={"atol": 1e-12, "rtol": 1e-9, **(tol or {})}, function="f")
+
+
+def _graded(handed, expected):
+    return score_exercise("ex9_9_f_test", decode_results(encode_results(handed, array=True)), expected, 1.0)
+
+
+def test_a_list_where_an_array_is_asked_fails_locally_and_graded_with_the_same_advice():
+    ex = checks.Exercise("9.9", "f")
+    with pytest.raises(checks.CheckFailed, match="is a Python list, not a numpy array: return np.array"):
+        ex.close([[1.0, 2.0]], [[1.0, 2.0]], what="positions", array=True)
+    graded = _graded([[[1.0, 2.0]]], _expected([[[1.0, 2.0]]]))
+    assert graded.score == 0.0
+    assert graded.message == ("1 of 1 hidden cases wrong; the first: f(0): your function returned a Python list, "
+                              "not a numpy array: return np.array(...) (the exercise asks for an array, as its check "
+                              "says).")
+    assert _graded([np.array([[1.0, 2.0]])], _expected([[[1.0, 2.0]]])).score == 1.0
+
+
+@pytest.mark.parametrize("got, passes", [(3.9e-16, True), (-1e-12, True), (2e-12, False), (np.nan, False)])
+def test_near_zero_is_zero_and_nan_is_wrong_the_same_locally_and_graded(got, passes):
+    ex = checks.Exercise("9.9", "f")
+    try:
+        ex.close(np.array([0.2, got]), [0.2, 0.0], what="last row", unit="rad")
+        local = True
+    except checks.CheckFailed:
+        local = False
+    graded = _graded([np.array([0.2, got])], _expected([[0.2, 0.0]])).score == 1.0
+    assert (local, graded) == (passes, passes)
+    assert DEFAULT_TOLERANCES["values"]["atol"] == checks.ZERO
+
+
+def _cases(lesson, grade_id, seed):
+    module = runpy.run_path(str(COURSE / "cases" / f"{lesson}.py"))
+    return module[grade_id](np.random.default_rng(seed), SPEC)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_every_hidden_move_of_4_3_is_not_a_whole_number_of_goal_periods_and_rounds_both_ways(seed):
+    cases = _cases("04_trajectories", "ex04_3_sample_10hz_test", seed)
+    parts = [T * rate - np.floor(T * rate) for _, _, T, rate in cases]
+    assert all(0.05 < p < 0.95 for p in parts), parts
+    assert any(p < 0.5 for p in parts) and any(p > 0.5 for p in parts), parts
+
+
+def test_4_3s_visible_check_holds_durations_of_the_hidden_kind_both_ways():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex04_3_sample_10hz_test"]
+    calls = re.findall(r"check_move\([^,]+, goal, ([\d.]+), ([\d.]+),", source)
+    parts = [float(T) * float(f) - np.floor(float(T) * float(f)) for T, f in calls]
+    assert any(0.05 < p < 0.5 for p in parts) and any(0.5 < p < 0.95 for p in parts), calls
+
+
+@pytest.mark.parametrize("lesson, grade_id, pick", [
+    ("02_jacobian", "ex02_3_manipulability_test", lambda c: np.array_equal(c[0], [0.55, 0, 0, 0, 0])),
+    ("03_inverse_kinematics", "ex03_1_two_link_ik_test", lambda c: c == (0.1, 0.0, 0.07, 0.03)),
+])
+def test_the_hidden_cases_hold_the_visible_case_where_a_missing_clip_gives_nan(lesson, grade_id, pick):
+    for seed in range(5):
+        assert any(pick(c) for c in _cases(lesson, grade_id, seed)), seed
