@@ -50,6 +50,7 @@ import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import ReturnedNone, encode_results, fetch_cases
+from .mistakes import either, mistake_hint, shape_hint
 from .watch import calls_to, forgot_return, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "quick", "waiting_for"]
@@ -261,7 +262,7 @@ class Exercise:
                       f"{str(got)[:80]}")
         if arr.shape != exp.shape:
             self.fail(f"{what}{_where(where)} has shape {arr.shape}, expected shape {exp.shape}.",
-                      _shape_hint(arr, exp))
+                      shape_hint(arr, exp))
         if not np.isfinite(arr).all():
             idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
             self.fail(f"{what}{_where(where)} holds {arr[idx]} at index {idx}; every value must be finite.")
@@ -285,7 +286,7 @@ class Exercise:
         if why is None:
             tol_text += ", " + f"{rtol:g}".replace("e-0", "e-") + " relative"
             tol_text += f" + {_fmt_diff(tol, u)}" if tol else ""
-        hint = _mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()) * 10 + 1e-9)
+        hint = mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()) * 10 + 1e-9)
         self.fail(f"{name}{_where(where)} is {_fmt(float(arr[i]), u)}, expected {_fmt(float(exp[i]), u)}: "
                   f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
 
@@ -346,56 +347,6 @@ def _student_function(name: str):
     """The student's function ``name`` in the notebook's namespace (None outside a notebook)."""
     fn = getattr(sys.modules.get("__main__"), name, None)
     return fn if getattr(fn, "__code__", None) is not None else None
-
-
-def _shape_hint(arr: np.ndarray, exp: np.ndarray) -> str:
-    if exp.ndim == 0:
-        return "return one number, not a list or an array of them: float(...) makes one."
-    if arr.ndim == 2 and arr.T.shape == exp.shape:
-        return "this is the transpose of the expected shape: swap rows and columns (or build it the other way)."
-    if arr.size == exp.size and arr.ndim != exp.ndim:
-        return (f"the right number of values, arranged wrongly (a flattened or reshaped array): "
-                f"return shape {exp.shape}.")
-    return f"return an array of shape {exp.shape}."
-
-
-class either(tuple):
-    """The answers one known mistake may give (a value of :meth:`Exercise.close`'s ``mistakes``):
-    its hint is shown when the result is near any of them.
-
-    >>> ex = Exercise("9.9", "halve")
-    >>> try:
-    ...     ex.close(2.0, 0.5, what="result", mistakes={"this is doubled or quadrupled.": either(1.0, 2.0)})
-    ... except CheckFailed as e:
-    ...     print(str(e).splitlines()[1])
-    Hint: this is doubled or quadrupled.
-    """
-
-    def __new__(cls, *values):
-        return super().__new__(cls, values)
-
-
-def _mistake_hint(arr, exp, unit, mistakes, *, tol: float) -> str:
-    def near(a, b):
-        b = np.asarray(b, dtype=float)
-        return b.shape == a.shape and bool(np.allclose(a, b, rtol=1e-6, atol=tol))
-
-    for hint, value in (mistakes or {}).items():
-        if any(near(arr, v) for v in (value if isinstance(value, either) else (value,))):
-            return hint
-    if arr.ndim == 2 and exp.ndim == 2 and near(arr, exp.T):   # a square array, built the other way round
-        return "rows and columns are swapped: this is the transpose of the expected array."
-    units = set(unit) if isinstance(unit, (tuple, list)) else {unit}
-    if np.abs(exp).max() > 1e-6:
-        if "rad" in units and near(arr, np.degrees(exp)):
-            return "this looks like degrees where radians were asked: use radians (np.radians / np.deg2rad)."
-        if "rad" in units and near(arr, np.radians(exp)):
-            return "these numbers are the right ones converted to radians once too often: they are radians already."
-        if "m" in units and near(arr, 1000 * exp):
-            return "this looks like millimetres where metres were asked: divide by 1000."
-        if "m" in units and near(arr, exp / 1000):
-            return "this looks like metres divided by 1000 again: the link lengths are already in metres."
-    return ""
 
 
 # --- the shortcut guard ---------------------------------------------------------------------

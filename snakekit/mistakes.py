@@ -1,0 +1,56 @@
+"""What a wrong result most likely is: the hints of the course's checks (:mod:`snakekit.checks`)
+for a result of another shape, a known mistake's value, a transpose or a unit slip."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def shape_hint(arr: np.ndarray, exp: np.ndarray) -> str:
+    """What to return when a result ``arr`` has another shape than the expected ``exp``."""
+    if exp.ndim == 0:
+        return "return one number, not a list or an array of them: float(...) makes one."
+    if arr.ndim == 2 and arr.T.shape == exp.shape:
+        return "this is the transpose of the expected shape: swap rows and columns (or build it the other way)."
+    if arr.size == exp.size and arr.ndim != exp.ndim:
+        return (f"the right number of values, arranged wrongly (a flattened or reshaped array): "
+                f"return shape {exp.shape}.")
+    return f"return an array of shape {exp.shape}."
+
+
+class either(tuple):
+    """The answers one known mistake may give (a value of ``Exercise.close``'s ``mistakes``):
+    its hint is shown when the result is near any of them.
+
+    >>> mistake_hint(np.array(2.0), np.array(0.5), "", {"this is doubled or quadrupled.": either(1.0, 2.0)}, tol=1e-9)
+    'this is doubled or quadrupled.'
+    """
+
+    def __new__(cls, *values):
+        return super().__new__(cls, values)
+
+
+def mistake_hint(arr, exp, unit, mistakes, *, tol: float) -> str:
+    """The hint for a result ``arr`` that misses ``exp``: a known mistake's (``mistakes``: hint ->
+    the value, or :class:`either` of the values, it gives), a transposed square array, or a unit
+    slip (degrees, millimetres), "" when none fits."""
+    def near(a, b):
+        b = np.asarray(b, dtype=float)
+        return b.shape == a.shape and bool(np.allclose(a, b, rtol=1e-6, atol=tol))
+
+    for hint, value in (mistakes or {}).items():
+        if any(near(arr, v) for v in (value if isinstance(value, either) else (value,))):
+            return hint
+    if arr.ndim == 2 and exp.ndim == 2 and near(arr, exp.T):   # a square array, built the other way round
+        return "rows and columns are swapped: this is the transpose of the expected array."
+    units = set(unit) if isinstance(unit, (tuple, list)) else {unit}
+    if np.abs(exp).max() > 1e-6:
+        if "rad" in units and near(arr, np.degrees(exp)):
+            return "this looks like degrees where radians were asked: use radians (np.radians / np.deg2rad)."
+        if "rad" in units and near(arr, np.radians(exp)):
+            return "these numbers are the right ones converted to radians once too often: they are radians already."
+        if "m" in units and near(arr, 1000 * exp):
+            return "this looks like millimetres where metres were asked: divide by 1000."
+        if "m" in units and near(arr, exp / 1000):
+            return "this looks like metres divided by 1000 again: the link lengths are already in metres."
+    return ""
