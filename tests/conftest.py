@@ -102,8 +102,23 @@ def _last_durations() -> dict[str, float]:
     return seconds
 
 
+#: Tests whose check rides on the wall clock of this machine: the emulated servos and the arm's lab
+#: in real time (a stall past the Bus Watchdog's 0.5 s, or past the lab's stall bound, is a fault),
+#: and the adversarial batch's 10 s cell clock. Marked ``serial``: `make test` runs them after the
+#: parallel part, one at a time, on a machine that has only them to do.
+SERIAL_FILES = {"tests/grader/test_arm_lab.py", "tests/grader/test_lab_safety.py", "tests/grader/test_return_lab.py",
+                "tests/grader/test_grader_adversarial.py", "tests/kit/test_bridge.py", "tests/kit/test_emulator.py",
+                "tests/kit/test_hardware.py", "tests/kit/test_late_replies.py", "tests/kit/test_servo_path.py",
+                "tests/kit/test_safety.py", "tests/kit/test_bus_protocol.py"}
+#: ...and every test of lesson 07 (the real robot's lesson runs on the emulated bus in real time)
+SERIAL_IDS = ("07_real_robot",)
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the xdist_group marks
 def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.nodeid.split("::")[0] in SERIAL_FILES or any(k in item.nodeid for k in SERIAL_IDS):
+            item.add_marker(pytest.mark.serial)
     groups = {}
     for item in items:
         group = _module_group(item)
@@ -160,6 +175,10 @@ def pytest_sessionfinish(session, exitstatus):
              "# seconds phase test"]
     lines += [f"{d:.2f}s {when:<8} {nodeid}" for d, when, nodeid, _ in sorted(_reports, key=lambda r: -r[0])]
     os.makedirs(os.path.dirname(DURATIONS), exist_ok=True)
+    if os.environ.get("SNAKEKIT_DURATIONS_APPEND") and os.path.exists(DURATIONS):  # make test's second part
+        with open(DURATIONS, "a") as f:
+            f.write("\n".join(lines) + "\n")
+        return
     with open(DURATIONS + ".tmp", "w") as f:
         f.write("\n".join(lines) + "\n")
     os.replace(DURATIONS + ".tmp", DURATIONS)

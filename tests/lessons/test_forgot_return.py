@@ -44,7 +44,7 @@ def exercises(lesson: str) -> list[dict]:
         if not m.get("solution") or f"{m['grade_id']}_test" not in tests:
             continue
         test = tests[f"{m['grade_id']}_test"]
-        name = re.search(r"checks\.Exercise\(\"[\d.]+\", \"(\w+)\"\)", test).group(1)
+        name = re.search(r"checks\.Exercise\(\"[\d.]+\", \"(\w+)\"", test).group(1)
         used = {n.id for n in ast.walk(ast.parse(c.source)) if isinstance(n, ast.Name)}
         out.append(dict(answer=m["grade_id"], test=f"{m['grade_id']}_test", name=name, source=c.source, used=used))
     names = {e["name"] for e in out}
