@@ -21,7 +21,7 @@ from pathlib import Path
 
 import nbformat
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]  # tests/grader/class_submissions/ -> the repository
 
 
 @dataclass(frozen=True)
