@@ -58,18 +58,18 @@ def main() -> int:
         run = robot.run(snakekit.side_sweep())
     print(f"run: Task 2 on the simulator, {len(run.commanded)} goals, {len(run.measured.times)} samples, "
           f"{run.robot_time:.1f} s of robot time; medians of {args.repeat}")
-    writers = {".npz": run.save, ".mcap": run.save, ".bag": run.save}
-    times = {name: {"write": [], "read": []} for name in (*writers, "bare rosbags (/joint_states only)")}
+    suffixes = (".npz", ".mcap", ".bag")
+    times = {name: {"write": [], "read": []} for name in (*suffixes, "bare rosbags (/joint_states only)")}
     sizes = {}
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         run.save(d / "warm.mcap"), run.save(d / "warm.bag")  # the message types are compiled once a process
         bare_joint_states(run, d / "warm-bare")
         for k in range(args.repeat):
-            for suffix, save in writers.items():
+            for suffix in suffixes:
                 path = d / f"run{k}{suffix}"
                 t0 = time.perf_counter()
-                save(path)
+                run.save(path)
                 times[suffix]["write"].append(time.perf_counter() - t0)
                 t0 = time.perf_counter()
                 Run.load(path)

@@ -10,7 +10,8 @@
 # The caller sets ROOT (the repository), and defines say, figure and die; then:
 #   engine_packages [PKG...]   install docker.io, debootstrap, curl (+PKG) when missing (apt; root)
 #   engine_lock                one engine on this cache at a time (flock)
-#   engine_start               record the host's state, start dockerd, export DOCKER_HOST
+#   engine_start               record the host's state, start dockerd, export DOCKER_HOST, clear
+#                              what a run stopped before its engine_stop left (engine_clear_left)
 #   engine_base                debian:bookworm-slim, made with debootstrap + docker import (cached),
 #                              with the host's CA bundle in it (this machine's TLS is re-signed)
 #   engine_build IMAGE LOG     build the image as a user does: `docker compose -f docker/compose.yaml
@@ -180,7 +181,21 @@ engine_start() {
     sleep 0.2
   done
   ENGINE_START_S=$(since "$t")
+  engine_clear_left
   say "dockerd $($DOCKER version -f '{{.Server.Version}}') up in $ENGINE_START_S s (data root $DATA)"
+}
+
+# What a run stopped before its engine_stop (killed, machine restarted) left in the data root:
+# the caller's services and swarm (engine_on_stop), containers and every volume. The data root
+# is this engine's alone, so no volume in it is anyone else's: a student's home volume from a
+# killed hub test would otherwise be the next run's, with its submissions in it.
+engine_clear_left() {
+  local ids
+  declare -F engine_on_stop >/dev/null && engine_on_stop
+  ids=$($DOCKER ps -aq 2>/dev/null); [ -z "$ids" ] || $DOCKER rm -f $ids >/dev/null 2>&1
+  ids=$($DOCKER volume ls -q 2>/dev/null)
+  [ -z "$ids" ] || { say "volumes a stopped run left, removed: $(echo $ids | wc -w)"; $DOCKER volume rm -f $ids >/dev/null 2>&1; }
+  [ -z "$($DOCKER volume ls -q 2>/dev/null)" ] || die "volumes left in $DATA could not be removed: $($DOCKER volume ls -q | head -5 | tr '\n' ' ')"
 }
 
 # --- the base image: debian:bookworm-slim, made here ---------------------------------------
