@@ -84,6 +84,14 @@ def _converges(target, q0, spec):
     return _loop(target, q0, spec) is not None
 
 
+def _inside_unclamped(target, q0, spec):
+    """Whether the loop reaches ``target`` from ``q0`` with or without clamping, and unclamped ends
+    inside the limits: the cases that judge the loop itself, where clamping changes nothing (a
+    loop that never clamps is judged by the three cases of :func:`_needs_clamping` alone)."""
+    q = _loop(target, q0, spec, clamp=False)
+    return _converges(target, q0, spec) and q is not None and not bool(((q < spec.lower) | (q > spec.upper)).any())
+
+
 def _needs_clamping(target, spec):
     """Whether the loop reaches ``target`` from home clamped, but unclamped ends outside the limits
     (or not at all): a loop that never clamps is caught there."""
@@ -93,17 +101,17 @@ def _needs_clamping(target, spec):
 
 
 def ex03_3_ik_loop_test(rng, spec):
-    """solve_ik(target[, q0]): 9 cases; targets the arm reaches inside its limits (from home,
-    and from a given start), three whose unclamped solution leaves the limits (the loop must clamp),
-    and one out of reach (a ValueError expected)."""
+    """solve_ik(target[, q0]): 9 cases; five targets the arm reaches inside its limits whether the
+    loop clamps or not (from home, and from a given start), three whose unclamped solution leaves
+    the limits (the loop must clamp), and one out of reach (a ValueError expected)."""
     cases = []
     while len(cases) < 3:
         t = _tool_xy(rng.uniform(-0.9, 0.9, spec.n_joints), spec)
-        if _converges(t, np.zeros(spec.n_joints), spec):
+        if _inside_unclamped(t, np.zeros(spec.n_joints), spec):
             cases.append((t,))
     while len(cases) < 5:
         t, q0 = _tool_xy(rng.uniform(-0.9, 0.9, spec.n_joints), spec), rng.uniform(-0.5, 0.5, spec.n_joints)
-        if _converges(t, q0, spec):
+        if _inside_unclamped(t, q0, spec):
             cases.append((t, q0))
     while len(cases) < 8:   # about a third of bent poses' targets: a few tries each
         t = _tool_xy(rng.uniform(-1.5, 1.5, spec.n_joints), spec)

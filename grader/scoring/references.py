@@ -40,37 +40,22 @@ COURSE = GRADER.parent / "course"
 #: the real arm, so no tolerance on a measured angle is tighter than this.
 TICK = 2 * np.pi / 4096
 
-#: Per-exercise overrides of the tolerances, by assignment and grade id (e.g. finite
-#: differences: ``{"rtol": 1e-6, "atol": 1e-6}``).
+#: Per-exercise tolerances of the lessons whose cases module gives none of its own, by assignment
+#: and grade id. A grade id's tolerances live in one place: here, or in its lesson's cases module
+#: (``TOLERANCES``, course/cases/), never both (:func:`tolerances` refuses a grade id given twice).
 OVERRIDES: dict[str, dict[str, dict]] = {
     # each as the lesson's hidden test judges it (its `tol`, absolute, plus 1e-9 relative)
-    "00_meet_the_arm": {"ex00_1_tool_distance_test": {"atol": 1e-9}},                # mm
-    "02_jacobian": {
-        "ex02_2_numerical_jacobian_test": {"atol": 1e-6},   # finite differences
-        "ex02_3_manipulability_test": {"atol": 1e-8},       # the square root of a determinant rounded near 0
-    },
-    "03_inverse_kinematics": {
-        "ex03_1_two_link_ik_test": {"atol": 1e-9},          # the tip on target, 1 nm
-        "ex03_2_dls_step_test": {"atol": 1e-9},             # 1e-9 rad
-        "ex03_3_ik_loop_test": {"atol": 1e-5},              # the solver stops within 1e-6 m
-        "ex03_4_task1_test": {"atol": 0.003},               # the servo settles within a few mrad: 3 mm
-    },
     "05_simulation": {
         "ex05_2_overshoot_test": {"atol": 1e-9},            # percent
         "ex05_4_profile_velocity_test": {"atol": 1e-9},     # the firmware's profile, timed to 1e-12 s
     },
     "07_real_robot": {
-        "ex07_1_ticks_test": {"rtol": 0.0, "atol": 0.0},    # whole ticks
-        # the planned duration (goals on a 10 ms grid) and the end within servo settling
-        "ex07_2_safe_move_test": {"duration": 0.011, "atol": 0.01},
-        "ex07_3_fault_test": {"rtol": 0.0, "atol": 0.0},    # servo ids
-    },
-    "06_coded_sweep": {
-        # the lag is read off a flat RMS minimum: estimates 10 ms apart are the same lag (the
-        # lesson's own check uses the same tolerance)
-        "ex06_4_phase_lag_test": {"rtol": 0.0, "atol": 0.010},
+        # the planned duration (goals on a 10 ms grid); the end within servo settling is the cases
+        # module's atol
+        "ex07_2_safe_move_test": {"duration": 0.011},
     },
 }
+
 
 def spec_hash(spec: SnakeSpec = SPEC) -> str:
     """A short hash of everything that defines the arm (a reference is only valid for it)."""
@@ -232,8 +217,8 @@ def _same(a: list, b: list) -> bool:
 
 
 def tolerances(assignment: str, gid: str, kind: str, batch: Draw, runs: list[list]) -> dict:
-    """An exercise's tolerances: the kind's default, the run's spread, then the overrides (this
-    module's OVERRIDES, the cases module's TOLERANCES)."""
+    """An exercise's tolerances: the kind's default, the run's spread, then this module's OVERRIDES
+    or the cases module's TOLERANCES (a key given in both is refused: :class:`CasesError`)."""
     if kind == "values":
         tol = dict(DEFAULT_TOLERANCES["values"])
     elif kind == "trajectory":
@@ -246,8 +231,14 @@ def tolerances(assignment: str, gid: str, kind: str, batch: Draw, runs: list[lis
         emax, erms = _spread([r[gid] for r in runs])
         tol = {"max": max(3 * emax, TICK), "rms": max(3 * erms, TICK / 2), "commanded_max": 1e-6,
                "commanded_rms": 1e-6}
-    tol.update(OVERRIDES.get(assignment, {}).get(gid, {}))
-    tol.update(batch.settings.get(gid, {}).get("tolerances", {}))
+    here, there = OVERRIDES.get(assignment, {}).get(gid, {}), batch.settings.get(gid, {}).get("tolerances", {})
+    twice = sorted(set(here) & set(there))
+    if twice:
+        raise CasesError(f"{assignment}: {gid}'s tolerance {', '.join(twice)} is given twice, in "
+                         "grader.scoring.references.OVERRIDES and in the cases module's TOLERANCES; "
+                         "keep it in the cases module (course/cases/) alone")
+    tol.update(here)
+    tol.update(there)
     return tol
 
 

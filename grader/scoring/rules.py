@@ -123,7 +123,7 @@ def task1(args, result, tol):
     return True, ""
 
 
-#: grade id -> rule. The tolerances come from the reference (references.OVERRIDES, the cases module).
+#: grade id -> rule. The tolerances come from the reference (the cases module's TOLERANCES, else references.OVERRIDES).
 RULES = {
     "ex03_1_two_link_ik_test": two_link_ik,
     "ex03_3_ik_loop_test": ik_loop,

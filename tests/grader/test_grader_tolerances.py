@@ -60,3 +60,40 @@ def test_the_nan_tolerance_the_check_refuses_would_have_failed_a_right_answer():
     assert score_exercise(GID, [{"value": 7.0}], e, 1.0).score == 0.0
     e_nan = type(e)(e.grade_id, e.kind, e.cases, e.results, {"atol": math.nan, "rtol": math.nan}, e.function)
     assert score_exercise(GID, [{"value": 1.0}], e_nan, 1.0).score == 0.0
+
+
+# --- one home for a grade id's tolerance ------------------------------------------------------------
+from pathlib import Path  # noqa: E402
+
+from grader.scoring import references  # noqa: E402
+
+COURSE = Path(__file__).resolve().parents[2] / "course"
+LESSONS = sorted(p.stem for p in (COURSE / "cases").glob("0*.py"))
+
+
+@pytest.mark.parametrize("assignment", LESSONS)
+def test_every_tolerance_has_one_home_and_the_reference_holds_it(assignment):
+    """No tolerance of a lesson is given both in OVERRIDES and in its cases module (lesson 03's 3.1
+    once was, 1e-9 in one and 1e-7 in the other, and one won silently); the recorded reference
+    holds each one as given."""
+    batch = draw(COURSE, assignment, seed=1)
+    ref = Reference.load(references.REFERENCES / f"{assignment}.npz")
+    for gid, ex in ref.exercises.items():
+        here = references.OVERRIDES.get(assignment, {}).get(gid, {})
+        there = batch.settings.get(gid, {}).get("tolerances", {})
+        assert not set(here) & set(there), (gid, here, there)
+        for key, value in {**here, **there}.items():
+            assert ex["tolerances"][key] == value, (gid, key, ex["tolerances"][key], value)
+    assert set(references.OVERRIDES.get(assignment, {})) <= set(ref.exercises)
+
+
+def test_a_tolerance_given_twice_is_refused_naming_both_homes(tmp_path, monkeypatch):
+    cases_module(tmp_path, "{'atol': 1e-7}")
+    batch = draw(tmp_path, A, seed=1)
+    monkeypatch.setitem(references.OVERRIDES, A, {GID: {"atol": 1e-9}})
+    with pytest.raises(CasesError) as e:
+        references.tolerances(A, GID, "values", batch, [])
+    assert str(e.value) == (f"{A}: {GID}'s tolerance atol is given twice, in grader.scoring.references.OVERRIDES "
+                            "and in the cases module's TOLERANCES; keep it in the cases module (course/cases/) alone")
+    monkeypatch.setitem(references.OVERRIDES, A, {GID: {"rtol": 1e-6}})
+    assert references.tolerances(A, GID, "values", batch, [])["atol"] == 1e-7
