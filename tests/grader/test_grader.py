@@ -9,12 +9,13 @@ import shutil
 import sqlite3
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import need_program
+from conftest import IN_CI, need_program
 from grader.scoring import compare
 from grader.scoring.references import REFERENCES as COURSE_REFERENCES
 from grader.scoring.references import Reference, differences, main as references_main, spec_hash
@@ -587,6 +588,35 @@ def test_a_kit_installed_under_tmp_is_seen_inside_the_sandbox(tmp_path, monkeypa
     assert outcome.returncode == 0, text
     assert "the kit is here" in text
     assert not (Path("/tmp") / "scratch").exists() or (Path("/tmp") / "scratch").read_text() != "x"  # private /tmp
+
+
+def test_the_instructors_course_beside_the_venv_is_not_seen_inside_the_sandbox(tmp_path):
+    """The grader's image keeps the instructor's course, solutions included, in /opt/snakekit/course,
+    beside its venv in /opt/venv: a submission's code must not read it (it could run the solution)."""
+    need_program("unshare")
+    from grader.sandbox import namespaces as sandbox
+
+    if not os.access("/opt", os.W_OK):
+        if IN_CI:
+            pytest.fail("this test writes a folder under /opt (as the grader's image has one): run it as root")
+        pytest.skip("needs to write a folder under /opt")
+    probe = Path(tempfile.mkdtemp(prefix="snakekit-course-", dir="/opt"))
+    try:
+        (probe / "solution.txt").write_text("BEGIN SOLUTION")
+        probe.chmod(0o755)
+        (probe / "solution.txt").chmod(0o644)
+        work = tmp_path / "work"
+        work.mkdir()
+        script = (f"import os; print('seen' if os.path.exists({str(probe / 'solution.txt')!r}) else 'not seen'); "
+                  "import snakekit, grader; print('kit', snakekit.__name__)")
+        with open(tmp_path / "out.txt", "w") as out:
+            outcome = sandbox.run([sys.executable, "-c", script], workdir=work, env={"PATH": "/usr/bin:/bin"},
+                                  limits=sandbox.Limits(wall=60), stdout=out, stderr=subprocess.STDOUT)
+        text = (tmp_path / "out.txt").read_text()
+        assert outcome.returncode == 0, text
+        assert text.split() == ["not", "seen", "kit", "snakekit"], text
+    finally:
+        shutil.rmtree(probe, ignore_errors=True)
 
 
 # --- the warm fork server ----------------------------------------------------------------------
