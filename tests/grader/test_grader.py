@@ -266,7 +266,9 @@ def graded(tmp_path_factory):
     second = grade("--seed", "20261124")
     csv2 = (course / f"grades-{ASSIGNMENT}.csv").read_text()
     third = grade()
-    return {"course": course, "first": first, "second": second, "third": third, "csv1": csv1, "csv2": csv2}
+    csv3 = (course / f"grades-{ASSIGNMENT}.csv").read_text()
+    return {"course": course, "first": first, "second": second, "third": third, "csv1": csv1, "csv2": csv2,
+            "csv3": csv3}
 
 
 def test_batch_writes_csv_with_scores(graded):
@@ -280,13 +282,16 @@ def test_batch_writes_csv_with_scores(graded):
     assert rows["bob"]["status"] == "graded" and 1 < float(rows["bob"]["score"]) < 4
 
 
-def test_the_seed_repeats_a_batch_and_a_new_batch_draws_new_cases(graded):
+def test_the_seed_repeats_a_batch_and_an_unchanged_attempt_keeps_its_cases(graded):
+    """--seed grades at that seed; a batch without it grades the attempts already graded (the same
+    notebooks) at the seed they met (grader.scoring.draws: a regrade changes no grade no one
+    touched); a new attempt's fresh draw: tests/grader/test_grader_regrade.py."""
     assert "hidden cases drawn with seed 20261124" in graded["first"].stderr
     assert graded["second"].returncode == 0 and graded["csv2"] == graded["csv1"]   # the same cases: the same grades
-    assert graded["third"].returncode == 0
-    seed = graded["third"].stderr.split("hidden cases drawn with seed ")[1].split()[0]
-    assert seed != "20261124"
-    assert read_csv(graded["course"] / f"grades-{ASSIGNMENT}.csv")["alice"]["score"] == "7"  # right at any cases
+    assert graded["third"].returncode == 0, graded["third"].stderr[-3000:]
+    assert "hidden cases drawn with seed 20261124" in graded["third"].stderr
+    assert graded["csv3"] == graded["csv1"]
+    assert read_csv(graded["course"] / f"grades-{ASSIGNMENT}.csv")["alice"]["score"] == "7"
 
 
 def test_scores_land_in_nbgraders_gradebook(graded):
