@@ -15,8 +15,9 @@ For each ``<course>/submitted/<student>/<assignment>/`` the grader
    instructor notebook's results at the same cases: the batch runs it first, in a sandbox like
    the students' (:mod:`grader.scoring.verdict`, :mod:`grader.scoring.score`, :func:`grader.scoring.references.expected`);
 4. writes the scores into the course's gradebook (only this process writes it, one
-   submission at a time), the executed notebook into ``autograded/``, and the feedback HTML
-   (:mod:`grader.course.gradebook`, :mod:`grader.feedback.report`).
+   submission at a time), the executed notebook into ``autograded/``, and then the feedback HTML
+   from the gradebook, a score set by hand and the late penalty included
+   (:mod:`grader.course.gradebook`, :mod:`grader.feedback.scores`).
 """
 
 from __future__ import annotations
