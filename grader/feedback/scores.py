@@ -47,7 +47,11 @@ def page_stamp(path: Path) -> str | None:
 
 
 def _duration(seconds: float) -> str:
-    """``2 days 3 h 5 min`` (whole minutes, at least one)."""
+    """A time late in a student's words (whole minutes, at least one).
+
+    >>> _duration(9000), _duration(2 * 86400 + 3 * 3600 + 300), _duration(5)
+    ('2 h 30 min', '2 days 3 h 5 min', '1 min')
+    """
     minutes = max(1, round(seconds / 60))
     days, rest = divmod(minutes, 1440)
     hours, minutes = divmod(rest, 60)
@@ -69,8 +73,9 @@ def head(numbers: SubmissionScores, status: str, detail: str) -> str:
         rows.append(f"| `{g.grade_id}` | {g.score:g} / {g.max_score:g} | {note} |\n")
     late = ""
     if numbers.late_penalty:
-        late = (f"Handed in late ({_duration(numbers.seconds_late)} after the due date): the late penalty took "
-                f"{numbers.late_penalty:g} point(s) off the {numbers.raw:g} your exercises scored, "
+        when = f" ({_duration(numbers.seconds_late)} after the due date)" if numbers.seconds_late > 0 else ""
+        late = (f"Handed in late{when}: the late penalty took "
+                f"{numbers.late_penalty:g} point(s) off the {round(numbers.raw, 4):g} your exercises scored, "
                 f"so your score is {numbers.score:g}.\n\n")
     return (f"# Feedback: {numbers.assignment}\n\nStudent: `{numbers.student}`. "
             f"Score: **{numbers.score:g} / {numbers.max_score:g}**"
