@@ -251,7 +251,7 @@ def agree(course, tmp, model, after: str):
 
 #: The steps of every sequence, in an order drawn from its seed, with one grading step after the due date moved.
 STEPS = ["hand-set score", "hand-set score", "hand-set score", "comment", "late penalty", "return", "export"]
-GRADING = ["grade", "grade --student", "grade"]
+GRADING = ["grade", "grade --student"]
 
 
 def sequence(seed: int) -> list[str]:
