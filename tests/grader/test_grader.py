@@ -364,7 +364,8 @@ def test_grader_depends_only_on_trajectory_model_and_run():
         assert f"'{banned}'" not in mods
 
 
-@pytest.mark.parametrize("name", ["grader.scoring.compare", "grader.feedback.report", "grader.scoring.score"])
+@pytest.mark.parametrize("name", ["grader.scoring.compare", "grader.feedback.report", "grader.scoring.score",
+                                  "grader.feedback.scores"])
 def test_docstring_examples(name):
     import doctest
     import importlib
