@@ -204,15 +204,16 @@ class Interrupted(KeyboardInterrupt):
 
 def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip_path: Path | None, out,
                     before=None) -> tuple[int, list]:
-    """Hand the pages back; ``before(course, assignment, out)`` runs first (``snakekit return`` writes
-    the pages whose scores are not the gradebook's again there: :func:`grader.commands.nbgrader_plugins.return_main`)."""
-    if before is not None:
-        before(course, assignment, out)
+    """Hand the pages back; ``before(course, assignment, out)`` runs once the pages and the manifest
+    are read (``snakekit return`` writes the pages whose scores are not the gradebook's again there:
+    :func:`grader.commands.nbgrader_plugins.return_main`)."""
     pages = _pages(course, assignment)
     if not pages:
         raise CourseError(f"no feedback pages of {assignment} in {course}/feedback/<student>/{assignment}/; "
                           f"run `snakekit grade {assignment}` first")
-    manifest = read_manifest(course, assignment)
+    manifest = read_manifest(course, assignment)  # a damaged manifest stops it before anything is written
+    if before is not None:
+        before(course, assignment, out)
     problems, done = [], {"exchange": 0, "zip": 0}
     entries: dict[str, dict[str, Path]] = {}
     written: list[Path] = []
