@@ -128,6 +128,7 @@ def saved_in_formgrader(handlers) -> None:
             sub = getattr(self.gradebook, _find)(item_id).notebook.assignment
             scores.refresh(Path(self.coursedir.root), sub.assignment.name, {sub.student.id}, after=HOOKS.pages)
 
+        put.__wrapped__ = saved  # inspect.unwrap reaches formgrader's own handler through it
         put._snakekit = True
         cls.put = put
 
