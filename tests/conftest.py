@@ -175,7 +175,7 @@ def pytest_runtest_logreport(report):
         os.makedirs(os.path.dirname(FAILURES), exist_ok=True)
         with open(FAILURES, "a") as f:
             f.write(f"{time.strftime('%H:%M:%S')} FAILED ({report.when}) {report.nodeid}\n"
-                    f"{str(report.longrepr)[-3000:]}\n\n")
+                    f"{str(report.longrepr)[-12000:]}\n\n")
 
 
 def pytest_sessionfinish(session, exitstatus):
