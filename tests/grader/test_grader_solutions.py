@@ -172,7 +172,8 @@ def test_no_hidden_test_nor_case_reaches_the_lesson_s_solution(lesson, tmp_path)
         shutil.copytree(COURSE / "source" / lesson, course / "source" / lesson)
         path = course / "source" / lesson / f"{lesson}.ipynb"
         nb = nbformat.read(path, as_version=4)
-        hide(nb, hidden)
+        if hidden:
+            hide(nb, hidden)
         nbformat.write(nb, path)
         (course / "release" / lesson).mkdir(parents=True)
         shutil.copyfile(REPO / "notebooks" / f"{lesson}.ipynb", course / "release" / lesson / f"{lesson}.ipynb")
@@ -187,6 +188,14 @@ def test_no_hidden_test_nor_case_reaches_the_lesson_s_solution(lesson, tmp_path)
         # the answers are there: no answer cell is the student's stub
         solved = [c.source for c in got.cells if c.metadata.get("nbgrader", {}).get("solution")]
         assert solved and not [a for a in solved if "NotImplementedError(\"exercise" in a]
+    # the lesson's code as the suite runs it in the instructor's notebook (tests/lessons/test_course.py, full
+    # marks): the same code cells, the solution markers' lines the only difference
+    source_code = [c.source for c in nbformat.read(COURSE / "source" / lesson / f"{lesson}.ipynb", as_version=4).cells
+                   if c.cell_type == "code"]
+    got = nbformat.read(tmp_path / "as-is" / "release" / f"{lesson}-solutions" / f"{lesson}-solutions.ipynb",
+                        as_version=4)
+    assert [c.source for c in got.cells if c.cell_type == "code"] == \
+        [re.sub(r"(?m)^[ \t]*### (BEGIN|END) SOLUTION[ \t]*\n?", "", s) for s in source_code]
 
 
 def test_before_the_due_date_it_is_refused_saying_when_and_how_to_override(course, capsys):
