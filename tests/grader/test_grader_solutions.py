@@ -135,11 +135,11 @@ def test_a_student_fetches_the_solution_and_it_passes_its_visible_checks(course,
                                                                   "ex3_peak_speed_test"}
 
 
-def test_released_again_the_solution_replaces_the_one_in_the_exchange(course, tmp_path):
+def test_released_again_the_solution_replaces_the_one_in_the_exchange(course, tmp_path, capsys):
     exchange = tmp_path / "exchange"
     exchange.mkdir()
     for _ in range(2):
-        r = snakekit("release", A, "--solutions", "--course", course, "--exchange", exchange)
+        r = run(capsys, "release", A, "--solutions", "--course", course, "--exchange", exchange)
         assert r.returncode == 0, r.stdout + r.stderr
     outbound = exchange / "snakekit-test-course" / "outbound" / S
     assert tree(outbound) == tree(course / "release" / S)
