@@ -50,7 +50,10 @@ def solution_notebook(nb, *, assignment: str, due: dt.datetime | None):
 
 
 def due_date(course: Path, assignment: str) -> dt.datetime | None:
-    """The assignment's due date as the gradebook holds it (aware, UTC), or None."""
+    """The assignment's due date as the gradebook holds it (aware, UTC), or None (also with no gradebook,
+    which is not made here)."""
+    if not (Path(course) / "gradebook.db").is_file():
+        return None
     with gradebook(course) as gb:
         found = [a.duedate for a in gb.assignments if a.name == assignment]
     return found[0].replace(tzinfo=dt.timezone.utc) if found and found[0] is not None else None

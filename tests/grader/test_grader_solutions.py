@@ -209,8 +209,11 @@ def test_before_the_due_date_it_is_refused_saying_when_and_how_to_override(cours
     assert (course / "release" / S / f"{S}.ipynb").is_file()
 
 
-def test_an_assignment_with_no_due_date_needs_force(course, capsys):
+@pytest.mark.parametrize("gradebook", ["without a due date", "missing"])
+def test_an_assignment_with_no_due_date_needs_force(course, capsys, gradebook):
     set_due(course, None)
+    if gradebook == "missing":
+        (course / "gradebook.db").unlink()
     before = tree(course)
     one_line_error(run(capsys, "release", A, "--solutions", "--course", course),
                    f"{A} has no due date in the gradebook", f"snakekit release {A} --due TIME", "--force")
