@@ -16,7 +16,7 @@ For each ``<course>/submitted/<student>/<assignment>/`` the grader
    the students' (:mod:`grader.scoring.verdict`, :mod:`grader.scoring.score`, :func:`grader.scoring.references.expected`);
 4. writes the scores into the course's gradebook (only this process writes it, one
    submission at a time), the executed notebook into ``autograded/``, and the feedback HTML
-   (:mod:`grader.course.gradebook`, :mod:`grader.feedback.report`).
+   (:mod:`grader.course.gradebook`, :mod:`grader.feedback.notebook`).
 """
 
 from __future__ import annotations

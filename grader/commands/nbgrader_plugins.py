@@ -4,9 +4,9 @@ A course's ``nbgrader_config.py`` calls :func:`use_safe_grading` (``course/nbgra
 does). Then:
 
 * ``nbgrader generate_feedback``, and formgrader's Generate Feedback buttons, write the
-  grader's safe pages (:mod:`grader.feedback.report`: no hidden tests, nothing loaded from the
-  network), never nbgrader's own (which keep the hidden tests, its issue #917). The pages are
-  built from the gradebook's scores, so a score or comment a TA entered in formgrader is on
+  grader's safe pages (:mod:`grader.feedback.notebook`, :mod:`grader.feedback.exporter`: no hidden
+  tests, nothing loaded from the network), never nbgrader's own (which keep the hidden tests, its
+  issue #917). The pages are built from the gradebook's scores, so a score or comment a TA entered in formgrader is on
   the page, beside the grader's verdict (kept in the autograded notebook by the grader), and
   the lab's result when ``snakekit lab`` ran the student's sweep (docs/lab.md).
 * formgrader's Autograde button grades the submission with ``snakekit grade ASSIGNMENT
@@ -28,7 +28,8 @@ from pathlib import Path
 
 from nbconvert.exporters import HTMLExporter
 
-from grader.feedback import report as feedback
+from grader.feedback import notebook as feedback
+from grader.feedback.exporter import page_exporter
 from grader.arm import feedback as lab_feedback
 
 #: where formgrader's request handlers live (imported only by a server that runs formgrader)
@@ -67,7 +68,7 @@ def safe_page(nb, *, root, student: str, assignment: str, notebook: str, db_url:
     """The grader's page of an autograded notebook, from the gradebook's scores and comments (and
     the lab's result, when the lab ran the student's sweep)."""
     page = regenerate(nb, student=student, assignment=assignment, notebook=notebook, db_url=db_url, course_id=course_id)
-    body, _ = feedback.page_exporter().from_notebook_node(page)
+    body, _ = page_exporter().from_notebook_node(page)
     if root and student and assignment:
         body = lab_feedback.add_to(body, Path(root), assignment, student)
     return body

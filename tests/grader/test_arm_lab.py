@@ -64,13 +64,13 @@ def feedback_pages(course, students):
     """Each student's feedback page as the grader writes them (a heading cell, then the lesson's cells)."""
     import nbformat
 
-    from grader.feedback import report as feedback
+    from grader.feedback.exporter import write_html
 
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(f"# Feedback: {A}\n\nScore: **9 / 10**"),
                                          nbformat.v4.new_markdown_cell("Grader: ex06_3_task2_test: 3 / 3 points")])
     for i, c in enumerate(nb.cells):
         c["id"] = f"cell-{i}"
-    page = feedback.write_html(nb, course / "feedback" / students[0] / A / f"{A}.html")
+    page = write_html(nb, course / "feedback" / students[0] / A / f"{A}.html")
     for st in students[1:]:
         (course / "feedback" / st / A).mkdir(parents=True)
         shutil.copyfile(page, course / "feedback" / st / A / f"{A}.html")

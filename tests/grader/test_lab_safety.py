@@ -276,7 +276,7 @@ def test_a_session_with_bad_hand_ins_among_good_ones_runs_the_good_ones(calibrat
 
     import nbformat
 
-    from grader.feedback import report as feedback
+    from grader.feedback.exporter import write_html
 
     course = tmp_path / "course"
     shutil.copytree(calibrated, course)
@@ -289,7 +289,7 @@ def test_a_session_with_bad_hand_ins_among_good_ones_runs_the_good_ones(calibrat
             hand_in(course, st, raw=raw)
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(f"# Feedback: {A}")])
     nb.cells[0]["id"] = "cell-0"
-    feedback.write_html(nb, course / "feedback" / "carl" / A / f"{A}.html")
+    write_html(nb, course / "feedback" / "carl" / A / f"{A}.html")
     students = ["carl", "alice", "dora", "emil", "bob", "fay", "gus"]
     q = Queue.load(course, A)
     for st in students:
