@@ -4,12 +4,12 @@ A course's ``nbgrader_config.py`` calls :func:`use_safe_grading` (``course/nbgra
 does). Then:
 
 * ``nbgrader generate_feedback``, and formgrader's Generate Feedback buttons, write the
-  grader's safe pages (:mod:`grader.feedback.report`: no hidden tests, nothing loaded from the
-  network), never nbgrader's own (which keep the hidden tests, its issue #917). The pages are
-  built from the gradebook's scores (:mod:`grader.feedback.scores`), so a score or comment a TA
-  entered in formgrader and the late penalty are on the page, beside the grader's verdict (kept
-  in the autograded notebook by the grader), and the lab's result when ``snakekit lab`` ran the
-  student's sweep (docs/lab.md).
+  grader's safe pages (:mod:`grader.feedback.notebook`, :mod:`grader.feedback.exporter`: no hidden
+  tests, nothing loaded from the network), never nbgrader's own (which keep the hidden tests, its
+  issue #917). The pages are built from the gradebook's scores (:mod:`grader.feedback.scores`),
+  so a score or comment a TA entered in formgrader and the late penalty are on the page, beside
+  the grader's verdict (kept in the autograded notebook by the grader), and the lab's result
+  when ``snakekit lab`` ran the student's sweep (docs/lab.md).
 * saving a score, extra credit or comment in formgrader writes that student's pages and the
   class CSV again from the gradebook at once: the page, the CSV, ``snakekit export`` and
   formgrader show the same score.

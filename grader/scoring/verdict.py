@@ -15,7 +15,8 @@ import nbformat
 
 from snakekit.errors import CheckFailed
 
-from grader.feedback import report as feedback
+from grader.feedback import scrub
+from grader.feedback import notebook as feedback
 from grader.scoring import rerun
 from grader.course.assignment import read_inside
 from grader.hooks import NO_HOOKS, BatchHooks
@@ -205,7 +206,7 @@ def kernel_score(gid, cell, nb) -> ExerciseScore:
     if c.get("execution_count") is None and not c.get("outputs"):
         return ExerciseScore(gid, 0.0, cell.max_score, "missing",
                              "the test cell did not run: the notebook was stopped before it.")
-    err = feedback.cell_error(c)
+    err = scrub.cell_error(c)
     if err is None:
         return ExerciseScore(gid, cell.max_score, cell.max_score, "scored", "the test cell passed.")
     ename, evalue, where = err
@@ -231,7 +232,7 @@ def with_local_hint(sc: ExerciseScore, cell) -> ExerciseScore:
     err = next((o for o in (cell or {}).get("outputs", []) if o.get("output_type") == "error"), None)
     if err is None or err.get("ename") not in ("CheckFailed", "ShortcutError"):
         return sc
-    hint = CheckFailed.hint_of(feedback.neutral(str(err.get("evalue", "")), feedback.machine_paths()))
+    hint = CheckFailed.hint_of(scrub.neutral(str(err.get("evalue", "")), scrub.machine_paths()))
     if not hint or hint in sc.message:
         return sc
     return dataclasses.replace(sc, message=f"{sc.message} The check in your notebook adds: {hint}")
@@ -267,7 +268,7 @@ def why_missing(cell, message: str) -> str:
     (the function it hands in is not defined: an error in the answer cell, or it was never
     run) or the notebook stopped before the cell. The cell's error is the student's own to see.
     """
-    err = feedback.cell_error(cell) if cell is not None else None
+    err = scrub.cell_error(cell) if cell is not None else None
     if err is None:
         return message
     ename, evalue, _ = err

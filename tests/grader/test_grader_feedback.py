@@ -186,7 +186,8 @@ def test_nbgrader_generate_feedback_writes_the_graders_pages_with_the_tas_scores
 def test_a_page_opened_offline_in_chromium_shows_typeset_math():
     sync_api = need("playwright.sync_api")
     chromium = need_program("chromium")
-    from grader.feedback import report as feedback
+    from grader.feedback.exporter import write_html
+    from grader.feedback.notebook import build
     from grader.scoring.verdict import SubmissionResult
 
     ARTIFACTS.mkdir(exist_ok=True)
@@ -195,8 +196,8 @@ def test_a_page_opened_offline_in_chromium_shows_typeset_math():
     tex = [m for c in nb.cells if c.cell_type == "markdown" for m in re.findall(r"\$\$.+?\$\$|\$[^$\n]+\$", c.source)]
     assert len(tex) > 20
     result = SubmissionResult("ann", lesson, 8.0, 8.0, "graded")
-    path = feedback.write_html(feedback.build(nb, student="ann", assignment=lesson, result=result, test_sources={}),
-                               ARTIFACTS / "feedback_offline_math.html")
+    path = write_html(build(nb, student="ann", assignment=lesson, result=result, test_sources={}),
+                      ARTIFACTS / "feedback_offline_math.html")
     _loads_nothing(path.read_text())
     requested = []
     with sync_api.sync_playwright() as pw:
