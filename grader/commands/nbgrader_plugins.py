@@ -35,7 +35,7 @@ from pathlib import Path
 
 from nbconvert.exporters import HTMLExporter
 
-from grader.feedback import report, scores
+from grader.feedback import exporter, scores
 from grader.arm import feedback as lab_feedback
 
 #: where formgrader's request handlers live (imported only by a server that runs formgrader)
@@ -59,7 +59,7 @@ def math_from_the_server(c) -> None:
     from nbgrader.server_extensions.formgrader.handlers import template_path
 
     c.HTMLExporter.template_name = "snakekit_formgrade"
-    c.HTMLExporter.extra_template_basedirs = [str(report.TEMPLATES), template_path]
+    c.HTMLExporter.extra_template_basedirs = [str(exporter.TEMPLATES), template_path]
 
 
 class SafeFeedbackExporter(HTMLExporter):
