@@ -37,6 +37,17 @@ def test_a_second_run_replaces_only_the_parts_that_lost_points_under_an_exercise
         {"ex06_3_task2_test": ["ex06_1_sweep_times", "ex06_2_sweep_positions"]}
 
 
+def test_a_dependent_exercise_stopped_by_a_part_that_never_returns_is_run_again_with_the_lessons_part():
+    """6.1 loops endlessly: 6.3's test cell, which calls it, is stopped before it hands anything in."""
+    got = scores(ex06_1=0.0, ex06_2=1.0)
+    got["ex06_3_task2_test"] = ExerciseScore("ex06_3_task2_test", 0.0, 1.0, "missing", "nothing was handed in")
+    assert rerun.needed(DEPENDS, got, WRITTEN) == {"ex06_3_task2_test": ["ex06_1_sweep_times"]}
+    # ...but not when it was never written, nor when it tampered with its test cell
+    assert rerun.needed(DEPENDS, got, {**WRITTEN, "ex06_3_task2": False}) == {}
+    got["ex06_3_task2_test"] = ExerciseScore("ex06_3_task2_test", 0.0, 1.0, "tampered", "")
+    assert rerun.needed(DEPENDS, got, WRITTEN) == {}
+
+
 @pytest.mark.parametrize("got, written", [
     (dict(ex06_1=0.0, ex06_2=1.0, ex06_3=1.0), WRITTEN),                  # 6.3 full: nothing to gain
     (dict(ex06_1=1.0, ex06_2=1.0, ex06_3=0.3), WRITTEN),                  # 6.3's own slip
