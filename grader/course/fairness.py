@@ -3,8 +3,9 @@
 For each lesson, every single-slip variant of the instructor's answers (:mod:`grader.course.mutants`)
 is typed into the lesson's student notebook (``notebooks/NN_*.ipynb``, generated from the source),
 every other answer cell holding the instructor's answer, and handed in as one student. The lesson's
-variants, with one notebook that holds every answer right, are graded in one batch by ``snakekit
-grade`` on a copy of the course, as a TA grades a class. The graded notebook of each variant shows
+variants are graded in one batch by ``snakekit grade`` on a copy of the course, as a TA grades a
+class; each exercise's loss is counted from its full points (every answer right earns them all:
+``tests/lessons/test_course.py``). The graded notebook of each variant shows
 what its visible checks said (the same cells ``snakekit check`` runs). Each variant must meet the
 rules of grader/README.md ("Fairness, tested by mutation"):
 
@@ -39,15 +40,19 @@ from grader.course.mutants import OPERATORS, Mutant, Skipped, exercises, variant
 from grader.scoring.rerun import exercise
 
 ROOT = Path(__file__).resolve().parents[2]
-#: the student who hands in every answer right: the batch's control (full marks, or the batch is broken)
-CONTROL = "all_right"
 #: the operators that must cost their own exercise only, even one that builds on it
 CONTAINED = ("endless_loop", "exception")
 #: each notebook's time [s]; a cell gets a third (60 s): lesson 06's and 07's slowest cells take about 20 s with
 #: their hidden cases on a loaded machine, and each endless loop costs the batch twice the cell's limit
 TIMEOUT = 180.0
-#: lesson 07 runs the arm's bus emulator in real time: on a loaded machine its instructor notebook needs longer
-TIMEOUTS = {"07_real_robot": 360.0}
+#: lesson 07 runs the arm's bus emulator in real time: on a loaded machine its instructor notebook needs longer.
+#: Lesson 04's notebook runs in about 10 s on a loaded machine: 40 s holds it, and 4.1's endless loop (which 4.1's
+#: check and 4.3's check each call) costs its batch 2 x 40 s, not 2 x 180 s
+TIMEOUTS = {"07_real_robot": 360.0, "04_trajectories": 40.0}
+#: One cell's limit where it is not a third of the notebook's: lesson 04's is half, so that 4.1's endless loop,
+#: stopped in 4.1's check at the cell limit, uses up the notebook's time in 4.3's check, before 4.4's runs (4.3
+#: and 4.4 are then graded in a second run with the lesson's own 4.1: an endless loop costs only its exercise)
+CELL_TIMEOUTS = {"04_trajectories": 20.0}
 
 #: Variants that give the same results as the instructor's answer at every input the exercise's
 #: task allows, so neither the visible check nor the graded cases can (or should) refuse them:
@@ -175,7 +180,7 @@ def _local(course: Path, lesson: str, student: str) -> dict:
 
 
 def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | None = None, jobs: int = 2,
-                 timeout: float | None = None) -> tuple[list[Row], dict]:
+                 timeout: float | None = None, cell_timeout: float | None = None) -> tuple[list[Row], dict]:
     """Grade ``mutants`` of ``lesson`` in one batch; the rows, and the batch's facts (seed, seconds)."""
     from nbgrader.api import Gradebook
 
@@ -185,7 +190,7 @@ def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | N
     shutil.copytree(ROOT / "course", course, ignore=shutil.ignore_patterns(
         "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log", "__pycache__"))
     right = {gid: answer for gid, answer, _ in exercises(ROOT / "course" / "source" / lesson / f"{lesson}.ipynb")}
-    students = {CONTROL: notebook(lesson, right)}
+    students = {}
     for m in mutants:
         students[_student(m)] = notebook(lesson, right, {m.grade_id: m.source})
     for name, nb in students.items():
@@ -193,8 +198,9 @@ def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | N
         folder.mkdir(parents=True)
         nbformat.write(nb, folder / f"{lesson}.ipynb")
     timeout = timeout or TIMEOUTS.get(lesson, TIMEOUT)
+    cell_timeout = cell_timeout or CELL_TIMEOUTS.get(lesson, timeout / 3)
     command = [sys.executable, "-m", "snakekit.cli", "grade", lesson, "--course", str(course), "--jobs", str(jobs),
-               "--timeout", f"{timeout:g}"]
+               "--timeout", f"{timeout:g}", "--cell-timeout", f"{cell_timeout:g}"]
     command += ["--seed", str(seed)] if seed is not None else []
     started = time.monotonic()
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
@@ -211,21 +217,19 @@ def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | N
             for g in gb.find_submission_notebook(lesson, lesson, name).grades:
                 per[exercise(g.name)] = per.get(exercise(g.name), 0.0) + float(g.score or 0.0)
             scores[name] = per
-    pts = points(lesson)
-    control = scores[CONTROL]
+    pts = points(lesson)   # every answer right earns them (tests/lessons/test_course.py): a variant's loss is from full
     depends = runpy.run_path(str(course / "cases" / f"{lesson}.py")).get("DEPENDS", {})
     rows = []
     for m in mutants:
         name = _student(m)
         own = exercise(m.grade_id)
-        lost = {ex: control.get(ex, 0.0) - scores[name].get(ex, 0.0) for ex in pts}
+        lost = {ex: full - scores[name].get(ex, 0.0) for ex, full in pts.items()}
         row = Row(m, pts[own], lost.pop(own), {ex: v for ex, v in lost.items() if abs(v) > 1e-9},
                   _local(course, lesson, name).get(own, "not run"), status.get(name, "no row"))
         row.broken = rules(row, depends, pts)
         rows.append(row)
     drawn = re.search(r"drawn with seed (\d+)", r.stderr)
-    facts = {"seconds": seconds, "variants": len(mutants), "control": control, "full": pts,
-             "control_status": status.get(CONTROL), "seed": drawn.group(1) if drawn else seed}
+    facts = {"seconds": seconds, "variants": len(mutants), "full": pts, "seed": drawn.group(1) if drawn else seed}
     return rows, facts
 
 
