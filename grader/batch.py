@@ -329,7 +329,8 @@ class Grader:
             keep = False
             try:
                 again = {} if second is not None or self.draw is None or tampered else rerun.needed(
-                    self.draw.depends, self.verdicts.handin_scores(work, tampered), self._written(nbs))
+                    self.draw.depends, self.verdicts.handin_scores(work, tampered), self._written(nbs),
+                    self.verdicts.unreached(work, student))
                 if again:  # run once more with the lesson's own parts, in the pool; score both then
                     keep = True
                     return Again(lambda: self._run_again(student, src, nbs, tampered, again, finish))

@@ -66,6 +66,34 @@ class Verdicts:
                 out[gid] = score_exercise(gid, handin, e, self.a.tests[gid].max_score)
         return out
 
+    def ran(self, work, student) -> tuple[dict, dict]:
+        """What the worker reported (``result.json``), and the executed notebooks (name -> notebook) in ``work``."""
+        raw = read_inside(work, "result.json", limit=1 << 20)
+        try:
+            worker = json.loads(raw) if raw else {}
+            worker = worker if isinstance(worker, dict) else {}
+        except ValueError:
+            worker = {}
+        executed = {}
+        for name in self.a.notebooks:
+            raw = read_inside(work, f"course/autograded/{student}/{self.a.name}/{name}.ipynb")
+            if raw:
+                try:
+                    executed[name] = nbformat.reads(raw.decode("utf-8"), as_version=4)
+                except Exception:  # noqa: BLE001 - a notebook the submission mangled: not used
+                    pass
+        return worker, executed
+
+    def unreached(self, work, student) -> set[str]:
+        """The test cells the notebook's clock stopped before they ran to their end: the cell the
+        worker stopped in and every test cell after it (:func:`grader.scoring.rerun.needed`)."""
+        worker, executed = self.ran(work, student)
+        out = set()
+        for name, index in stopped_cells(worker.get("stopped"), executed).items():
+            out |= {gid for c in executed[name].cells[index:]
+                    if (gid := c.get("metadata", {}).get("nbgrader", {}).get("grade_id")) in self.a.tests}
+        return out
+
     def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None, runs=1,
                 restored=None) -> SubmissionResult:
         """``second``: grade id -> (its hand-in, the answer cells replaced) from a second run with the
@@ -74,20 +102,7 @@ class Verdicts:
         ``restored``: test cells put back as released before the run (:mod:`grader.course.restore`): no
         points lost, the status says so for the TA."""
         a = self.a
-        raw = read_inside(work, "result.json", limit=1 << 20)
-        try:
-            worker = json.loads(raw) if raw else {}
-            worker = worker if isinstance(worker, dict) else {}
-        except ValueError:
-            worker = {}
-        executed = {}
-        for name in a.notebooks:
-            raw = read_inside(work, f"course/autograded/{student}/{a.name}/{name}.ipynb")
-            if raw:
-                try:
-                    executed[name] = nbformat.reads(raw.decode("utf-8"), as_version=4)
-                except Exception:  # noqa: BLE001 - a notebook the submission mangled: not used
-                    pass
+        worker, executed = self.ran(work, student)
         errors = set()
         for nb in executed.values():
             for cell in nb.cells:
@@ -109,14 +124,14 @@ class Verdicts:
                     scores.append(ExerciseScore(gid, 0.0, cell.max_score, "inconsistent", f"hand-in unreadable: {e}."))
                     continue
                 sc = score_exercise(gid, handin, self.expected[gid], cell.max_score)
-                if second and gid in second:
-                    again, replaced = second[gid]
-                    sc = rerun.better(sc, score_exercise(gid, again, self.expected[gid], cell.max_score), replaced)
                 if sc.status == "missing":
                     sc = dataclasses.replace(sc, message=why_missing(find_cell(executed.get(cell.notebook), gid),
                                                                      sc.message))
                 elif sc.score < sc.max_score:
                     sc = with_local_hint(sc, find_cell(executed.get(cell.notebook), gid))
+                if second and gid in second:   # after the first run's message is made: the line goes before it
+                    again, replaced = second[gid]
+                    sc = rerun.better(sc, score_exercise(gid, again, self.expected[gid], cell.max_score), replaced)
                 scores.append(sc)
             else:
                 scores.append(kernel_score(gid, cell, executed.get(cell.notebook)))
