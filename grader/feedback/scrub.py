@@ -2,8 +2,9 @@
 
 Not trusted to nbgrader (whose feedback keeps the hidden tests, its issue #917): an output that
 repeats a line of hidden test code is replaced by one line saying so (:func:`scrub_cell`); an
-interactive widget becomes one line saying what it was (its model lives only in a running
-kernel); the grading machine's paths in tracebacks and outputs (the sandbox's folder, the Python
+interactive widget, and an output that would load an address when the page opens (the live
+3D view's iframe, served by the kernel that graded it), become one line saying what they were
+(they live only in a running kernel); the grading machine's paths in tracebacks and outputs (the sandbox's folder, the Python
 installation, the kit, the home folder) are replaced by neutral names (:func:`neutral`); a TeX
 output becomes MathML (:mod:`grader.feedback.mathml`). A failed test cell is said to have failed
 in its visible or its hidden part, never where in the hidden part (:func:`cell_error`).
@@ -25,6 +26,9 @@ from grader.feedback.mathml import math_html
 from grader.markup import HIDDEN, first_hidden_line
 
 REMOVED = "[output removed by the grader: it showed hidden test code]"
+
+#: An element that loads an address when the page opens (a page loads nothing: it works offline)
+LOADS = re.compile(r"<(script|link|iframe|img)[^>]+(src|href)=[\"'](?!data:)", re.IGNORECASE)
 
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
@@ -126,6 +130,13 @@ def _widget_line(out):
                                   text=f"[an interactive widget{kind}: it works in the running notebook, not in this page]\n")
 
 
+def _loading_line(html: str):
+    """One line in place of an output that would load an address (the live 3D view's iframe)."""
+    what = "the 3D view" if "snakekit 3D view" in html else "an output that loads an address"
+    return nbformat.v4.new_output("stream", name="stdout",
+                                  text=f"[{what}: it works in the running notebook, not in this page]\n")
+
+
 def scrub_cell(cell, secret: set[str], paths=()) -> None:
     """A code cell's outputs made fit for the page: hidden test code, widgets, machine paths, TeX."""
     if cell.cell_type != "code":
@@ -141,6 +152,11 @@ def scrub_cell(cell, secret: set[str], paths=()) -> None:
         data = out.get("data", {})
         if WIDGET in data:
             keep.append(_widget_line(out))
+            continue
+        html = data.get("text/html", "")
+        html = "".join(html) if isinstance(html, list) else str(html)
+        if LOADS.search(html):
+            keep.append(_loading_line(html))
             continue
         if "text/latex" in data and not {"text/html", "image/png", "image/svg+xml"} & set(data):
             latex = "".join(data["text/latex"]) if isinstance(data["text/latex"], list) else str(data["text/latex"])

@@ -140,6 +140,10 @@ def explain_error(text: str, name: str = "your function") -> str:
 
     >>> explain_error("returned None from task1", "graded_task1")[:52]
     'task1 returned None: did you forget `return`? A func'
+    >>> explain_error("NameError: name 'sweep_times' is not defined", "sweep_times")[:59]
+    'sweep_times is not defined: its answer cell did not run to '
+    >>> explain_error("NameError: name 'helper' is not defined", "sweep_times")
+    "your function raised NameError: name 'helper' is not defined"
     """
     m = re.match(r"returned None from (\w+)$", text)
     if m:
@@ -157,6 +161,10 @@ def explain_error(text: str, name: str = "your function") -> str:
         return f"{where} returned a {what}, not numbers or an array."
     if text.startswith("ShortcutError:"):
         return text.split(":", 1)[1].strip()
+    m = re.match(r"NameError: name '(\w+)' is not defined", text)
+    if m and m.group(1) == name:
+        return (f"{name} is not defined: its answer cell did not run to the end (an error in that cell, such as "
+                f"an IndentationError or a SyntaxError, stops it before the def): see that cell's output above.")
     etype, _, msg = text.partition(":")
     return f"your function raised {etype}: {msg.strip()}" if msg.strip() else f"your function raised {etype}."
 

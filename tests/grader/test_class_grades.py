@@ -88,7 +88,8 @@ def grade_class(lesson: str, tmp: Path) -> dict:
                 ex = exercise_of(g.name)
                 per[ex] = per.get(ex, 0.0) + float(g.score or 0.0)
             exercises[student.name] = per
-    return {"rows": rows, "details": details, "exercises": exercises, "seconds": seconds,
+    pages = {path.parts[-3]: path.read_text() for path in (course / "feedback").glob(f"*/{lesson}/*.html")}
+    return {"rows": rows, "details": details, "exercises": exercises, "seconds": seconds, "pages": pages,
             "seed": seed and seed.group(1), "late": [line for line in r.stderr.splitlines() if "reply never came" in line]}
 
 
@@ -191,6 +192,17 @@ def test_every_submission_scores_in_the_range_a_fair_grader_gives(graded):
 def test_more_right_never_scores_less(graded):
     module, result = graded
     _none(pair_failures(module, result), f"of {len(module.PAIRS)} pairs broken", result)
+
+
+def test_no_page_of_the_class_loads_anything(graded):
+    """Each student's page works offline: the lesson's live 3D view (an iframe to the kernel that
+    graded it) and anything else that loads an address are one line saying what they were."""
+    module, result = graded
+    assert len(result["pages"]) >= len([s for s in module.STUDENTS if s.name in result["exercises"]]) > 0
+    loads = {name: m.group(0) for name, page in result["pages"].items()
+             if (m := re.search(r"<(script|link|iframe|img)[^>]+(src|href)=[\"'](?!data:)[^\"']*", page))}
+    assert not loads, f"{len(loads)} pages load an address: {loads}"
+    assert not [name for name, page in result["pages"].items() if "http" in page]
 
 
 def _none(failures: list, what: str, result) -> None:

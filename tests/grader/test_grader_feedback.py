@@ -156,6 +156,25 @@ def test_a_widget_is_one_line_and_no_machine_path_is_shown(graded):
         assert path not in page, path
 
 
+def test_the_live_3d_view_is_one_line_on_the_page():
+    """A lesson's cell that shows the 3D view outputs an iframe to the kernel's own viewer server,
+    which is gone when the page is read: one line says what it was, and the picture beside it stays."""
+    from types import SimpleNamespace
+
+    from grader.feedback.scrub import scrub_cell
+    from snakekit.viewer import Viewer
+
+    view = Viewer.iframe(SimpleNamespace(url="http://127.0.0.1:43881/static/", height=420))
+    cell = nbformat.v4.new_code_cell("viewer")
+    cell.outputs = [nbformat.v4.new_output("execute_result", execution_count=3,
+                                           data={"text/html": view, "text/plain": "<snakekit Viewer>"}),
+                    nbformat.v4.new_output("display_data", data={"image/png": "iVBORw0KGgo="})]
+    scrub_cell(cell, set())
+    assert cell.outputs[0] == nbformat.v4.new_output(
+        "stream", name="stdout", text="[the 3D view: it works in the running notebook, not in this page]\n")
+    assert cell.outputs[1]["data"] == {"image/png": "iVBORw0KGgo="}
+
+
 def test_nbgrader_generate_feedback_writes_the_graders_pages_with_the_tas_scores(graded):
     course, _ = graded
     from nbgrader.api import Gradebook
