@@ -23,9 +23,10 @@ def fail(msg: str) -> None:
 def log_in(hub: str, name: str, password: str) -> tuple[requests.Session, requests.Response]:
     """The hub's log-in form, as a browser posts it: the session and the form's answer."""
     s = requests.Session()
-    s.get(f"{hub}/hub/login", timeout=30)  # the form's page sets its _xsrf cookie
+    # (bounds for a hang: a class arriving at once on a busy machine keeps the hub busy for minutes)
+    s.get(f"{hub}/hub/login", timeout=300)  # the form's page sets its _xsrf cookie
     r = s.post(f"{hub}/hub/login", data={"username": name, "password": password, "_xsrf": s.cookies.get("_xsrf")},
-               allow_redirects=False, timeout=60)
+               allow_redirects=False, timeout=300)
     return s, r
 
 

@@ -85,7 +85,7 @@ c.DockerSpawner.mem_limit = env("SNAKEKIT_MEM_LIMIT", "1G")
 c.DockerSpawner.cpu_limit = float(env("SNAKEKIT_CPU_LIMIT", "1"))
 # a class arriving at once on a small machine: JupyterLab starts slower when many start together
 c.DockerSpawner.start_timeout = int(env("SNAKEKIT_START_TIMEOUT", "300"))
-c.DockerSpawner.http_timeout = 180
+c.DockerSpawner.http_timeout = int(env("SNAKEKIT_HTTP_TIMEOUT", "180"))  # from the container's start to JupyterLab answering
 c.DockerSpawner.environment = {
     "SNAKEKIT_EXCHANGE_URL": f"http://{HUB_HOST}:{EXCHANGE_PORT}/services/exchange/",
     # the 3D view's servers on the container's loopback: reached only through the owner's Jupyter

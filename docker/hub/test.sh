@@ -93,6 +93,8 @@ fi
 OLD_SHARED=week-of-class-$$
 export SNAKEKIT_DUMMY_PASSWORD=$OLD_SHARED SNAKEKIT_HUB_BIND=127.0.0.1:18000
 export SNAKEKIT_SUBMIT_LIMIT_MB=8 SNAKEKIT_EXCHANGE_QUOTA_MB=64 SNAKEKIT_MEM_LIMIT=768M SNAKEKIT_CPU_LIMIT=1
+# bounds for a hang, not speeds: 25 servers starting at once on a busy 2-core machine take minutes
+export SNAKEKIT_START_TIMEOUT=900 SNAKEKIT_HTTP_TIMEOUT=900
 # The start command exactly as docker/hub/README.md gives it (the settings above in the environment)
 start=$(awk '/^## Start it/ {f = 1} f && /^```sh$/ {getline; print; exit}' docker/hub/README.md)
 [ "$start" = "SNAKEKIT_INSTRUCTORS=teacher,ta docker/hub/up" ] \
