@@ -42,7 +42,7 @@ check-generated: setup
 	$(VENV)/bin/snakekit generate --check
 
 references: setup
-	$(PY) -m grader.references
+	$(PY) -m grader.scoring.references
 
 clean:
 	rm -rf $(VENV) .pytest_cache artifacts

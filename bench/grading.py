@@ -41,7 +41,7 @@ from _common import table  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from grader.batch import default_jobs  # noqa: E402
-from grader.cases import CaseServer, draw  # noqa: E402
+from grader.scoring.cases import CaseServer, draw  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 LESSON = "06_coded_sweep"

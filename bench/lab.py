@@ -4,7 +4,7 @@ Run as ``python bench/lab.py [--jobs 3] [--calibration-runs 2]``. The arm is the
 behind the real driver (``make_robot("emulator")``, in this process, paced by the wall clock
 like the arm); the trajectory is the full Task 2 (500 goals at 10 Hz, 50 sweeps, 0.2 rad: 49.9 s
 of goals and 0.5 s of settling). Each job is timed in the lab's own steps
-(:mod:`grader.lab.session`): the gate (limits, self-collision, duration, the 50 s simulator run
+(:mod:`grader.arm.session`): the gate (limits, self-collision, duration, the 50 s simulator run
 against the reference's), the arm (home, the run, home again) and the write-up (the grade, the
 result folder with its plot, the gradebook). The arm is opened once, as in a session.
 
@@ -31,9 +31,9 @@ import numpy as np  # noqa: E402
 
 import snakekit  # noqa: E402
 from bench._common import table  # noqa: E402
-from grader.lab import gate  # noqa: E402
-from grader.lab import session as lab  # noqa: E402
-from grader.lab.jobs import load_handin, settings  # noqa: E402
+from grader.arm import gate  # noqa: E402
+from grader.arm import session as lab  # noqa: E402
+from grader.arm.jobs import load_handin, settings  # noqa: E402
 
 A = "06_coded_sweep"
 TARGET = 50.0  # jobs per hour

@@ -77,11 +77,11 @@ c.GenerateAssignment.preprocessors = [
 
 # nbgrader's generate_feedback and formgrader's Generate Feedback and Autograde buttons give
 # the grader's results: its safe pages and its sandboxed grading (see grader/README.md).
-from grader.nbgrader_plugins import use_safe_grading  # noqa: E402
+from grader.commands.nbgrader_plugins import use_safe_grading  # noqa: E402
 
 use_safe_grading(c)
 
 # What a run of an instructor notebook writes beside it (a 3D scene, a saved run, a plot, a
-# table) is never released, nor part of what a reference was recorded from (grader/course.py,
+# table) is never released, nor part of what a reference was recorded from (grader/course/folder.py,
 # source_hash): an instructor may run the notebook in its folder.
 c.CourseDirectory.ignore = [".ipynb_checkpoints", "*.pyc", "__pycache__", "feedback", "*.html", "*.npz", "*.png", "*.csv"]

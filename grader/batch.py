@@ -4,17 +4,17 @@ For each ``<course>/submitted/<student>/<assignment>/`` the grader
 
 1. reads the notebook (not valid JSON / nbformat -> ``invalid notebook``, nothing runs) and
    compares each autograded test cell with the released one (edited, deleted or duplicated
-   -> those cells score 0, status ``tests tampered``) (:mod:`grader.assignment`);
+   -> those cells score 0, status ``tests tampered``) (:mod:`grader.course.assignment`);
 2. copies the submission into a fresh folder with a gradebook that holds only this
-   assignment, and runs nbgrader's ``autograde`` there in a sandbox (:mod:`grader.runner`,
-   :mod:`grader.sandbox`), with the batch's hidden cases served on a socket in that folder
-   (:mod:`grader.cases`) and ``SNAKEKIT_HANDIN_DIR`` set, so each test cell hands in its results;
+   assignment, and runs nbgrader's ``autograde`` there in a sandbox (:mod:`grader.sandbox.runner`,
+   :mod:`grader.sandbox.namespaces`), with the batch's hidden cases served on a socket in that folder
+   (:mod:`grader.scoring.cases`) and ``SNAKEKIT_HANDIN_DIR`` set, so each test cell hands in its results;
 3. scores every test cell in its own process from the hand-ins, case by case, against the
    instructor notebook's results at the same cases: the batch runs it first, in a sandbox like
-   the students' (:mod:`grader.verdict`, :mod:`grader.score`, :func:`grader.references.expected`);
+   the students' (:mod:`grader.scoring.verdict`, :mod:`grader.scoring.score`, :func:`grader.scoring.references.expected`);
 4. writes the scores into the course's gradebook (only this process writes it, one
    submission at a time), the executed notebook into ``autograded/``, and the feedback HTML
-   (:mod:`grader.records`, :mod:`grader.feedback`).
+   (:mod:`grader.course.gradebook`, :mod:`grader.feedback.report`).
 """
 
 from __future__ import annotations
@@ -33,17 +33,19 @@ from pathlib import Path
 
 import nbformat
 
-from . import rerun, sandbox, worker
-from .assignment import (MAX_FILE, GradingError, _Assignment, _Cell, ensure_released, load_assignment,  # noqa: F401
-                         read_inside, tampered_cells, _template_gradebook)
-from .cases import CasesError, CaseServer, draw
-from .files import uninterrupted
-from .records import CSV_COLUMNS, class_rows, late_penalties, read_class_csv, record, write_csv  # noqa: F401
-from .references import REFERENCES, ReferenceError, expected
-from .runner import Runner
-from .verdict import SubmissionResult, Verdicts
-from .lab.keep import with_lab_case
-from .score import read_handin
+from grader.scoring import rerun
+from grader.sandbox import namespaces as sandbox
+from grader.sandbox.inside import worker
+from grader.course.assignment import MAX_FILE, load_assignment, read_inside, tampered_cells, template_gradebook
+from grader.scoring.cases import CaseServer, draw
+from grader.errors import CasesError, GradingError, InstructorReferenceError
+from grader.files import uninterrupted
+from grader.hooks import NO_HOOKS, BatchHooks
+from grader.course.gradebook import late_penalties, write_grade
+from grader.scoring.references import REFERENCES, expected
+from grader.sandbox.runner import Runner
+from grader.scoring.verdict import SubmissionResult, Verdicts
+from grader.scoring.score import read_handin
 
 #: The student id the instructor notebook runs under in its sandbox (never a row of the gradebook).
 INSTRUCTOR = "_instructor_reference"
@@ -63,12 +65,14 @@ class Grader:
     def __init__(self, course: Path, assignment: str, *, jobs: int | None = None, timeout: float = 120.0,
                  references: Path | None = REFERENCES, memory: int = 4 << 30, progress=None,
                  workroot: Path | None = None, use_sandbox: bool = True, cell_timeout: float | None = None,
-                 seed: int | None = None, retry_timeouts: bool = True):
+                 seed: int | None = None, retry_timeouts: bool = True, hooks: BatchHooks = NO_HOOKS):
         """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: ``timeout``);
         ``seed``: the batch's hidden cases (default: drawn from ``os.urandom``, printed);
-        ``retry_timeouts``: a submission stopped by a clock runs once more before the timeout counts."""
+        ``retry_timeouts``: a submission stopped by a clock runs once more before the timeout counts;
+        ``hooks``: what an optional part adds (the arm's lab: :data:`grader.arm.keep.HOOKS`, given by the command)."""
         self.course = Path(course).resolve()
         self.assignment = assignment
+        self.hooks = hooks
         self.jobs = jobs or default_jobs()
         self.timeout = float(timeout)
         self.cell_timeout = min(float(cell_timeout or timeout), self.timeout)
@@ -111,7 +115,7 @@ class Grader:
             if a.reference is not None:  # the hidden cases of this batch, drawn anew
                 try:
                     self.draw = draw(self.course, self.assignment, self.seed)
-                    self.draw = with_lab_case(self.draw, self.course)  # the spec's case too, kept for `snakekit lab`
+                    self.draw = self.hooks.cases(self.draw, self.course)  # the lab's case too, kept for `snakekit lab`
                 except CasesError as e:
                     raise GradingError(str(e)) from e
                 self.runner.cases = CaseServer(self.draw)
@@ -119,16 +123,16 @@ class Grader:
                       f"(--seed {self.draw.seed} draws them again)", file=sys.stderr)
             from nbgrader.preprocessors import AssignLatePenalties
 
-            from .course import _on_path, config
+            from grader.course.folder import on_path, config
 
-            with _on_path(self.course):  # a plugin module beside the course's config (nbgrader's late.py)
+            with on_path(self.course):  # a plugin module beside the course's config (nbgrader's late.py)
                 self.late_plugin = AssignLatePenalties(config=config(self.course))
             # every notebook has its own deadline inside the sandbox; this one is the backstop
             self.limits = dataclasses.replace(self.limits, wall=self.timeout * max(1, len(a.notebooks)) + 30)
             self.runner.a, self.runner.limits = a, self.limits
             self.verdicts = Verdicts(self.course, a, base, timeout=self.timeout, cell_timeout=self.cell_timeout,
-                                     memory=self.limits.memory)
-            _template_gradebook(self.course, a, base / "template.db")
+                                     memory=self.limits.memory, hooks=self.hooks)
+            template_gradebook(self.course, a, base / "template.db")
             self.runner.server = self.runner.fork_server_ready(server)  # it built matplotlib's font cache
             if not (base / "mplcache").is_dir():
                 self.runner.mpl_cache(base / "mplcache")
@@ -195,7 +199,7 @@ class Grader:
                 except Exception as e:  # noqa: BLE001 - one submission never stops the batch
                     r = SubmissionResult(s, self.assignment, 0.0, self.a.max_score, "grader error",
                                          f"{type(e).__name__}: {e}")
-                if isinstance(r, Again):  # a second run (grader.rerun): a sandbox like the first
+                if isinstance(r, Again):  # a second run (grader.scoring.rerun): a sandbox like the first
                     pending[pool.submit(r)] = s
                     continue
                 if callable(r):  # ran: score it and write the feedback, while the next sandbox runs
@@ -206,7 +210,7 @@ class Grader:
                     continue
                 try:
                     with uninterrupted():  # a Ctrl-C waits until the student's rows are written whole
-                        record(self.course, self.a, r, self.late_plugin, self._lock)  # only this thread writes
+                        write_grade(self.course, self.a, r, self.late_plugin, self._lock)  # only this thread writes
                         results.append(r)
                 except Exception as e:  # noqa: BLE001
                     raise GradingError(f"cannot write {s}'s grade to the gradebook: {e}") from e
@@ -233,7 +237,7 @@ class Grader:
             try:
                 return expected(self.a.reference, self.draw, handins, where=where,
                                 sources={g: c.source for g, c in a.tests.items()})
-            except ReferenceError as e:
+            except InstructorReferenceError as e:
                 detail = "" if outcome.returncode == 0 else f" (its sandbox ended with {outcome.returncode}" + \
                     (", timed out" if outcome.timed_out else "") + ")"
                 raise GradingError(f"{e}{detail}; nothing was graded") from e
@@ -313,7 +317,7 @@ class Grader:
 
     def _run_again(self, student, src, nbs, tampered, again: dict, finish):
         """The submission run once more with the instructor's answers in the cells ``again`` names
-        (:mod:`grader.rerun`); only the dependent exercises' hand-ins are read from it."""
+        (:mod:`grader.scoring.rerun`); only the dependent exercises' hand-ins are read from it."""
         cells = {c for replaced in again.values() for c in replaced}
         work, second = None, {}
         try:
@@ -340,7 +344,7 @@ class Grader:
 
 def late_replies(work: Path, student: str) -> None:
     """Say (on stderr, for the TA) where a kernel finished a cell whose reply never came, which the
-    worker took as finished (:data:`grader.worker.LATE_REPLY`): the kernel's fault, never a score."""
+    worker took as finished (:data:`grader.sandbox.inside.worker.LATE_REPLY`): the kernel's fault, never a score."""
     raw = read_inside(work, "result.json", limit=1 << 20)
     try:
         late = json.loads(raw).get("late_replies") or [] if raw else []
@@ -380,7 +384,7 @@ def default_jobs() -> int:
 
 
 class Again:
-    """A second sandbox run a submission needs (:mod:`grader.rerun`): it goes to the pool."""
+    """A second sandbox run a submission needs (:mod:`grader.scoring.rerun`): it goes to the pool."""
 
     def __init__(self, call):
         self.call = call

@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import argparse
 import codecs
 import contextlib
 import csv
@@ -23,11 +24,21 @@ import io
 import os
 import re
 import signal
+import sys
 import threading
 import zipfile
 from pathlib import Path
 
-from .course import CourseError
+from grader.errors import CourseError
+
+
+class CommandParser(argparse.ArgumentParser):
+    """The grader's commands' argument parser: a bad argument prints the usage and one line, exit 2."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        print(f"{self.prog}: {message}", file=sys.stderr)
+        raise SystemExit(2)
 
 #: The longest quote of an input in a message [characters].
 EXCERPT = 200

@@ -1,6 +1,6 @@
 """The ``snakekit`` command.
 
-    snakekit sweep [--backend sim] [--realtime] [--out run.npz] [--plot sweep.png]
+    snakekit sweep [--backend sim] [--realtime] [--out run.npz|run.mcap|run.bag] [--plot sweep.png]
     snakekit emulator [...]          (an emulated MX-28 bus on a pseudo-terminal or a TCP port)
     snakekit bridge PORT [--listen HOST:PORT]   (serve the arm's serial port over TCP)
     snakekit generate [--check]      (the URDF and MJCF from the robot spec)
@@ -56,7 +56,7 @@ def _save_run(run, path: Path, out) -> bool:
         return True
     except SnakekitError as e:
         print(f"snakekit sweep: {e}", file=sys.stderr)
-    name = f"snakekit-run-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.npz"
+    name = f"snakekit-run-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}{path.suffix}"
     for folder in (Path.cwd(), Path(tempfile.gettempdir())):
         try:
             run.save(folder / name)
@@ -94,7 +94,7 @@ def _sweep(args, out) -> int:
 
     problems = []
     if args.out:
-        problems.append(_writable(Path(args.out), (".npz",), "run file"))
+        problems.append(_writable(Path(args.out), (".npz", ".mcap", ".bag"), "run file"))
     if args.plot:
         problems.append(_writable(Path(args.plot), PLOT_SUFFIXES, "plot"))
     problems = [p for p in problems if p]
@@ -199,7 +199,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--realtime", action="store_true", help="pace the simulator to the wall clock")
     p.add_argument("--port", help="serial port of the arm, or socket://HOST:PORT of a snakekit bridge "
                                   "(hardware backend; default: $SNAKEKIT_PORT)")
-    p.add_argument("--out", metavar="RUN.npz", help="save the recorded run")
+    p.add_argument("--out", metavar="RUN.npz", help="save the recorded run: .npz (numpy), .mcap (a ROS 2 bag) "
+                   "or .bag (a ROS 1 bag)")
     p.add_argument("--plot", metavar="PLOT.png", help="plot commanded vs measured angles per joint")
     p.set_defaults(func=_sweep)
     sub.add_parser("emulator", help="emulate the arm's MX-28 bus on a pseudo-terminal "

@@ -156,16 +156,28 @@ class Run:
         return "\n".join(lines)
 
     def save(self, path) -> Path:
-        """Write the run to a ``.npz`` file.
+        """Write the run to a file; its suffix says which kind.
+
+        - ``.npz``: numpy's arrays (the kit's own; loads with numpy alone);
+        - ``.mcap``: a ROS 2 bag (rosbag2's MCAP storage), for ``ros2 bag``, Foxglove, Lichtblick;
+        - ``.bag``: a ROS 1 bag, for ``rosbag`` and RViz.
+
+        The bags hold ``/joint_states``, ``/joint_trajectory``, ``/tf``, ``/tf_static`` and
+        ``/robot_description`` (:mod:`snakekit.bags` lists them).
 
         Raises:
             FileFormatError: another suffix.
             FileWriteError: the folder is missing, the path is a folder, or writing failed.
         """
+        from . import bags
+
         path = as_path(path, "run file")
-        if path.suffix != ".npz":
-            raise FileFormatError(f"a run is saved as .npz, not '{path.suffix}' ({path})")
+        if path.suffix not in (".npz", *bags.SUFFIXES):
+            raise FileFormatError(f"a run is saved as .npz, .mcap (ROS 2) or .bag (ROS 1), not "
+                                  f"'{path.suffix}' ({path})")
         writable_file(path, "run file", probe=False)
+        if path.suffix in bags.SUFFIXES:
+            return bags.write(self, path)
         try:
             np.savez(path, commanded_times=self.commanded.times, commanded_positions=self.commanded.positions,
                      measured_times=self.measured.times, measured_positions=self.measured.positions,
@@ -177,12 +189,22 @@ class Run:
 
     @classmethod
     def load(cls, path) -> "Run":
-        """Read a run written by :meth:`save`.
+        """Read a run written by :meth:`save` (``.npz``, ``.mcap`` or ``.bag``).
 
         Raises:
             FileFormatError: the file is missing, truncated, damaged, or its arrays are not a
                 run (a missing array, efforts of another shape than the measured positions...).
         """
+        from . import bags
+
+        path = as_path(path, "run file")
+        if path.suffix in bags.SUFFIXES:
+            try:
+                return cls(**bags.read(path))
+            except FileFormatError:
+                raise
+            except SnakekitError as e:
+                raise FileFormatError(f"{path} is not a snakekit run ({e}); save runs with Run.save") from None
         fix = "save runs with Run.save"
         z = read_npz(path, "run file", _RUN_ARRAYS, fix=fix)
         path = Path(path)

@@ -41,7 +41,7 @@ def make_course(tmp: Path) -> Path:
     """
     global _released
     if _released is None:
-        from grader.batch import ensure_released
+        from grader.course.assignment import ensure_released
 
         cache = Path(tempfile.mkdtemp(prefix="snakekit-test-course-"))
         atexit.register(shutil.rmtree, cache, ignore_errors=True)

@@ -2,9 +2,11 @@
 their own layer, every exception is in the tree, and no module grows past 500 lines."""
 
 import ast
+import builtins
 import importlib
 import inspect
 import pkgutil
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -19,14 +21,14 @@ PACKAGE = Path(snakekit.__file__).parent
 LAYER = {
     "errors": 0, "model": 0, "host": 0, "handin": 1, "bridge": 1, "validate": 1, "progress": 1, "collision": 2, "kinematics": 2,
     "trajectory": 2, "profile_planner": 2,
-    "run": 3, "robot": 3, "sim": 4, "hardware": 4, "emulator": 4, "plots": 5, "viewer": 5, "widgets": 5,
+    "run": 3, "bags": 3, "robot": 3, "sim": 4, "hardware": 4, "emulator": 4, "plots": 5, "viewer": 5, "widgets": 5,
     "checks": 5, "start": 5, "notebook_check": 5, "cli": 6, "__init__": 6, "__main__": 6,
 }
 # Imports across one layer, on purpose (docs/architecture.md says why).
-ALLOWED_SIDEWAYS = {("kinematics", "collision"), ("robot", "run"), ("emulator", "sim"), ("emulator", "hardware"), ("widgets", "plots")}
+ALLOWED_SIDEWAYS = {("kinematics", "collision"), ("robot", "run"), ("run", "bags"), ("emulator", "sim"), ("emulator", "hardware"), ("widgets", "plots")}
 # Third-party packages that only some parts of the kit may import.
 HEAVY = {"pinocchio": {"kinematics", "collision"}, "coal": {"collision"}, "mujoco": {"sim"}, "meshcat": {"viewer"}, "zmq": {"viewer"},
-         "ipywidgets": {"widgets"}, "dynamixel_sdk": {"hardware"},
+         "ipywidgets": {"widgets"}, "dynamixel_sdk": {"hardware"}, "rosbags": {"bags"}, "mcap": {"bags"},
          "matplotlib": {"plots", "widgets", "cli", "checks"}}
 
 
@@ -160,19 +162,58 @@ def test_no_module_is_over_500_lines(path):
 # --- the grader: a package beside the kit, reached through an entry point ------------------------
 
 GRADER = PACKAGE.parent / "grader"
+GRADER_MAP = PACKAGE.parent / "docs" / "architecture.md"
+
+
+def _grader_modules() -> dict[str, Path]:
+    """Every grader module by dotted name (a package by its own name, for its ``__init__``)."""
+    out = {}
+    for p in sorted(GRADER.rglob("*.py")):
+        parts = p.relative_to(GRADER.parent).with_suffix("").parts
+        out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = p
+    return out
+
+
+GRADER_MODULES = _grader_modules()
+
+
+def _module_of(path: Path) -> str:
+    return next(m for m, p in GRADER_MODULES.items() if p == path)
 
 
 def _grader_imports(path: Path) -> set[str]:
     """The grader modules ``path`` imports, at the top or inside a function."""
     out = set()
+    package = _module_of(path) if path.name == "__init__.py" else _module_of(path).rpartition(".")[0]
     for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.ImportFrom) and node.level == 1:
-            out |= {node.module.split(".")[0]} if node.module else {a.name for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("grader."):
-            out.add(node.module.split(".")[1])
+        if isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(up + ([node.module] if node.module else []))
+            if base.split(".")[0] == "grader":
+                out |= {f"{base}.{a.name}" if f"{base}.{a.name}" in GRADER_MODULES else base for a in node.names}
         elif isinstance(node, ast.Import):
-            out |= {a.name.split(".")[1] for a in node.names if a.name.startswith("grader.")}
-    return out
+            out |= {a.name for a in node.names if a.name.split(".")[0] == "grader"}
+    return out & set(GRADER_MODULES)
+
+
+def _third_party(path: Path) -> set[str]:
+    """The top-level names of every import of ``path`` that is not the grader's."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 0:
+            out.add((node.module or "").split(".")[0])
+        elif isinstance(node, ast.Import):
+            out |= {a.name.split(".")[0] for a in node.names}
+    return out - {"grader", "__future__"}
+
+
+GRAPH = {m: _grader_imports(p) - {m} for m, p in GRADER_MODULES.items()}
+
+
+def _in(module: str, room: str) -> bool:
+    return module == room or module.startswith(room + ".")
 
 
 @pytest.mark.parametrize("path", sources(), ids=lambda p: str(p.relative_to(PACKAGE)))
@@ -186,23 +227,22 @@ def test_the_kit_never_imports_the_grader(path):
 def test_snakekit_grade_reaches_the_grader_through_its_entry_point():
     from snakekit import cli
 
-    import grader.cli
-    import grader.collect
-    import grader.lms
+    import grader.commands.grade
+    import grader.lms.collect
+    import grader.lms.export
 
-    assert cli.plugin_command("grade") is grader.cli.main
-    assert cli.plugin_command("collect") is grader.collect.main
-    assert (cli.plugin_command("return"), cli.plugin_command("export")) == (grader.lms.return_main, grader.lms.export_main)
-    import grader.lab.cli
+    assert cli.plugin_command("grade") is grader.commands.grade.main
+    assert cli.plugin_command("collect") is grader.lms.collect.main
+    assert (cli.plugin_command("return"), cli.plugin_command("export")) == (grader.lms.export.return_main, grader.lms.export.export_main)
+    import grader.commands.lab
 
-    assert cli.plugin_command("lab") is grader.lab.cli.main
+    assert cli.plugin_command("lab") is grader.commands.lab.main
     r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", "--help"], capture_output=True, text=True,
                        timeout=120)
     assert r.returncode == 0 and "usage: snakekit grade" in r.stdout
 
 
 def test_the_grader_has_no_import_cycle():
-    graph = {p.stem: _grader_imports(p) & {q.stem for q in GRADER.glob("*.py")} for p in GRADER.glob("*.py")}
     done, on_path = set(), []
 
     def visit(m):
@@ -211,16 +251,108 @@ def test_the_grader_has_no_import_cycle():
         if m in done:
             return
         on_path.append(m)
-        for n in sorted(graph.get(m, ())):
+        for n in sorted(GRAPH[m]):
             visit(n)
         on_path.pop()
         done.add(m)
 
-    for m in sorted(graph):
+    for m in sorted(GRAPH):
         visit(m)
-    assert {"references", "score"} <= set(graph) and "references" not in graph["score"]
+    # the walk sees the sub-packages: the arm's session reads the gradebook through the course folder
+    assert "grader.course.folder" in GRAPH["grader.arm.session"]
 
 
-@pytest.mark.parametrize("path", sorted(GRADER.glob("*.py")), ids=lambda p: p.name)
+# The rooms' rules (docs/architecture.md, "The grader"): who may import whom.
+NEVER = [
+    ("grader.scoring", "grader.sandbox", "scoring judges results; it never runs a sandbox"),
+    ("grader.feedback", "grader.sandbox", "the pages are made from results, never inside a sandbox"),
+    ("grader.scoring", "grader.commands", "the core never imports a command"),
+    ("grader.feedback", "grader.commands", "the core never imports a command"),
+]
+CORE = ("grader.errors", "grader.markup", "grader.files", "grader.hooks", "grader.batch", "grader.lms", "grader.course",
+        "grader.sandbox", "grader.scoring", "grader.feedback")
+# What runs beside the student's code: the standard library, nbgrader and what nbgrader's autograde
+# itself runs on (nbformat, traitlets, its gradebook's sqlalchemy, the kernel's jupyter_client and ipykernel).
+INSIDE_MAY_IMPORT = {"nbgrader", "nbformat", "traitlets", "sqlalchemy", "jupyter_client", "ipykernel"}
+
+
+@pytest.mark.parametrize("module", sorted(GRADER_MODULES))
+def test_the_grader_s_rooms_import_only_what_they_may(module):
+    imported = GRAPH[module]
+    for room, banned, why in NEVER:
+        if _in(module, room):
+            assert not [m for m in imported if _in(m, banned)], why
+    if any(_in(module, c) for c in CORE):
+        assert not [m for m in imported if _in(m, "grader.arm") or _in(m, "grader.commands")], \
+            "the core never imports the arm's lab or a command (the arm comes in through grader.hooks)"
+
+
+@pytest.mark.parametrize("module", sorted(m for m in GRADER_MODULES if _in(m, "grader.sandbox.inside")))
+def test_what_runs_inside_the_sandbox_imports_only_the_standard_library_and_nbgrader(module):
+    assert {m for m in GRAPH[module] if not _in(m, "grader.sandbox.inside")} <= {"grader", "grader.sandbox"}
+    outside = {n for n in _third_party(GRADER_MODULES[module]) if n not in sys.stdlib_module_names}
+    assert outside <= INSIDE_MAY_IMPORT, f"{module} imports {sorted(outside - INSIDE_MAY_IMPORT)}"
+    assert "snakekit" not in _third_party(GRADER_MODULES[module])  # no course data, no kit
+
+
+@pytest.mark.parametrize("module", sorted(GRADER_MODULES))
+def test_every_grader_module_is_on_the_map(module):
+    assert f"`{module}`" in GRADER_MAP.read_text(), f"docs/architecture.md names every grader module: {module}"
+
+
+def test_the_map_names_no_grader_module_that_is_gone():
+    named = set(re.findall(r"`(grader(?:\.\w+)+)`", GRADER_MAP.read_text()))
+    assert named and named <= set(GRADER_MODULES) | {m + "." + n for m in GRADER_MODULES for n in ("main",)}, \
+        sorted(named - set(GRADER_MODULES))
+
+
+def _classes(path: Path):
+    return [n for n in ast.walk(ast.parse(path.read_text())) if isinstance(n, ast.ClassDef)]
+
+
+@pytest.mark.parametrize("module", sorted(GRADER_MODULES))
+def test_every_grader_exception_lives_in_grader_errors(module):
+    errors_defined = set(vars(importlib.import_module("grader.errors")))
+    for c in _classes(GRADER_MODULES[module]):
+        bases = {b.id if isinstance(b, ast.Name) else getattr(b, "attr", "") for b in c.bases}
+        if module != "grader.errors":
+            assert not (bases & (errors_defined | {"Exception", "SnakekitError"}) or c.name.endswith("Error")), \
+                f"{c.name} (line {c.lineno}): exception classes live in grader/errors.py"
+
+
+def test_the_grader_s_exceptions_are_in_the_kit_s_tree_and_shadow_no_built_in():
+    mod = importlib.import_module("grader.errors")
+    classes = [c for c in vars(mod).values() if inspect.isclass(c) and c.__module__ == "grader.errors"]
+    assert len(classes) >= 9
+    for c in classes:
+        assert issubclass(c, errors.SnakekitError), c
+        assert c.__name__ not in dir(builtins), f"{c.__name__} shadows a built-in"
+
+
+def _strings(path: Path) -> list[tuple[int, str]]:
+    """The string constants of ``path`` that are not docstrings."""
+    tree = ast.parse(path.read_text())
+    docs = {id(n.body[0].value) for n in ast.walk(tree)
+            if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and n.body
+            and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}
+    return [(n.lineno, n.value) for n in ast.walk(tree)
+            if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docs]
+
+
+@pytest.mark.parametrize("module", sorted(m for m in GRADER_MODULES if m != "grader.markup"))
+def test_nbgrader_s_markers_are_written_only_in_grader_markup(module):
+    found = [line for line, s in _strings(GRADER_MODULES[module]) if re.search(r"(BEGIN|END) (HIDDEN TESTS|SOLUTION)", s)]
+    assert found == [], f"lines {found}: use grader.markup"
+
+
+@pytest.mark.parametrize("module", sorted(GRADER_MODULES))
+def test_no_private_name_crosses_a_grader_module(module):
+    bad = [f"line {n.lineno}: {a.name} from {n.module}" for n in ast.walk(ast.parse(GRADER_MODULES[module].read_text()))
+           if isinstance(n, ast.ImportFrom) and (n.module or "").startswith("grader") for a in n.names
+           if a.name.startswith("_")]
+    assert bad == []
+
+
+@pytest.mark.parametrize("path", sorted(GRADER.rglob("*.py")), ids=lambda p: str(p.relative_to(GRADER)))
 def test_no_grader_module_is_over_600_lines(path):
     assert len(path.read_text().splitlines()) <= 600

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 import snakekit
-from grader.lab import cli as lab_cli
-from grader.lab import session as lab
-from grader.lab.jobs import Queue, settings
+from grader.commands import lab as lab_cli
+from grader.arm import session as lab
+from grader.arm.jobs import Queue, settings
 from snakekit.emulator import Faults
 from snakekit.hardware.registers import GOAL_POSITION, TORQUE_ENABLE
 
@@ -64,7 +64,7 @@ def feedback_pages(course, students):
     """Each student's feedback page as the grader writes them (a heading cell, then the lesson's cells)."""
     import nbformat
 
-    from grader import feedback
+    from grader.feedback import report as feedback
 
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(f"# Feedback: {A}\n\nScore: **9 / 10**"),
                                          nbformat.v4.new_markdown_cell("Grader: ex06_3_task2_test: 3 / 3 points")])
@@ -130,9 +130,14 @@ def until_done(arm, course, s, students, starts=4):
 def calibrated(tmp_path_factory):
     course = make_course(tmp_path_factory.mktemp("lab"))
     s = settings(course, A)
-    with snakekit.make_robot("emulator") as robot:
-        cal = lab.calibrate(robot, course, s, runs=4)
-    return course, s, cal
+    for attempt in range(3):  # again after a fault of this shared machine (a stall, the watchdog), as a TA would
+        try:
+            with snakekit.make_robot("emulator") as robot:
+                cal = lab.calibrate(robot, course, s, runs=4)
+            return course, s, cal
+        except snakekit.BackendError:
+            if attempt == 2:
+                raise
 
 
 def test_calibration_sets_the_bands_from_the_spread_of_the_reference_runs(calibrated):
@@ -170,12 +175,16 @@ def test_a_class_is_gated_run_and_graded_and_a_second_start_has_nothing_left(cal
 
     for st in ("alice", "bob", "carol", "dan", "erin"):
         d = course / "lab" / A / "results" / st
-        assert sorted(p.name for p in d.iterdir()) == ["info.json", "plot.png", "report.json", "run.npz"]
+        assert sorted(p.name for p in d.iterdir()) == ["info.json", "plot.png", "report.json", "run.bag", "run.mcap",
+                                                       "run.npz"]
         report = json.loads((d / "report.json").read_text())
         info = json.loads((d / "info.json").read_text())
         with np.load(d / "run.npz") as z:
-            measured = z["measured_positions"]
+            measured, efforts = z["measured_positions"], z["efforts"]
             assert np.array_equal(z["commanded_positions"], CLASS[st][0].positions)
+        for bag in ("run.mcap", "run.bag"):  # the same run as ROS bags
+            back = snakekit.Run.load(d / bag)
+            assert np.array_equal(back.measured.positions, measured) and np.array_equal(back.efforts, efforts)
         with np.load(course / "lab" / A / "reference.npz") as z:
             t, ref = z["times"], z["positions"]
             with np.load(d / "run.npz") as r:  # on the sweep's clock: the host's stalls taken out
@@ -317,8 +326,8 @@ def test_grading_keeps_each_trajectory_at_the_spec_values_for_the_lab(tmp_path):
     unsandboxed here)."""
     from pathlib import Path
 
-    from grader.cases import draw, execute
-    from grader.lab.keep import keep, with_lab_case
+    from grader.scoring.cases import draw, execute
+    from grader.arm.keep import keep, with_lab_case
 
     root = Path(__file__).resolve().parents[1] / "course"
     batch = with_lab_case(draw(root, A, seed=7), root)

@@ -1022,7 +1022,7 @@ LONG_NAME = "x" * 5000  # longer than a file name may be
     (["sweep", "--backend", "gazebo"], "snakekit sweep: argument --backend: invalid choice: 'gazebo'"),
     (["sweep", "--backend", LONG_NAME], "snakekit sweep: argument --backend: invalid choice: 'xxx"),
     (["sweep", "--bogus"], "snakekit: unrecognized arguments: --bogus; see snakekit --help"),
-    (["sweep", "--out", "run.txt"], "snakekit sweep: run file run.txt must end in .npz"),
+    (["sweep", "--out", "run.txt"], "snakekit sweep: run file run.txt must end in .npz or .mcap or .bag"),
     (["sweep", "--out", "missing/run.npz"], "snakekit sweep: cannot write run file missing/run.npz: folder"),
     (["sweep", "--out", LONG_NAME + ".npz"], "(5004 characters): File name too long. Choose a place you can write"),
     (["sweep", "--plot", "plot.txt"], "snakekit sweep: plot plot.txt must end in .png or .pdf or .svg"),

@@ -126,7 +126,7 @@ def autograded(tmp_path_factory):
     handin = tmp / "handin"
     nbgrader = [sys.executable, "-m", "nbgrader"]
     timings, draws = {}, {}
-    from grader.cases import CaseServer, draw
+    from grader.scoring.cases import CaseServer, draw
 
     for name in SOURCES:
         draws[name] = draw(COURSE, name) if name in DRAWN else None
@@ -191,7 +191,7 @@ def test_the_cases_change_with_the_batch_and_stay_small():
     """A new batch draws other cases (a case seen in one feedback is no use in the next), the
     same seed the same ones; every lesson's cases are few (it still grades in seconds)."""
     np = need("numpy")
-    from grader.cases import draw
+    from grader.scoring.cases import draw
 
     for name in DRAWN:
         a, b, again = draw(COURSE, name, 1), draw(COURSE, name, 2), draw(COURSE, name, 1)

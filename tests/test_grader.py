@@ -15,17 +15,17 @@ import numpy as np
 import pytest
 
 from conftest import need_program
-from grader import compare
-from grader.references import REFERENCES as COURSE_REFERENCES
-from grader.references import Reference, differences, main as references_main, spec_hash
-from grader.score import Expected, score_exercise
+from grader.scoring import compare
+from grader.scoring.references import REFERENCES as COURSE_REFERENCES
+from grader.scoring.references import Reference, differences, main as references_main, spec_hash
+from grader.scoring.score import Expected, score_exercise
 from grader_helpers import ASSIGNMENT, FIXTURE, REFERENCES, make_course, read_csv, submit
 from snakekit.trajectory import Trajectory, side_sweep
 
 REPO = Path(__file__).resolve().parent.parent
 
 
-# --- grader.compare -----------------------------------------------------------------------------
+# --- grader.scoring.compare -----------------------------------------------------------------------------
 
 
 def test_task2_sweep_passes_every_check():
@@ -110,7 +110,7 @@ def test_fixture_reference_is_current():
 def test_course_references_are_current(path):
     # as a developer runs it (in-process under pytest's captured output, lesson 00's kernel,
     # which starts the meshcat viewer, was seen to stall)
-    r = subprocess.run([sys.executable, "-m", "grader.references", path.stem, "--check"], capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "grader.scoring.references", path.stem, "--check"], capture_output=True,
                        text=True, cwd=REPO, timeout=900,
                        env={**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"})
     assert r.returncode == 0 and f"{path.name} is current" in r.stdout, r.stderr[-3000:]
@@ -306,7 +306,7 @@ def test_progress_shows_done_left_failed(graded):
 def test_feedback_has_verdicts_and_plots_but_no_hidden_tests(graded):
     import nbformat
 
-    from grader.feedback import hidden_lines
+    from grader.feedback.report import hidden_lines
 
     html = (graded["course"] / "feedback" / "bob" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
     assert "Grader: ex1_tool_xy_test: 0 / 2 points" in html
@@ -348,7 +348,7 @@ def test_exit_code_1_when_the_grader_fails(tmp_path):
 
 
 def test_grader_depends_only_on_trajectory_model_and_run():
-    code = ("import sys, grader.batch, grader.cli, grader.score, grader.feedback, grader.references; "
+    code = ("import sys, grader.batch, grader.commands.grade, grader.scoring.score, grader.feedback.report, grader.scoring.references; "
             "print(sorted(m for m in sys.modules if m.startswith('snakekit')))")
     mods = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True).stdout
     for banned in ("snakekit.viewer", "snakekit.sim", "snakekit.hardware", "snakekit.emulator", "snakekit.widgets",
@@ -356,7 +356,7 @@ def test_grader_depends_only_on_trajectory_model_and_run():
         assert f"'{banned}'" not in mods
 
 
-@pytest.mark.parametrize("name", ["grader.compare", "grader.feedback", "grader.score"])
+@pytest.mark.parametrize("name", ["grader.scoring.compare", "grader.feedback.report", "grader.scoring.score"])
 def test_docstring_examples(name):
     import doctest
     import importlib
@@ -369,13 +369,13 @@ def test_kernel_verdict_hides_a_hidden_tests_message():
     """A test cell without a reference keeps nbgrader's verdict, but only a visible check's words."""
     from nbformat.v4 import new_code_cell, new_notebook, new_output
 
-    from grader.assignment import _Cell
-    from grader.verdict import kernel_score
+    from grader.course.assignment import TestCell
+    from grader.scoring.verdict import kernel_score
 
     src = "check(f)\n### BEGIN HIDDEN TESTS\nassert f(7) == 49, 'f(7) should be 49'\n### END HIDDEN TESTS\n"
     cell = new_code_cell(src, execution_count=5, metadata={"nbgrader": {"grade_id": "t", "grade": True}})
     nb = new_notebook(cells=[cell])
-    info = _Cell("t", "nb", 2.0, src, "code")
+    info = TestCell("t", "nb", 2.0, src, "code")
 
     def fails_at(line):
         cell.outputs = [new_output("error", ename="AssertionError", evalue="f(7) should be 49",
@@ -393,7 +393,7 @@ def test_kernel_verdict_hides_a_hidden_tests_message():
 def test_only_the_sandboxs_own_gradebook_copy_skips_waiting_for_the_disk(tmp_path):
     """The worker's course copy is deleted after the run: its SQLite need not sync; a fresh process still does."""
     code = ("import sys, sqlalchemy as sa\n"
-            "if sys.argv[1] == 'worker':\n    from grader.worker import _throwaway_gradebook; _throwaway_gradebook()\n"
+            "if sys.argv[1] == 'worker':\n    from grader.sandbox.inside.worker import _throwaway_gradebook; _throwaway_gradebook()\n"
             "with sa.create_engine(f'sqlite:///{sys.argv[2]}').connect() as c:\n"
             "    print(c.exec_driver_sql('PRAGMA synchronous').scalar(), c.exec_driver_sql('PRAGMA journal_mode').scalar())")
     out = {who: subprocess.run([sys.executable, "-c", code, who, str(tmp_path / f"{who}.db")], capture_output=True,
@@ -404,7 +404,7 @@ def test_only_the_sandboxs_own_gradebook_copy_skips_waiting_for_the_disk(tmp_pat
 def test_feedback_plot_drawn_once_for_the_same_run_and_again_for_any_other(monkeypatch):
     from collections import OrderedDict
 
-    from grader import feedback
+    from grader.feedback import report as feedback
 
     drawn = []
     draw = feedback._draw
@@ -433,7 +433,7 @@ def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
     without them (nbconvert's, with math as MathML)."""
     from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
 
-    from grader import feedback
+    from grader.feedback import report as feedback
 
     def page(student):
         code = new_code_cell(f"x = np.arange(3)  # {student}\nprint(x)", execution_count=1)
@@ -463,7 +463,7 @@ def test_a_feedback_page_is_what_nbconvert_writes_with_its_alt_texts_and_tabinde
     from nbconvert import HTMLExporter
     from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
 
-    from grader import feedback
+    from grader.feedback import report as feedback
 
     png = ("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNk+M9QDwADhgGAWjR9awAAAABJRU5ErkJggg==")
     assert base64.b64decode(png).startswith(b"\x89PNG")
@@ -502,7 +502,7 @@ def test_a_trajectory_is_held_only_to_the_properties_its_reference_has():
     assert late.score < 3 and "the first point is at t=0.1 s, expected 0 s" in late.message
 
 
-# --- grader.exercises: rules that judge a case by a property -----------------------------------
+# --- grader.scoring.rules: rules that judge a case by a property -----------------------------------
 
 
 def _tip(q, l1, l2):
@@ -566,7 +566,7 @@ def test_task1_judged_by_where_each_move_ends():
 def test_a_kit_installed_under_tmp_is_seen_inside_the_sandbox(tmp_path, monkeypatch):
     """A clone under /tmp (its venv and packages there) stays visible past the private /tmp."""
     need_program("unshare")
-    from grader import sandbox
+    from grader.sandbox import namespaces as sandbox
 
     kit = tmp_path / "kit"  # pytest's tmp_path lies under /tmp
     kit.mkdir()
@@ -599,7 +599,8 @@ def _probe(nb):
 
 
 def _grade_in_process(course, *, warm: bool, monkeypatch):
-    from grader import batch, runner
+    from grader import batch
+    from grader.sandbox import runner
 
     if not warm:
         monkeypatch.setattr(runner.Runner, "start_fork_server", lambda self, base: None)
@@ -650,7 +651,7 @@ def test_warm_and_fresh_sandboxes_give_the_same_grades(tmp_path, monkeypatch):
 
 
 def test_fork_server_that_cannot_start_says_why(tmp_path):
-    from grader.forkserver import ForkServer
+    from grader.sandbox.forkserver import ForkServer
 
     server = ForkServer({"PATH": "/usr/bin:/bin", "PYTHONPATH": str(tmp_path / "nothing"),
                          "SNAKEKIT_FORKSERVER_PRELOAD": "no_such_module_anywhere"})
@@ -667,7 +668,7 @@ def test_a_cell_whose_reply_never_comes_counts_as_finished_once_its_kernel_is_id
     import nbformat
     from jupyter_core.utils import run_sync
 
-    from grader import worker
+    from grader.sandbox.inside import worker
 
     monkeypatch.setattr(worker, "LATE_REPLY", 1.0)
     monkeypatch.setattr(worker, "_late", [])

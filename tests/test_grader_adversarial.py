@@ -88,7 +88,7 @@ def batch(tmp_path_factory):
     for case in CASES:
         case.make(course, case.student, ctx)
     csv = tmp / "grades.csv"
-    r = subprocess.run([sys.executable, "-m", "grader.cli", ASSIGNMENT, "--course", str(course), "--jobs", "2",
+    r = subprocess.run([sys.executable, "-m", "grader.commands.grade", ASSIGNMENT, "--course", str(course), "--jobs", "2",
                         "--timeout", str(TIMEOUT), "--cell-timeout", str(CELL_TIMEOUT), "--memory", "1536", "--csv", str(csv),
                         "--references", str(REFERENCES)],
                        capture_output=True, text=True, timeout=900, cwd=REPO,

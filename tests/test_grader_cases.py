@@ -37,7 +37,7 @@ def course(tmp_path):
 
 
 def test_a_seed_draws_the_same_cases_again_and_another_seed_others(course):
-    from grader.cases import draw
+    from grader.scoring.cases import draw
 
     a, b, c = draw(course, "t1", 7), draw(course, "t1", 7), draw(course, "t1", 8)
     assert sorted(a.cases) == ["ex_a_test", "ex_b_test"]          # _helper is not a grade id
@@ -50,7 +50,7 @@ def test_a_seed_draws_the_same_cases_again_and_another_seed_others(course):
 
 def test_each_grade_id_draws_from_its_own_stream(course):
     """Adding a grade id to the module leaves the others' cases as they were."""
-    from grader.cases import draw
+    from grader.scoring.cases import draw
 
     before = draw(course, "t1", 11).cases["ex_a_test"]
     (course / "cases" / "t1.py").write_text("def ex_0_test(rng, spec):\n    return [(rng.random(),)]\n" + CASES)
@@ -67,7 +67,8 @@ def test_each_grade_id_draws_from_its_own_stream(course):
     ("TOLERANCES = {'ex_a_test': 1e-9}\ndef ex_a_test(rng, spec):\n    return [(1,)]", "must map grade ids to dicts"),
 ])
 def test_a_broken_cases_module_is_refused_with_what_is_wrong(course, body, says):
-    from grader.cases import CasesError, draw
+    from grader.scoring.cases import draw
+    from grader.errors import CasesError
 
     (course / "cases" / "t1.py").write_text(body)
     with pytest.raises(CasesError, match=says):
@@ -75,14 +76,15 @@ def test_a_broken_cases_module_is_refused_with_what_is_wrong(course, body, says)
 
 
 def test_no_cases_module_names_the_file_to_write(tmp_path):
-    from grader.cases import CasesError, draw
+    from grader.scoring.cases import draw
+    from grader.errors import CasesError
 
     with pytest.raises(CasesError, match=r"cases/t9\.py does not exist"):
         draw(tmp_path, "t9", 1)
 
 
 def test_the_server_answers_each_grade_id_with_its_cases(course, tmp_path):
-    from grader.cases import CaseServer, draw
+    from grader.scoring.cases import CaseServer, draw
     from snakekit.handin import fetch_cases
 
     batch = draw(course, "t1", 3)
@@ -101,7 +103,7 @@ def test_clients_that_never_ask_cost_only_their_own_socket(course, tmp_path):
     they go, its socket answers again, and another sandbox's socket answers all along."""
     import socket
 
-    from grader.cases import CaseServer, draw
+    from grader.scoring.cases import CaseServer, draw
     from snakekit.handin import fetch_cases
 
     with CaseServer(draw(course, "t1", 3), timeout=30) as server:
@@ -117,8 +119,8 @@ def test_clients_that_never_ask_cost_only_their_own_socket(course, tmp_path):
 
 def test_the_socket_is_reached_from_inside_a_sandbox(course, tmp_path):
     need_program("unshare")
-    from grader import sandbox
-    from grader.cases import CaseServer, draw
+    from grader.sandbox import namespaces as sandbox
+    from grader.scoring.cases import CaseServer, draw
 
     batch = draw(course, "t1", 5)
     work = tmp_path / "work"
@@ -156,10 +158,10 @@ def test_run_command_prints_each_case_and_what_was_handed_in(course, tmp_path):
         checks.Exercise("2", "b").hand_in("ex_b_test", b)
     """))]
     nbformat.write(nb, tmp_path / "t1.ipynb")
-    r = subprocess.run([sys.executable, "-m", "grader.cases", "run", str(tmp_path / "t1.ipynb"), "--course",
+    r = subprocess.run([sys.executable, "-m", "grader.scoring.cases", "run", str(tmp_path / "t1.ipynb"), "--course",
                         str(course), "--seed", "4"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
-    from grader.cases import draw
+    from grader.scoring.cases import draw
 
     n, rate = draw(course, "t1", 4).cases["ex_a_test"][0]
     assert "t1: cases drawn with seed 4" in r.stdout
@@ -172,7 +174,7 @@ def test_behind_a_gate_only_the_running_test_cells_cases_are_answered(course, tm
     """The worker says which test cell runs; a kernel asking at any other moment gets no cases."""
     import socket
 
-    from grader.cases import CaseServer, draw
+    from grader.scoring.cases import CaseServer, draw
     from snakekit.handin import fetch_cases
 
     with CaseServer(draw(course, "t1", 3)) as server:
@@ -198,7 +200,7 @@ def test_a_sandbox_has_pseudo_terminals_of_its_own(tmp_path):
     """Lesson 07's bus emulator serves the arm on a pty: a sandbox can open one (a private devpts
     instance), and it does not see the host's terminals."""
     need_program("unshare")
-    from grader import sandbox
+    from grader.sandbox import namespaces as sandbox
 
     work = tmp_path / "work"
     work.mkdir()
@@ -219,15 +221,16 @@ def test_a_sandbox_has_pseudo_terminals_of_its_own(tmp_path):
 def test_an_instructor_run_that_only_raises_stops_the_batch(course):
     """A solution that raised at every case (a device missing on the grading machine, say) would make
     every student who raises the same score full marks: the batch refuses it."""
-    from grader.cases import draw
-    from grader.references import ReferenceError, expected
+    from grader.scoring.cases import draw
+    from grader.scoring.references import expected
+    from grader.errors import InstructorReferenceError
 
     batch = draw(course, "t1", 5)
     gid = "ex_a_test"
     ref = type("Ref", (), {"exercises": {gid: {"kind": "values", "outputs": ["value"], "tolerances": {}}}})()
     batch = dataclasses.replace(batch, cases={gid: batch.cases[gid]})
     errors = ["OSError: out of pty devices"] * len(batch.cases[gid])
-    with pytest.raises(ReferenceError, match=r"ex_a_test raised at every one of its 4 hidden cases .*OSError: out of pty"):
+    with pytest.raises(InstructorReferenceError, match=r"ex_a_test raised at every one of its 4 hidden cases .*OSError: out of pty"):
         expected(ref, batch, {gid: errors})
 
 
@@ -235,7 +238,7 @@ def test_lesson_06s_sweeps_catch_a_sweep_that_ignores_its_rate_at_every_seed():
     """6.3's sweeps inside the limits are inside them (the library's own side_sweep passes
     check_limits), and at every seed a sweep that sends 10 Hz whatever its rate is wrong in at
     least two of them: one draw in 27 once had all three at 10 Hz, and such a slip got 6.3 in full."""
-    from grader.cases import draw
+    from grader.scoring.cases import draw
     from snakekit import LimitError, side_sweep
 
     course = Path(__file__).resolve().parents[1] / "course"

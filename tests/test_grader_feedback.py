@@ -35,7 +35,7 @@ EXTRAS = {"ex1_tool_xy": "import ipywidgets\ndisplay(ipywidgets.VBox([ipywidgets
 def _use_safe_grading(course: Path) -> None:
     """The course's nbgrader config, as course/nbgrader_config.py does it, with the test course's references."""
     with open(course / "nbgrader_config.py", "a") as f:
-        f.write("\nfrom grader.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n"
+        f.write("\nfrom grader.commands.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n"
                 f"c.SnakekitGrade.references = {str(REFERENCES)!r}\nc.SnakekitGrade.timeout = {TIMEOUT}\n")
 
 
@@ -65,7 +65,7 @@ def _loads_nothing(page: str) -> None:
 def graded(tmp_path_factory):
     need_program("unshare")
     from grader.batch import INSTRUCTOR, Grader
-    from grader.runner import Runner
+    from grader.sandbox.runner import Runner
 
     course = make_course(tmp_path_factory.mktemp("feedback"))
     _use_safe_grading(course)
@@ -192,8 +192,8 @@ def test_nbgrader_generate_feedback_writes_the_graders_pages_with_the_tas_scores
 def test_a_page_opened_offline_in_chromium_shows_typeset_math():
     sync_api = need("playwright.sync_api")
     chromium = need_program("chromium")
-    from grader import feedback
-    from grader.batch import SubmissionResult
+    from grader.feedback import report as feedback
+    from grader.scoring.verdict import SubmissionResult
 
     ARTIFACTS.mkdir(exist_ok=True)
     lesson = "01_forward_kinematics"

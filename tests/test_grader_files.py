@@ -337,7 +337,7 @@ SAVED_AS = {
 
 @pytest.mark.parametrize("saved_as", sorted(SAVED_AS))
 def test_a_roster_is_read_in_every_encoding_a_spreadsheet_saves(saved_as, tmp_path):
-    from grader.collect import Roster
+    from grader.lms.roster import Roster
 
     path = tmp_path / "roster.csv"
     path.write_bytes(SAVED_AS[saved_as](ROSTER))
@@ -351,7 +351,7 @@ def test_a_roster_is_read_in_every_encoding_a_spreadsheet_saves(saved_as, tmp_pa
 def test_a_times_file_is_read_in_every_encoding_a_spreadsheet_saves(saved_as, tmp_path):
     import datetime as dt
 
-    from grader.collect import read_times
+    from grader.lms.collect import read_times
 
     path = tmp_path / "times.csv"
     path.write_bytes(SAVED_AS[saved_as]("Full name,Last modified (submission)\nJosé Müller,2026-03-02 10:30\n"))
@@ -419,7 +419,7 @@ def _damage(course: Path, how: str) -> None:
 @pytest.mark.parametrize("how", ["not a database", "truncated", "emptied"])
 @pytest.mark.parametrize("command", ["grade", "export", "collect", "return"])
 def test_a_damaged_gradebook_is_one_line_saying_how_to_restore_it(course, command, how, tmp_path, capsys):
-    from grader.course import backup_gradebook
+    from grader.course.folder import backup_gradebook
 
     backup = backup_gradebook(course)
     _damage(course, how)
@@ -493,9 +493,9 @@ def test_a_zip_bomb_is_not_unpacked(course, tmp_path):
 
 
 def test_a_download_over_its_bound_is_refused_before_anything_is_read(course, tmp_path, capsys, monkeypatch):
-    import grader.collect
+    import grader.lms.collect
 
-    monkeypatch.setattr(grader.collect, "MAX_DOWNLOAD", 3 << 20)
+    monkeypatch.setattr(grader.lms.collect, "MAX_DOWNLOAD", 3 << 20)
     dl = tmp_path / "elsewhere" / "big.zip"
     with zipfile.ZipFile(dl, "w", zipfile.ZIP_DEFLATED) as z:
         for k in range(4):
@@ -511,7 +511,7 @@ def test_a_download_over_its_bound_is_refused_before_anything_is_read(course, tm
 ])
 def test_a_feedback_zip_entry_never_climbs_out_of_its_folder(lms_name, entry):
     """``return`` names a Moodle page by the manifest's name; a name that is no folder name is refused."""
-    from grader.lms import lms_name as feedback_entry
+    from grader.lms.export import lms_name as feedback_entry
 
     row = {"lms": "moodle", "lms_name": lms_name, "lms_id": "9001"}
     assert feedback_entry(row, Path(f"/feedback/ann/{A}/{A}.html")) == entry

@@ -10,10 +10,11 @@ import nbformat
 import numpy as np
 import pytest
 
-from grader import rerun
-from grader.cases import CasesError, draw
-from grader.exercises import two_link_ik
-from grader.score import Expected, ExerciseScore, score_exercise
+from grader.scoring import rerun
+from grader.scoring.cases import draw
+from grader.errors import CasesError
+from grader.scoring.rules import two_link_ik
+from grader.scoring.score import Expected, ExerciseScore, score_exercise
 from snakekit.trajectory import side_sweep
 
 DEPENDS = {"ex06_3_task2_test": ["ex06_1_sweep_times", "ex06_2_sweep_positions"]}
@@ -127,7 +128,7 @@ def test_the_task_itself_called_without_arguments_weighs_as_much_as_the_other_ca
 
 
 def test_an_ik_solution_near_the_target_earns_half_a_case_and_one_outside_the_limits_nothing():
-    from grader.exercises import ik_loop
+    from grader.scoring.rules import ik_loop
     from snakekit.kinematics import tool_pose_2d
 
     q = np.array([0.3, -0.2, 0.4, 0.1, -0.3])
@@ -153,7 +154,7 @@ def test_the_second_run_runs_the_imports_the_answers_and_the_test_read_from_it_a
     the exercises (lesson 06's full Task 2 run and its plots) and everything after the last test it reads."""
     from pathlib import Path
 
-    from grader.worker import runs_cell
+    from grader.sandbox.inside.worker import runs_cell
 
     nb = nbformat.read(Path(__file__).parent.parent / "course" / "source" / lesson / f"{lesson}.ipynb", as_version=4)
     ran = [c.metadata.get("nbgrader", {}).get("grade_id") or ("imports" if "import numpy" in c.source else c.source)

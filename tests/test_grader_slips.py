@@ -35,7 +35,7 @@ def released(tmp_path_factory):
 @pytest.fixture
 def course(released, tmp_path):
     """A copy of the released test course with a due date."""
-    from grader.course import gradebook
+    from grader.course.folder import gradebook
 
     course = tmp_path / "course"
     shutil.copytree(released, course)
@@ -73,7 +73,7 @@ READERS = {
 
 
 def test_every_column_that_must_not_repeat_is_checked():
-    from grader.collect import ROSTER_IDS, UNIQUE as checked
+    from grader.lms.roster import ROSTER_IDS, UNIQUE as checked
 
     assert set(checked) == set(UNIQUE)
     assert set(ROSTER_IDS) - set(checked) == {"name"}  # two students may share a name: reported when it matters
@@ -101,8 +101,8 @@ def test_a_roster_that_repeats_an_id_is_refused_naming_the_rows(course, tmp_path
 
 
 def test_a_roster_names_every_repeat_at_once(tmp_path):
-    from grader.collect import Roster
-    from grader.course import CourseError
+    from grader.lms.roster import Roster
+    from grader.errors import CourseError
 
     path = tmp_path / "roster.csv"
     path.write_text("student,canvas_id,email\nann,101,a@x\nben,101,b@x\nann,103,B@X\n")
@@ -113,7 +113,7 @@ def test_a_roster_names_every_repeat_at_once(tmp_path):
 
 
 def test_two_students_may_share_a_name(tmp_path):
-    from grader.collect import Roster
+    from grader.lms.roster import Roster
 
     path = tmp_path / "roster.csv"
     path.write_text("student,name,canvas_id\nsam1,Sam Lee,101\nsam2,Sam Lee,102\n")
@@ -207,7 +207,7 @@ def interrupt(argv: list, course: Path, ready, *, timeout: float = 600) -> tuple
 
 
 def gradebook_rows(course: Path) -> dict[str, float]:
-    from grader.course import gradebook
+    from grader.course.folder import gradebook
 
     with gradebook(course) as gb:
         return {sub.student.id: float(sub.score or 0.0) for sub in gb.find_assignment(A).submissions}
@@ -277,7 +277,7 @@ def run_collect(course: Path, dl: Path):
 def test_another_assignments_download_is_refused_naming_it(course, tmp_path, capsys):
     import nbformat
 
-    from grader.course import gradebook
+    from grader.course.folder import gradebook
 
     with gradebook(course) as gb:  # lesson t0_intro, released earlier: its notebook and cells
         gb.add_assignment("t0_intro")

@@ -5,9 +5,11 @@ import math
 
 import pytest
 
-from grader.cases import CasesError, Draw, draw
-from grader.references import Reference, ReferenceError, expected
-from grader.score import score_exercise
+from grader.scoring.cases import Draw, draw
+from grader.errors import CasesError
+from grader.scoring.references import Reference, expected
+from grader.errors import InstructorReferenceError
+from grader.scoring.score import score_exercise
 
 A = "t1_values"
 GID = "ex_t1_double_test"
@@ -43,7 +45,7 @@ def test_good_tolerances_are_kept_as_numbers(tmp_path):
 def test_a_bad_tolerance_in_a_reference_is_refused_before_grading(key, kind, value, shown):
     ref = Reference(A, {"exercises": {GID: {"kind": "values", "outputs": ["value"], "tolerances": {key: value}}}})
     batch = Draw(A, 1, {GID: [(0.5,), (0.25,)]})
-    with pytest.raises(ReferenceError, match=r"record it again \(`python -m grader.references t1_values`\)") as e:
+    with pytest.raises(InstructorReferenceError, match=r"record it again \(`python -m grader.scoring.references t1_values`\)") as e:
         expected(ref, batch, {GID: [{"value": 1.0}, {"value": 0.5}]})
     assert str(e.value).startswith(f"{A}'s reference: {GID}: tolerance {key!r} must be a finite number")
     assert f"got {shown}" in str(e.value)

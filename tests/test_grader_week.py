@@ -104,7 +104,7 @@ def week(tmp_path_factory):
     (course / "late.py").write_text(LATE_PLUGIN)
     with open(course / "nbgrader_config.py", "a") as f:
         f.write("c.AssignLatePenalties.plugin_class = 'late.PerHour'\n")
-    from grader.course import gradebook
+    from grader.course.folder import gradebook
 
     with gradebook(course) as gb:  # the due date, as formgrader's "Manage Assignments" or `nbgrader db` sets it
         gb.update_or_create_assignment(ASSIGNMENT, duedate=DUE)
@@ -271,7 +271,7 @@ def test_a_changed_test_cell_is_refused_until_regenerated(week, capsys):
         assert r.returncode == 2
         assert f"nbgrader generate_assignment {ASSIGNMENT} --force" in r.stderr
         assert "the gradebook's cells differ from the source's (ex1_tool_xy_test)" in r.stderr
-        assert f"python -m grader.references {ASSIGNMENT} --course {course} --out {week['refs']}" in r.stderr
+        assert f"python -m grader.scoring.references {ASSIGNMENT} --course {course} --out {week['refs']}" in r.stderr
         assert "nothing was graded" in r.stderr
         assert (course / f"grades-{ASSIGNMENT}.csv").read_bytes() == csv_before
     finally:
@@ -287,7 +287,7 @@ def test_a_changed_cases_module_is_refused_until_the_reference_is_recorded_again
         csv_before = (course / f"grades-{ASSIGNMENT}.csv").read_bytes()
         r = run(capsys, "grade", ASSIGNMENT, "--course", course, "--references", week["refs"], "--student", "alice")
         assert r.returncode == 2 and f"{course}/cases/{ASSIGNMENT}.py changed since" in r.stderr, r.stderr
-        assert f"python -m grader.references {ASSIGNMENT} --course {course} --out {week['refs']}" in r.stderr
+        assert f"python -m grader.scoring.references {ASSIGNMENT} --course {course} --out {week['refs']}" in r.stderr
         assert (course / f"grades-{ASSIGNMENT}.csv").read_bytes() == csv_before
     finally:
         path.write_text(before)
@@ -348,7 +348,7 @@ def test_unknown_assignment_missing_references_and_empty_class_are_errors(small,
 
 def test_moodle_folders_with_the_grading_worksheets_times(released, tmp_path, capsys):
     course = copy_of(released, tmp_path)
-    from grader.course import gradebook
+    from grader.course.folder import gradebook
 
     with gradebook(course) as gb:
         gb.update_or_create_assignment(ASSIGNMENT, duedate=dt.datetime(2026, 3, 2, 12, 0))
@@ -378,8 +378,8 @@ def test_moodle_folders_with_the_grading_worksheets_times(released, tmp_path, ca
     assert (sub / "alice" / ASSIGNMENT / "timestamp.txt").read_text() == "2026-03-02 09:30:00.000000 UTC"  # CET
     assert (sub / "bob" / ASSIGNMENT / "timestamp.txt").read_text() == "2026-03-03 12:00:00.000000 UTC"
     assert (sub / "bob" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb").read_bytes() == notebook_bytes(course)
-    from grader.collect import read_manifest
-    from grader.lms import lms_name
+    from grader.lms.collect import read_manifest
+    from grader.lms.export import lms_name
 
     row = read_manifest(course, ASSIGNMENT)["bob"]
     assert (row["late"], lms_name(row, Path(f"{ASSIGNMENT}.html"))) == \

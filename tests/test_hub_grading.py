@@ -1,5 +1,5 @@
 """The hub's grading service (docker/hub/grading_service.py) and `snakekit grade` on a hub's
-server (grader/hub_grading.py): a TA's request runs the grader's container with the options
+server (grader/lms/hub_grading.py): a TA's request runs the grader's container with the options
 given, and its output and exit code come back to the TA's terminal; a student's is refused
 (403) and nothing runs; a bad option is refused before anything runs; one grading at a time.
 
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from grader.cli import build_parser
-from grader.hub_grading import MARK, grade_on_hub
+from grader.commands.grade import build_parser
+from grader.lms.hub_grading import MARK, grade_on_hub
 from tests.conftest import free_port
 
 REPO = Path(__file__).resolve().parents[1]

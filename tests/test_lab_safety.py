@@ -21,10 +21,11 @@ import numpy as np
 import pytest
 
 import snakekit
-from grader.lab import cli as lab_cli
-from grader.lab import lock
-from grader.lab import session as lab
-from grader.lab.jobs import CASE_NUMBERS, NUMBERS, LabError, Queue, settings
+from grader.commands import lab as lab_cli
+from grader.arm import lock
+from grader.arm import session as lab
+from grader.arm.jobs import CASE_NUMBERS, NUMBERS, Queue, settings
+from grader.errors import LabError
 
 A = "06_coded_sweep"
 CASE = {"points": 30, "rate": 10.0, "sweeps": 2, "amplitude": 0.2}  # 2.9 s, peak 0.87 rad/s
@@ -142,7 +143,7 @@ def test_grading_stops_before_it_starts_on_a_bad_lab_json_and_goes_on_without_on
     """The grader keeps the hand-ins for the lab as lab.json says: a bad value is said, not passed over."""
     from types import SimpleNamespace
 
-    from grader.lab.keep import with_lab_case
+    from grader.arm.keep import with_lab_case
 
     batch = SimpleNamespace(assignment=A, cases={})
     (bare_course / "lab" / A / "lab.json").write_text('{"max_duration_ratio": "abc"}')
@@ -156,7 +157,7 @@ def test_grading_stops_before_it_starts_on_a_bad_lab_json_and_goes_on_without_on
 
 def test_sim_tolerance_nan_no_longer_lets_a_sweep_of_40_sweeps_onto_the_arm(bare_course):
     """The probe's case: NaN compared false with every gap, so the simulator gate passed everything."""
-    from grader.lab import gate
+    from grader.arm import gate
 
     (bare_course / "lab" / A / "lab.json").write_text('{"sim_tolerance": NaN, "exercise": "ex06_3_task2_test", '
                                                       '"case": {"points": 30, "rate": 10.0, "sweeps": 2, '
@@ -275,7 +276,7 @@ def test_a_session_with_bad_hand_ins_among_good_ones_runs_the_good_ones(calibrat
 
     import nbformat
 
-    from grader import feedback
+    from grader.feedback import report as feedback
 
     course = tmp_path / "course"
     shutil.copytree(calibrated, course)

@@ -128,7 +128,7 @@ def test_a_refused_sweep_says_why_on_the_returned_page(returned):
 
 
 def test_the_first_return_had_no_lab_part_and_the_second_loses_nothing_of_it(returned):
-    from grader.lab.feedback import with_lab
+    from grader.arm.feedback import with_lab
 
     for student, first in returned["before"].items():
         assert lab_part(first) == ("", [])
@@ -151,7 +151,7 @@ def test_a_page_written_again_keeps_the_lab_part(returned):
         "--student", "erin", cwd=REPO, env=env)
     assert lab_part(page.read_text()) == want
     with open(course / "nbgrader_config.py", "a") as f:
-        f.write("\nfrom grader.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n")
+        f.write("\nfrom grader.commands.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n")
     page.unlink()
     cli("nbgrader", "generate_feedback", ASSIGNMENT, "--student", "fay", "--force", cwd=course, env=env)
     cli("nbgrader", "generate_feedback", ASSIGNMENT, "--student", "erin", "--force", cwd=course, env=env)

@@ -5,7 +5,7 @@ sets, and on a hub of containers every server runs as the same uid, so one stude
 submit as another or read others' submissions (nbgrader issues #978, #1225). Here the
 exchange's files live in a folder only this service (in the hub's container) reaches, and
 every request carries the caller's hub token; the hub says whose it is and which groups they
-are in. Students' servers speak to it through ``grader.hub_exchange`` (nbgrader's exchange
+are in. Students' servers speak to it through ``grader.lms.hub_exchange`` (nbgrader's exchange
 classes, configured in the image), so ``nbgrader fetch_assignment`` / ``submit`` /
 ``collect`` / ``release_feedback`` / ``fetch_feedback`` and the Assignments tab work as usual.
 

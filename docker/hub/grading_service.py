@@ -2,7 +2,7 @@
 
 A TA types ``snakekit grade 06_coded_sweep`` in a terminal of their hub server, in ``course/``:
 their server cannot make the grader's sandboxes (a hub's servers keep Docker's seccomp profile
-and /proc masking), so the command sends the request here (``grader.hub_grading``), with the
+and /proc masking), so the command sends the request here (``grader.lms.hub_grading``), with the
 server's hub token. This service, in the hub's container, asks the hub whose token it is: a
 member of an instructors' group (SNAKEKIT_INSTRUCTOR_GROUPS) gets the grader's container run on
 the course volume, as ``docker/hub/grade`` runs it (no network, read-only root, no

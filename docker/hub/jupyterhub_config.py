@@ -5,7 +5,7 @@
   plain containers on this engine), on the overlay network ``SNAKEKIT_NETWORK``, with the
   student's own volume ``snakekit-<user>`` as ``~/work``, and memory and CPU limits.
 - The exchange: the hub-managed service ``exchange`` (exchange_service.py), which knows
-  students by their hub token; the image's nbgrader talks to it (grader.hub_exchange).
+  students by their hub token; the image's nbgrader talks to it (grader.lms.hub_exchange).
 - Instructors and TAs: the hub group ``instructors`` (``SNAKEKIT_INSTRUCTORS``, or the admin
   page / REST API later). Their servers run the grader's image (``SNAKEKIT_GRADER_IMAGE``: the
   same with the instructor's course, which students' image leaves out) and also mount the

@@ -1,12 +1,12 @@
 """nbgrader in snakekit's image (/etc/jupyter/nbgrader_config.py): on a hub's server, the
 class's course id and the exchange through the hub's exchange service, which knows each user
-by their hub token (grader/hub_exchange.py). Outside a hub (no JUPYTERHUB_API_TOKEN in the
+by their hub token (grader/lms/hub_exchange.py). Outside a hub (no JUPYTERHUB_API_TOKEN in the
 environment) it changes nothing."""
 import os
 
 c = get_config()  # noqa: F821 (nbgrader provides it)
 if os.environ.get("JUPYTERHUB_API_TOKEN"):
-    from grader.hub_exchange import use_hub_exchange
+    from grader.lms.hub_exchange import use_hub_exchange
 
     c.CourseDirectory.course_id = os.environ.get("SNAKEKIT_COURSE_ID", "snakekit")
     if os.environ.get("SNAKEKIT_ROLE") != "instructor":

@@ -1,0 +1,237 @@
+"""``snakekit grade ASSIGNMENT``: grade a class's submissions.
+
+    snakekit grade 06_coded_sweep [--course course/] [--jobs N] [--timeout S] [--cell-timeout S] [--csv FILE]
+                                  [--student S]... [--regenerate]
+
+Before anything runs, the release and the reference are compared with the source: when they
+differ, nothing is graded (exit 2) and the command that fixes it is printed (``--regenerate``
+runs it). The gradebook is backed up to ``<course>/backups/`` before the batch writes it.
+
+Exit codes: 0 the batch completed (even if some submissions failed: see the CSV),
+1 the grader itself failed, 2 bad arguments or a stale release/reference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from snakekit.errors import SnakekitError
+
+from grader.course.folder import default_course
+from grader.files import CommandParser
+from grader.scoring.references import REFERENCES
+
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = CommandParser(prog="snakekit grade", description="Grade every submission of an assignment: nbgrader's "
+                "autograde in parallel sandboxes, scored against the reference runs, with feedback.")
+    p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
+    p.add_argument("--course", type=Path, default=default_course(),
+                   help="the nbgrader course folder (default: the current folder when it holds "
+                        "nbgrader_config.py, else course/)")
+    p.add_argument("--jobs", type=int, default=None, help="submissions graded at once (default: one more than the cores)")
+    p.add_argument("--timeout", type=float, default=120.0,
+                   help="wall-clock limit of a whole notebook [s]: at its end the running cell is stopped and the "
+                        "cells after it do not run; a submission stopped by a clock runs once more from the start "
+                        "and the timeout counts only if it comes again (default: 120)")
+    p.add_argument("--cell-timeout", type=float, default=None,
+                   help="wall-clock limit of one cell [s]: that cell is interrupted and the notebook goes on "
+                        "(default: the --timeout)")
+    p.add_argument("--memory", type=int, default=4096, help="memory limit per process [MB] (default: 4096)")
+    p.add_argument("--csv", type=Path, default=None, help="write the grades here (default: <course>/grades-<assignment>.csv)")
+    p.add_argument("--references", type=Path, default=REFERENCES, help="reference runs folder (default: grader/references/)")
+    p.add_argument("--student", action="append", default=None,
+                   help="grade only this student (repeatable); the other rows of the CSV are kept")
+    p.add_argument("--seed", type=int, default=None, help="draw the hidden cases of an earlier batch again (its "
+                   "seed is printed when it starts; default: a fresh draw from the system's randomness)")
+    p.add_argument("--regenerate", action="store_true", help="if the release or the reference no longer matches "
+                   "the source, regenerate them (nbgrader generate_assignment --force; grader.scoring.references) first")
+    return p
+
+
+def _refs_command(args, assignment: str) -> str:
+    extra = ""
+    if args.course.resolve() != (REFERENCES.parent.parent / "course").resolve():
+        extra += f" --course {args.course}"
+    if args.references.resolve() != REFERENCES.resolve():
+        extra += f" --out {args.references}"
+    return f"python -m grader.scoring.references {assignment}{extra}"
+
+
+def check_current(args, out) -> list[str]:
+    """Problems (each with the command that fixes it) if the release, the gradebook or the
+    reference no longer match ``source/<a>``; with ``--regenerate`` they are fixed instead."""
+    from grader.course.folder import backup_gradebook, generate, gradebook, release_differences, source_hash
+    from grader.scoring.references import Reference, record_reference
+
+    course, a = args.course, args.assignment
+    problems = []
+    if not (course / "source" / a).is_dir():
+        return problems  # graded from the gradebook alone: nothing to compare with
+    known = False
+    if (course / "gradebook.db").exists():
+        with gradebook(course) as gb:
+            known = any(x.name == a and x.notebooks for x in gb.assignments)
+    diffs = release_differences(course, a) if known else []
+    if diffs and args.regenerate:
+        backup_gradebook(course)
+        print(f"snakekit grade: the release of {a} is stale ({diffs[0]}); running nbgrader generate_assignment "
+              f"{a} --force", file=out)
+        generate(course, course, a)
+    elif diffs:
+        problems.append(f"the release of {a} no longer matches {course}/source/{a}: " + "; ".join(diffs)
+                        + f". Regenerate it: `cd {course} && nbgrader generate_assignment {a} --force` "
+                        f"(then release it again on a hub), or run `snakekit grade {a} --regenerate`")
+    ref = Reference.load(args.references / f"{a}.npz")
+    changed = ref.source_changed(course)
+    if changed and args.regenerate:
+        print(f"snakekit grade: {course}/source/{a} or its cases changed since its reference was recorded; "
+              "recording it again",
+              file=out)
+        record_reference(a, course).save(args.references / f"{a}.npz")
+    elif changed:
+        what = f"{course}/source/{a}" if ref.meta.get("source_hash") != source_hash(course, a) else \
+            f"{course}/cases/{a}.py"
+        problems.append(f"{what} changed since {args.references}/{a}.npz was recorded from it. "
+                        f"Record it again: `{_refs_command(args, a)}`, or run `snakekit grade {a} --regenerate`")
+    elif changed is None:
+        print(f"snakekit grade: {args.references}/{a}.npz does not say which source it was recorded from; "
+              f"`{_refs_command(args, a)} --check` tells whether it is current", file=sys.stderr)
+    return problems
+
+
+def interrupted(course: Path, assignment: str, results: list, students: list[str], csv_path: Path) -> int:
+    """After a Ctrl-C: the CSV gets the students graded before it (as the gradebook has them), the
+    others' rows stay as they were; says who is left and how to grade them. Exit code 130."""
+    from grader.course.gradebook import class_rows, read_class_csv, write_csv
+    from grader.files import excerpt, uninterrupted
+
+    if results:
+        with uninterrupted():
+            write_csv(class_rows(course, assignment, results, read_class_csv(csv_path)), csv_path)
+    done = {r.student for r in results}
+    left = [s for s in students if s not in done]
+    again = " ".join(f"--student {s}" for s in left[:20])
+    print(f"snakekit grade: interrupted; {len(done)} submission(s) graded before it are in the gradebook and "
+          f"{csv_path}, the other {len(left)} are as they were"
+          + (f" (grade them: `snakekit grade {assignment}{'' if course == default_course() else f' --course {course}'} "
+             f"{excerpt(again, 300, quote=False)}`"
+             f"{' ...' if len(left) > 20 else ''})" if left else ""), file=sys.stderr)
+    return 130
+
+
+def main(argv: list[str] | None = None, out=None) -> int:
+    out = out or sys.stdout
+    args = build_parser().parse_args(argv)
+    if os.environ.get("SNAKEKIT_GRADING_URL"):  # an instructor's or TA's server on the class's hub
+        from grader.lms.hub_grading import grade_on_hub
+
+        return grade_on_hub(args, out)
+    course = args.course
+    problems = []
+    from grader.course.folder import check_assignment
+    from grader.errors import CourseError
+    from grader.files import check_output, one_line
+
+    if not course.is_dir():
+        problems.append(f"no course folder {course} (give --course DIR, the folder with nbgrader_config.py)")
+    else:
+        try:
+            check_assignment(course, args.assignment)
+        except CourseError as e:
+            problems.append(str(e))
+    if args.jobs is not None and args.jobs < 1:
+        problems.append(f"--jobs must be at least 1, got {args.jobs}")
+    if not args.timeout > 0:
+        problems.append(f"--timeout must be > 0 s, got {args.timeout:g}")
+    if args.cell_timeout is not None and not args.cell_timeout > 0:
+        problems.append(f"--cell-timeout must be > 0 s, got {args.cell_timeout:g}")
+    if args.memory < 256:
+        problems.append(f"--memory must be at least 256 MB, got {args.memory}")
+    if not args.references.is_dir():
+        problems.append(f"no references folder {args.references}; give --references DIR, or record them with "
+                        f"`python -m grader.scoring.references {args.assignment}`")
+    elif not (args.references / f"{args.assignment}.npz").is_file():
+        problems.append(f"no reference {args.references}/{args.assignment}.npz: every test cell would keep the "
+                        f"kernel's own verdict. Record it: `python -m grader.scoring.references {args.assignment}`")
+    csv_path = args.csv or course / f"grades-{args.assignment}.csv"
+    if course.is_dir():
+        try:
+            check_output(csv_path, course, suffix=".csv", what="--csv", command="snakekit grade")
+        except CourseError as e:
+            problems.append(str(e))
+    if problems:
+        for p in problems:
+            print(f"snakekit grade: {one_line(p)}", file=sys.stderr)
+        return 2
+    from grader.arm.keep import HOOKS
+    from grader.batch import Grader
+    from grader.course.gradebook import class_rows, read_class_csv, write_csv
+    from grader.course.folder import backup_gradebook
+
+    grader = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
+                    memory=args.memory << 20, cell_timeout=args.cell_timeout, seed=args.seed, hooks=HOOKS)
+    students = grader.students()
+    if args.student:
+        missing = [s for s in args.student if s not in students]
+        if missing:
+            print(f"snakekit grade: no submission of {args.assignment} by {', '.join(missing)} in "
+                  f"{course}/submitted", file=sys.stderr)
+            return 2
+        students = args.student
+    if not students:
+        print(f"snakekit grade: no submissions of {args.assignment} in {course}/submitted/<student>/"
+              f"{args.assignment}/; collect them first (`snakekit collect {args.assignment} --from DOWNLOAD` "
+              f"or `nbgrader collect {args.assignment}`)", file=sys.stderr)
+        return 2
+    try:
+        stale = check_current(args, out)
+    except SnakekitError as e:
+        print(f"snakekit grade: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"snakekit grade: interrupted before anything was graded; the gradebook and {csv_path} are as they "
+              "were", file=sys.stderr)
+        return 130
+    if stale:
+        for p in stale:
+            print(f"snakekit grade: {p}", file=sys.stderr)
+        print("snakekit grade: nothing was graded", file=sys.stderr)
+        return 2
+    try:  # the lab's settings, when the course has a lab for it: a bad value stops grading before the backup
+        from grader.arm.keep import lab_case
+
+        lab_case(course, args.assignment)
+    except SnakekitError as e:
+        print(f"snakekit grade: {one_line(e)}; nothing was graded", file=sys.stderr)
+        return 2
+    backup = backup_gradebook(course)
+    try:
+        results = grader.run(students)
+    except SnakekitError as e:
+        print(f"snakekit grade: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt as e:
+        return interrupted(course, args.assignment, getattr(e, "results", []), students, csv_path)
+    rows = class_rows(course, args.assignment, results, read_class_csv(csv_path))
+    write_csv(rows, csv_path)
+    failed = [r for r in results if r.status != "graded"]
+    width = max(len(r.student) for r in results)
+    by_student = {r["student"]: r for r in rows}
+    for r in results:
+        row = by_student.get(r.student, {})
+        late = f"  (late: {row['raw_score']} - {row['late_penalty']})" if float(row.get("late_penalty") or 0) else ""
+        print(f"{r.student:<{width}}  {row.get('score', f'{r.score:g}'):>6} / {r.max_score:g}  {r.status}"
+              + (f": {r.detail}" if r.detail and r.status != "graded" else "") + late, file=out)
+    print(f"graded {len(results)} submission(s) of {args.assignment}, {len(failed)} with problems; "
+          f"CSV ({len(rows)} student(s)): {csv_path}; feedback: {course / 'feedback'}/<student>/{args.assignment}/"
+          + (f"; gradebook backed up to {backup}" if backup else ""), file=out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

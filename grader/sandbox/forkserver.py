@@ -1,0 +1,256 @@
+"""A warm start for the grader's sandboxes: import the heavy libraries once, fork one sandbox per submission.
+
+Every sandbox used to start a fresh Python, import nbgrader (0.8 s), then start a fresh kernel
+that imported ipykernel, numpy, matplotlib, Pinocchio and MuJoCo (1 s) - for each student. The
+fork server is one process per batch that imports all of that once (:data:`PRELOAD`; nothing of
+the course: no references, tests or gradebook are ever read in it). For each submission:
+
+1. the grader sends the sandbox's configuration (the same one :func:`grader.sandbox.namespaces.run` uses)
+   and one end of a socket pair over a Unix socket;
+2. the server forks a *supervisor*, which starts its own session, sends the log there, makes
+   new mount, network and PID namespaces (and a user namespace without root), and forks
+3. the sandbox's first process (PID 1 of its namespace, killed if the supervisor dies). It
+   builds the private root, drops to the sandbox user with its limits
+   (:func:`grader.sandbox.inside.enter.enter`, as the exec'd sandbox does) and runs
+   :func:`grader.sandbox.inside.worker.main` in-process, which forks its kernels from itself
+   (:mod:`grader.sandbox.inside.warmkernel`).
+
+The supervisor reports its process id, then the sandbox's exit code, on the socket pair; the
+grader's deadline kills the supervisor's whole process group, and with it the namespace.
+The server is single-threaded and holds no ZeroMQ context or event loop, so forking it is safe.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from grader.sandbox.namespaces import STOP, TICK
+from grader.errors import Stopped
+
+CLONE_NEWNS, CLONE_NEWUSER, CLONE_NEWPID, CLONE_NEWNET = 0x00020000, 0x10000000, 0x20000000, 0x40000000
+PR_SET_PDEATHSIG = 1
+
+#: imported once by the server: what the worker and a lesson kernel import at start
+#: (``SNAKEKIT_FORKSERVER_PRELOAD``, comma-separated, adds modules a course's lessons need)
+PRELOAD = (
+    "nbgrader.apps", "nbgrader.coursedir", "nbgrader.converters", "nbgrader.preprocessors",
+    "jupyter_client.manager", "ipykernel.kernelapp", "ipykernel.ipkernel", "IPython",
+    "ipykernel.debugger", "numpy", "matplotlib.pyplot", "matplotlib_inline.backend_inline",
+    "snakekit", "snakekit.kinematics", "snakekit.trajectory", "snakekit.sim", "snakekit.plots",
+    "snakekit.checks", "snakekit.profile_planner",
+    "grader.sandbox.inside.worker", "grader.sandbox.inside.warmkernel", "grader.sandbox.inside.enter",
+)
+
+
+# --- the server process -----------------------------------------------------------------------
+
+
+def _preload() -> None:
+    import importlib
+    import io
+
+    sys.modules.setdefault("rfc3987_syntax", None)  # see grader.sandbox.inside.worker
+    extra = [m for m in os.environ.get("SNAKEKIT_FORKSERVER_PRELOAD", "").split(",") if m]
+    for name in (*PRELOAD, *extra):
+        importlib.import_module(name)
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()  # load the fonts and the PNG writer once
+    ax.plot([0, 1])
+    fig.savefig(io.BytesIO(), format="png")
+    plt.close(fig)
+    from nbformat import v4, validator
+
+    for relax in (False, True):  # the notebook schema, compiled (70 ms) once, not in every sandbox
+        validator.get_validator(4, v4.nbformat_minor, relax_add_props=relax)
+    if threading.active_count() != 1:
+        raise RuntimeError(f"a preloaded module started threads ({threading.enumerate()}); forking would be unsafe")
+
+
+def serve(fd: int) -> None:
+    """The server's loop: one fork per request on the control socket ``fd``, until it closes."""
+    _preload()
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # supervisors are reaped by the kernel
+    ctl = socket.socket(fileno=fd)
+    ctl.sendall(b"ready")
+    while True:
+        msg, fds, _, _ = socket.recv_fds(ctl, 1 << 20, 1)
+        if not msg:
+            return  # the grader is gone
+        if len(fds) != 1:
+            for f in fds:
+                os.close(f)
+            continue
+        pid = os.fork()
+        if pid == 0:
+            code = 125
+            try:
+                ctl.close()
+                signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+                code = _supervise(json.loads(msg), fds[0])
+            except BaseException:  # noqa: BLE001 - into the log if it is open, else the server's errors
+                import traceback
+
+                traceback.print_exc()
+            finally:
+                os._exit(code)
+        os.close(fds[0])
+
+
+def _supervise(cfg: dict, report_fd: int) -> int:
+    report = socket.socket(fileno=report_fd)
+    os.setsid()
+    log = os.open(cfg["log"], os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
+    null = os.open(os.devnull, os.O_RDONLY)
+    for src, dst in ((null, 0), (log, 1), (log, 2)):
+        os.dup2(src, dst)
+    os.close(null)
+    os.close(log)
+    libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+    uid, gid = os.getuid(), os.getgid()
+    flags = CLONE_NEWNS | CLONE_NEWNET | CLONE_NEWPID | (0 if uid == 0 else CLONE_NEWUSER)
+    if libc.unshare(flags) != 0:
+        print(f"sandbox: unshare: {os.strerror(ctypes.get_errno())}", file=sys.stderr, flush=True)
+        report.sendall(b"exit 125\n")
+        return 0
+    if uid != 0:  # as `unshare --map-root-user`
+        Path("/proc/self/setgroups").write_text("deny")
+        Path("/proc/self/uid_map").write_text(f"0 {uid} 1")
+        Path("/proc/self/gid_map").write_text(f"0 {gid} 1")
+    report.sendall(f"pid {os.getpid()}\n".encode())
+    pid = os.fork()
+    if pid == 0:  # PID 1 of the new namespace
+        from grader.sandbox.inside.warmkernel import exit_child  # preloaded: already imported
+
+        def sandbox() -> int:
+            libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)  # the supervisor only waits for it
+            report.close()
+            from grader.sandbox.inside import enter
+            from grader.sandbox.inside import worker
+
+            try:
+                enter.enter(cfg)
+            except Exception as e:  # noqa: BLE001 - as the exec'd sandbox: status 125
+                print(f"sandbox: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
+                return 125
+            os.environ.clear()
+            os.environ.update(cfg["env"])
+            return worker.main(cfg["argv"][3:], warm=True)
+        exit_child(sandbox)
+    _, status = os.waitpid(pid, 0)
+    report.sendall(f"exit {os.waitstatus_to_exitcode(status)}\n".encode())
+    return 0
+
+
+# --- the grader's side ------------------------------------------------------------------------
+
+
+class ForkServer:
+    """One fork server per batch; :meth:`run` is :func:`grader.sandbox.namespaces.run` through it (thread-safe)."""
+
+    def __init__(self, env: dict, *, start_timeout: float = 120.0):
+        """Start the server; :meth:`wait_ready` before the first :meth:`run`."""
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        theirs.set_inheritable(True)
+        self._lock = threading.Lock()
+        self._ctl = ours
+        self._errors = tempfile.TemporaryFile()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "grader.sandbox.forkserver", str(theirs.fileno())], env=env,
+            cwd=str(Path(__file__).resolve().parents[2]), pass_fds=(theirs.fileno(),),
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors)
+        theirs.close()
+        self._start_timeout = start_timeout
+
+    def wait_ready(self) -> "ForkServer":
+        """Wait until the server has imported everything; raises RuntimeError if it could not."""
+        self._ctl.settimeout(self._start_timeout)
+        try:
+            ready = self._ctl.recv(16)
+        except OSError:
+            ready = b""
+        if ready != b"ready":
+            self.proc.kill()
+            self._errors.seek(0)
+            lines = self._errors.read().decode(errors="replace").strip().splitlines()
+            self.close()
+            raise RuntimeError(f"the grader's fork server did not start: {lines[-1] if lines else 'no message'}")
+        self._ctl.settimeout(None)
+        return self
+
+    def run(self, cfg: dict, wall: float) -> tuple[int | None, bool]:
+        """Run one sandbox (``cfg`` as grader.sandbox.namespaces builds it, plus ``log``): (exit code or None, timed out)."""
+        mine, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            with self._lock:
+                socket.send_fds(self._ctl, [json.dumps(cfg).encode()], [child.fileno()])
+            child.close()
+            deadline = time.monotonic() + wall
+            pid, code, buf, stopped = None, None, b"", False
+            while code is None:
+                left = deadline - time.monotonic()
+                if left <= 0 or stopped:
+                    break
+                mine.settimeout(min(left, TICK))
+                try:
+                    data = mine.recv(4096)
+                except TimeoutError:
+                    stopped = STOP.is_set()  # the batch was interrupted: kill it now
+                    continue
+                if not data:
+                    return (-signal.SIGKILL if pid else 125), False  # the supervisor died
+                buf += data
+                while b"\n" in buf:
+                    line, buf = buf.split(b"\n", 1)
+                    key, _, value = line.decode().partition(" ")
+                    if key == "pid":
+                        pid = int(value)
+                    elif key == "exit":
+                        code = int(value)
+            if code is not None:
+                return code, False
+            if pid:
+                try:
+                    os.killpg(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                mine.settimeout(30)  # the report socket closes when the supervisor is gone
+                try:
+                    while mine.recv(4096):
+                        pass
+                except OSError:
+                    pass
+            if stopped:
+                raise Stopped("the batch was interrupted")
+            return None, True
+        finally:
+            mine.close()
+
+    def close(self) -> None:
+        """Stop the server (sandboxes still running finish on their own deadline); safe to call twice."""
+        if self._ctl.fileno() < 0:
+            return
+        self._ctl.close()  # the server reads end-of-file and exits
+        if STOP.is_set():  # interrupted: nothing of the server's is worth the wait of its exit
+            self.proc.kill()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self._errors.close()
+
+
+if __name__ == "__main__":
+    serve(int(sys.argv[1]))

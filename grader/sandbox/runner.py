@@ -1,0 +1,143 @@
+"""Running one notebook in a sandbox: its private copy of the course, the case socket in its
+folder, nbgrader's autograde (:mod:`grader.sandbox.inside.worker`) forked from the batch's warm server."""
+
+from __future__ import annotations
+
+import os
+import secrets
+import shutil
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import nbformat
+
+from snakekit.host import mujoco_gl
+
+from grader.sandbox import namespaces as sandbox
+
+
+class Runner:
+    """Stages and runs the notebooks of one batch (thread-safe: one call per submission)."""
+
+    def __init__(self, course: Path, a, base: Path, *, timeout: float, cell_timeout: float, limits: sandbox.Limits,
+                 use_sandbox: bool = True):
+        self.course, self.a, self.base = course, a, base
+        self.timeout, self.cell_timeout, self.limits = timeout, cell_timeout, limits
+        self.use_sandbox = use_sandbox
+        self.server = None
+        self.cases = None  # the batch's grader.scoring.cases.CaseServer, once drawn
+
+    def stage(self, student: str, src: Path, nbs: dict, tampered: dict) -> Path:
+        """A fresh folder with the submission (``src``) as ``course/submitted/<student>/<a>/``, the
+        assignment's gradebook template, and the folders the sandbox writes."""
+        a = self.a
+        work = self.base / secrets.token_hex(8)
+        course = work / "course"
+        (course / "submitted" / student).mkdir(parents=True)
+        shutil.copytree(src, course / "submitted" / student / a.name, symlinks=True,
+                        ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
+        for name, nb in nbs.items():
+            if any(why.startswith("duplicated") for why in tampered.values()):
+                # nbgrader refuses a notebook with a grade id twice: run it with the first copy only
+                # (the duplicated cells score 0 anyway), so the other exercises are still graded
+                seen, cells = set(), []
+                for cell in nb.cells:
+                    gid = cell.get("metadata", {}).get("nbgrader", {}).get("grade_id")
+                    if gid not in seen:
+                        cells.append(cell)
+                    if gid:
+                        seen.add(gid)
+                dst = course / "submitted" / student / a.name / f"{name}.ipynb"
+                dst.unlink()
+                nbformat.write(nbformat.from_dict({**nb, "cells": cells}), dst)
+        for f in a.source_files:
+            dst = course / "source" / a.name / f.relative_to(self.course / "source" / a.name)
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy(f, dst)
+        shutil.copy(self.base / "template.db", course / "gradebook.db")
+        (course / "nbgrader_config.py").write_text(
+            f"c = get_config()\nc.CourseDirectory.course_id = {a.course_id!r}\n")
+        for d in ("handin", "home", "home/.jupyter-runtime"):
+            (work / d).mkdir()
+        shutil.copytree(self.base / "mplcache", work / "home" / ".mpl")
+        return work
+
+    def run(self, work: Path, student: str) -> sandbox.Outcome:
+        """Run the staged notebook, with the batch's cases served in its folder while it runs."""
+        gate = None
+        if self.cases is not None:  # in the sandbox's own folder: it sees the socket at the same path
+            # the gate beside the folder, out of the sandbox's view: its worker says which test cell runs
+            gate = work.parent / f".{work.name}.gate"
+            self.cases.listen(work / "cases.sock", gate=gate if self.use_sandbox else None)
+        try:
+            return self.execute(work, student, gate=gate if self.use_sandbox else None)
+        finally:
+            if self.cases is not None:
+                self.cases.stop(work / "cases.sock")
+
+    def env(self, work: Path) -> dict:
+        venv_bin = str(Path(os.path.abspath(sys.executable)).parent)
+        return {"PATH": f"{venv_bin}:/usr/local/bin:/usr/bin:/bin", "HOME": str(work / "home"),
+                "SNAKEKIT_HANDIN_DIR": str(work / "handin"), "SNAKEKIT_CASES": str(work / "cases.sock"),
+                "MPLBACKEND": "Agg",
+                "MPLCONFIGDIR": str(work / "home" / ".mpl"), "JUPYTER_RUNTIME_DIR": str(work / "home" / ".jupyter-runtime"),
+                "IPYTHONDIR": str(work / "home" / ".ipython"), "TMPDIR": "/tmp", "LANG": "C.UTF-8",
+                "MUJOCO_GL": mujoco_gl("linux"), "PYTHONDONTWRITEBYTECODE": "1", "OMP_NUM_THREADS": "1",  # sandbox: Linux
+                "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MALLOC_ARENA_MAX": "2",
+                "PYDEVD_DISABLE_FILE_VALIDATION": "1", "JUPYTER_PLATFORM_DIRS": "1"}
+
+    def execute(self, work: Path, student: str, gate: Path | None = None) -> sandbox.Outcome:
+        argv = [os.path.abspath(sys.executable), "-m", "grader.sandbox.inside.worker", str(work / "course"), self.a.name, student,
+                f"{self.timeout:g}", f"{self.cell_timeout:g}", str(len(self.a.notebooks))]
+        if self.use_sandbox and self.server is not None:
+            return sandbox.run_forked(self.server, argv, workdir=work, env=self.env(work), limits=self.limits,
+                                      hide=[str(self.course)], log=work.parent / f".{work.name}.log", gate=gate)
+        with open(work.parent / f".{work.name}.log", "wb") as log:
+            if self.use_sandbox:
+                return sandbox.run(argv, workdir=work, env=self.env(work), limits=self.limits,
+                                   hide=[str(self.course)], stdout=log, stderr=log, gate=gate)
+            t0 = time.monotonic()
+            p = subprocess.Popen(argv, cwd=work, env={**self.env(work), "PYTHONPATH": str(sandbox.PACKAGE_ROOT)},
+                                 stdout=log, stderr=log, start_new_session=True)
+            try:
+                p.wait(timeout=self.limits.wall)
+                return sandbox.Outcome(p.returncode, False, time.monotonic() - t0)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, 9)
+                p.wait()
+                return sandbox.Outcome(None, True, time.monotonic() - t0)
+
+    def mpl_cache(self, path: Path) -> None:
+        """Build matplotlib's font list once; each sandbox starts with a copy."""
+        path.mkdir()
+        subprocess.run([sys.executable, "-c", "import matplotlib.font_manager"], env={**os.environ, "MPLCONFIGDIR": str(path)},
+                       capture_output=True, timeout=120)
+
+    def start_fork_server(self, base: Path):
+        """Start the batch's warm fork server (:mod:`grader.sandbox.forkserver`), or None if it cannot start."""
+        from grader.sandbox.forkserver import ForkServer
+
+        try:
+            extra = {k: os.environ[k] for k in ("SNAKEKIT_FORKSERVER_PRELOAD",) if k in os.environ}
+            return ForkServer({**self.env(base), "MPLCONFIGDIR": str(base / "mplcache"), **extra})
+        except Exception as e:  # noqa: BLE001
+            self.no_server(e)
+            return None
+
+    def fork_server_ready(self, server):
+        """The started server once it has imported everything; None (each sandbox then starts
+        Python afresh: slower, same grades) if it could not."""
+        if server is None:
+            return None
+        try:
+            return server.wait_ready()
+        except Exception as e:  # noqa: BLE001
+            self.no_server(e)
+            return None
+
+    @staticmethod
+    def no_server(e: Exception) -> None:
+        warnings.warn(f"grading without the fork server (each submission starts Python afresh): {e}", stacklevel=3)

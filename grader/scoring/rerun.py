@@ -1,0 +1,90 @@
+"""An exercise built on earlier ones, graded once more with the lesson's own earlier parts.
+
+6.3's sweep is built from the student's 6.1 and 6.2, 3.3's loop from their 3.2: a slip there
+would cost the later exercise in full, though what it adds may be right. The cases module names
+these dependencies (``DEPENDS``: a test cell's grade id -> the answer cells it builds on). When
+a dependent exercise scored less than full and one of its dependencies did too, the grader runs
+the submission once more in its sandbox, at the same cases, with those answer cells replaced by
+the instructor's (from the source notebook), and scores the dependent exercise from that run;
+the exercise keeps the better of the two. The second run's outputs are never shown (the
+instructor's code ran in its kernel): only its hand-in of the dependent exercise is read, and
+the feedback says in one line which parts were replaced and what that scored.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import nbformat
+
+from grader.markup import without_solution_markers
+from grader.scoring.score import ExerciseScore
+
+__all__ = ["needed", "with_answers", "better"]
+
+def exercise(grade_id: str) -> str:
+    """'ex06_3_task2_test' -> '6.3' (the exercise a cell belongs to; the grade id if it names none).
+
+    >>> exercise("ex06_1_sweep_times"), exercise("ex03_3_ik_loop_test"), exercise("odd")
+    ('6.1', '3.3', 'odd')
+    """
+    m = re.match(r"ex0*(\d+)_(\d+)_", grade_id)
+    return f"{m.group(1)}.{m.group(2)}" if m else grade_id
+
+
+def _grade_id(cell) -> str | None:
+    return cell.get("metadata", {}).get("nbgrader", {}).get("grade_id")
+
+
+def needed(depends: dict, scores: dict, written: dict) -> dict[str, list[str]]:
+    """The dependent test cells worth a second run, each with the answer cells to replace.
+
+    ``scores``: test cell grade id -> :class:`ExerciseScore` of the first run; ``written``: answer
+    cell grade id -> whether the student changed it from the release (an exercise left
+    unwritten has nothing to grade, whatever it builds on). A dependency is replaced when a
+    test cell of its exercise scored less than full.
+    """
+    out = {}
+    for gid, cells in depends.items():
+        sc = scores.get(gid)
+        if sc is None or sc.status != "scored" or sc.score >= sc.max_score:
+            continue
+        own = [c for c in written if exercise(c) == exercise(gid)]
+        if own and not any(written[c] for c in own):
+            continue
+        weak = [c for c in cells if any(s.score < s.max_score for g, s in scores.items() if exercise(g) == exercise(c))]
+        if weak:
+            out[gid] = weak
+    return out
+
+
+def with_answers(nbs: dict, source: dict, cells: set) -> dict:
+    """The submitted notebooks (name -> notebook) with the answer ``cells`` replaced by the
+    instructor's solution from ``source`` (name -> the source notebook)."""
+    theirs = {}
+    for nb in source.values():
+        for c in nb.cells:
+            if _grade_id(c) in cells:
+                theirs[_grade_id(c)] = without_solution_markers(c.source)
+    out = {}
+    for name, nb in nbs.items():
+        nb = nbformat.from_dict(nb)
+        for c in nb.cells:
+            if _grade_id(c) in theirs:
+                c.source = theirs[_grade_id(c)]
+        out[name] = nb
+    return out
+
+
+def better(first: ExerciseScore, second: ExerciseScore | None, replaced: list[str]) -> ExerciseScore:
+    """The better of the two runs' scores of one exercise. The second run's checks and curves
+    are never shown (they came from a kernel that held the instructor's code): only its score,
+    in one line before the first run's message."""
+    if second is None or second.score <= first.score:
+        return first
+    parts = sorted({exercise(c) for c in replaced})
+    names = " and ".join(parts)
+    line = (f"graded with the lesson's own {names} in place of yours: {second.score:g} of {second.max_score:g} "
+            f"(with yours: {first.score:g}, the run below).")
+    return dataclasses.replace(first, score=second.score, message=f"{line} {first.message}")

@@ -1,0 +1,131 @@
+"""Exercises the grader judges by a rule of its own, not by closeness to the instructor's numbers.
+
+Most exercises are judged case by case against the instructor solution's results at the same
+hidden cases (:func:`grader.scoring.score.score_exercise`). Some have more than one right answer: the
+two angles that put a two-link tip on a target (either elbow), an IK solution (any angles that
+put the tool on the target inside the limits), a move on the simulator (it ends where the
+servo settles). For those a rule below judges each case, in the grader's own process, from the
+case's arguments and the student's result, with the exercise's tolerance. A case where the
+instructor's solution raises is judged before any rule: the student must raise the same type.
+
+Each rule takes ``(args, result, tol)`` -- the case's positional arguments, the student's result
+(name -> array; a plain return value is ``"value"``) and the tolerances -- and returns
+``(right, why)``: whether the case is right (or the share of it that is, a number in [0, 1])
+and, if not, what is wrong, with numbers.
+``RULES`` maps grade ids to rules.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from snakekit.model import SPEC
+
+__all__ = ["RULES"]
+
+
+def _value(result: dict, shape: tuple, what: str, name: str = "value"):
+    """The result's array ``name`` of ``shape``, or (None, why not)."""
+    if name not in result:
+        return None, f"{what} handed in {', '.join(sorted(result))}, expected {name if name != 'value' else 'one array'}."
+    a = np.asarray(result[name], dtype=float)
+    if a.shape != shape:
+        return None, f"{what} returned shape {a.shape}, expected {shape}."
+    if not np.isfinite(a).all():
+        return None, f"{what} returned {a.tolist()}: every value must be a finite number."
+    return a, ""
+
+
+def _tool_xy(q) -> np.ndarray:
+    """The tool point [x, y] of joint angles ``q`` (rows), by the kit's own FK (the grader's process)."""
+    from snakekit.kinematics import tool_pose_2d
+
+    q = np.atleast_2d(q)
+    return np.array([tool_pose_2d(row)[:2] for row in q])
+
+
+# --- lesson 03 ----------------------------------------------------------------------------
+
+
+def two_link_ik(args, result, tol):
+    """``two_link_ik(x, y, l1, l2)``: both rows put the tip on the target; row 0 has q2 >= 0.
+
+    Credit per case: each row whose tip is on the target a quarter (each elbow is judged on its
+    own), the order asked (row 0 the elbow with q2 >= 0) the other half, judged once both tips
+    are right (the order of wrong angles means nothing)."""
+    x, y, l1, l2 = (float(a) for a in args[:4])
+    q, why = _value(result, (2, 2), "two_link_ik")
+    if q is None:
+        return False, why
+    tips = np.stack([l1 * np.cos(q[:, 0]) + l2 * np.cos(q[:, 0] + q[:, 1]),
+                     l1 * np.sin(q[:, 0]) + l2 * np.sin(q[:, 0] + q[:, 1])], axis=-1)
+    off = np.abs(tips - [x, y]).max(axis=1)
+    on = off <= tol["atol"] + tol["rtol"] * np.hypot(x, y)
+    if not on.all():
+        k = int(np.argmax(~on))
+        return 0.25 * int(on.sum()), (f"the angles {np.round(q[k], 6).tolist()} (row {k}) put the tip {off[k]:.3g} m "
+                                      f"from the target ({x:.6g}, {y:.6g}) m (tolerance {tol['atol']:.2g} m).")
+    if q[0, 1] < -1e-9 or q[1, 1] > 1e-9:
+        return 0.5, (f"both tips are on the target, but row 0 has q2 = {q[0, 1]:.6g} and row 1 q2 = {q[1, 1]:.6g} "
+                     "rad; row 0 is the solution with q2 >= 0 (elbow one way), row 1 the one with q2 <= 0.")
+    return True, ""
+
+
+def ik_loop(args, result, tol):
+    """``solve_ik(target[, q0])``: angles inside the joint limits that put the tool on the target."""
+    target = np.asarray(args[0], dtype=float)[:2]
+    q, why = _value(result, (SPEC.n_joints,), "solve_ik")
+    if q is None:
+        return False, why
+    off = float(np.abs(_tool_xy(q)[0] - target).max())
+    if ((q < SPEC.lower - 1e-12) | (q > SPEC.upper + 1e-12)).any():
+        return False, f"q={np.round(q, 4).tolist()} is outside the joint limits {SPEC.lower}..{SPEC.upper} rad."
+    if off > tol["atol"]:
+        # near but not within the tolerance asked (a loop that stops too early): half the case
+        near = off <= NEAR * tol["atol"]
+        return 0.5 if near else False, (f"your angles put the tool {off:.3g} m from the target (tolerance "
+                                        f"{tol['atol']:.2g} m){'; near, not on it: half of this case' if near else ''}.")
+    return True, ""
+
+
+#: 3.3: a tool within NEAR times the tolerance (1 mm at 1e-5 m) is near the target: half a case.
+NEAR = 100.0
+
+
+def task1(args, result, tol):
+    """Task 1 on the simulator: one move per target, each ending with the tool within 3 mm of it.
+
+    Where each move ended is the recorded run's last angles (``final_q``: the grader computes
+    the tool from them); the poses the function returned (``poses``, one (x, y, heading) per
+    move) must say the same."""
+    targets = np.atleast_2d(np.asarray(args[0], dtype=float))
+    name = "final_q" if "final_q" in result else "value"
+    q, why = _value(result, (len(targets), SPEC.n_joints), "the moves (their final angles)", name)
+    if q is None:
+        return False, why
+    tool = _tool_xy(q)
+    off = np.abs(tool - targets[:, :2]).max(axis=1)
+    bad = np.nonzero(off > tol["atol"])[0]
+    if len(bad):
+        k = int(bad[0])
+        return False, (f"move {k + 1} to ({targets[k, 0]:.4f}, {targets[k, 1]:.4f}) m ended with the tool at "
+                       f"({tool[k, 0]:.4f}, {tool[k, 1]:.4f}) m, {off[k] * 1000:.3g} mm off (tolerance "
+                       f"{tol['atol'] * 1000:.3g} mm).")
+    if "poses" in result:
+        poses, why = _value(result, (len(targets), 3), "task1", "poses")
+        if poses is None:
+            return False, why + " One tool pose (x, y, heading) per move."
+        off = np.abs(poses[:, :2] - tool).max(axis=1)
+        if (off > tol["atol"]).any():
+            k = int(np.argmax(off))
+            return False, (f"task1 returned the pose ({poses[k, 0]:.4f}, {poses[k, 1]:.4f}) m for move {k + 1}, but "
+                           f"that move ended with the tool at ({tool[k, 0]:.4f}, {tool[k, 1]:.4f}) m.")
+    return True, ""
+
+
+#: grade id -> rule. The tolerances come from the reference (references.OVERRIDES, the cases module).
+RULES = {
+    "ex03_1_two_link_ik_test": two_link_ik,
+    "ex03_3_ik_loop_test": ik_loop,
+    "ex03_4_task1_test": task1,
+}

@@ -1,0 +1,250 @@
+"""What a sandbox gave back, made into a grade: the executed notebooks and the hand-ins read
+safely, every test cell scored in this process (:mod:`grader.scoring.score`), the submission's status,
+the notebook for the TA (``autograded/``) and the feedback page for the student."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import nbformat
+
+from grader.feedback import report as feedback
+from grader.scoring import rerun
+from grader.course.assignment import read_inside
+from grader.hooks import NO_HOOKS, BatchHooks
+from grader.scoring.score import ExerciseScore, read_handin, score_exercise
+
+
+@dataclass(frozen=True)
+class SubmissionResult:
+    """One student's grade: ``status`` is ``graded`` or the reason it went wrong."""
+
+    student: str
+    assignment: str
+    score: float
+    max_score: float
+    status: str
+    detail: str = ""
+    exercises: tuple[ExerciseScore, ...] = ()
+    wall: float = 0.0
+    feedback: Path | None = None
+
+
+class Verdicts:
+    """Scores what came back from one batch's sandboxes and writes the pages.
+
+    ``expected``: grade id -> :class:`grader.scoring.score.Expected`, the batch's instructor results
+    (set once the reference run is in); test cells without them keep nbgrader's verdict.
+    """
+
+    def __init__(self, course: Path, a, base: Path, *, timeout: float, cell_timeout: float, memory: int,
+                 hooks: BatchHooks = NO_HOOKS):
+        self.course, self.a, self.base, self.hooks = course, a, base, hooks
+        self.timeout, self.cell_timeout, self.memory = timeout, cell_timeout, memory
+        self.expected: dict = {}
+        self.draw = None  # the batch's cases (set with the expected results)
+
+    def handin_scores(self, work, tampered) -> dict[str, ExerciseScore]:
+        """The score of every test cell with expected results, from the hand-ins in ``work``."""
+        out = {}
+        for gid, e in self.expected.items():
+            if gid in self.a.tests and gid not in tampered:
+                try:
+                    raw = read_inside(work, f"handin/{gid}.npz")
+                    handin = read_handin(raw) if raw is not None else None
+                except ValueError:
+                    continue
+                out[gid] = score_exercise(gid, handin, e, self.a.tests[gid].max_score)
+        return out
+
+    def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None, runs=1) -> SubmissionResult:
+        """``second``: grade id -> (its hand-in, the answer cells replaced) from a second run with the
+        instructor's answers in those cells (:mod:`grader.scoring.rerun`); the better score counts. ``runs``: 2
+        when the first run was stopped by a clock and this is the run from scratch after it."""
+        a = self.a
+        raw = read_inside(work, "result.json", limit=1 << 20)
+        try:
+            worker = json.loads(raw) if raw else {}
+            worker = worker if isinstance(worker, dict) else {}
+        except ValueError:
+            worker = {}
+        executed = {}
+        for name in a.notebooks:
+            raw = read_inside(work, f"course/autograded/{student}/{a.name}/{name}.ipynb")
+            if raw:
+                try:
+                    executed[name] = nbformat.reads(raw.decode("utf-8"), as_version=4)
+                except Exception:  # noqa: BLE001 - a notebook the submission mangled: not used
+                    pass
+        errors = set()
+        for nb in executed.values():
+            for cell in nb.cells:
+                for out in cell.get("outputs", []):
+                    if out.get("output_type") == "error":
+                        errors.add(str(out.get("ename")))
+        log = str(worker.get("log", "")) + str(worker.get("error", ""))
+        scores = []
+        for gid, cell in a.tests.items():
+            if gid in tampered:
+                scores.append(ExerciseScore(gid, 0.0, cell.max_score, "tampered",
+                                            f"tests tampered: this test cell was {tampered[gid]}, so it scores 0."))
+                continue
+            if gid in self.expected:
+                raw = read_inside(work, f"handin/{gid}.npz")
+                try:
+                    handin = read_handin(raw) if raw is not None else None
+                except ValueError as e:
+                    scores.append(ExerciseScore(gid, 0.0, cell.max_score, "inconsistent", f"hand-in unreadable: {e}."))
+                    continue
+                sc = score_exercise(gid, handin, self.expected[gid], cell.max_score)
+                if second and gid in second:
+                    again, replaced = second[gid]
+                    sc = rerun.better(sc, score_exercise(gid, again, self.expected[gid], cell.max_score), replaced)
+                if sc.status == "missing":
+                    sc = dataclasses.replace(sc, message=why_missing(find_cell(executed.get(cell.notebook), gid),
+                                                                     sc.message))
+                scores.append(sc)
+            else:
+                scores.append(kernel_score(gid, cell, executed.get(cell.notebook)))
+        stopped = stopped_cells(worker.get("stopped"), executed)
+        if outcome.timed_out or stopped:
+            where = "".join(f" in cell {i + 1}" + (f" of {n}.ipynb" if len(a.notebooks) > 1 else "")
+                            for n, i in sorted(stopped.items())[:1])
+            status, detail = "timeout", f"the notebook ran longer than {self.timeout:g} s and was stopped{where}"
+        elif "CellTimeoutError" in errors:
+            status, detail = "timeout", f"a cell ran longer than {self.cell_timeout:g} s and was interrupted"
+        elif "MemoryError" in errors or "MemoryError" in log:
+            status, detail = "memory limit", f"the notebook used more than {self.memory >> 20} MB"
+        elif "DeadKernelError" in log or "kernel died" in log.lower():
+            status, detail = "kernel died", "the Python kernel stopped while the notebook ran"
+        elif tampered:
+            status = "tests tampered"
+            detail = "; ".join(f"{g}: {why}" for g, why in sorted(tampered.items()))
+        elif not executed:
+            last = (str(worker.get("error", "")).strip().splitlines() or ["no result"])[-1][:300]
+            status = "kernel died" if outcome.returncode not in (0, 3) else "autograde failed"
+            detail = (f"nbgrader stopped (exit {outcome.returncode}): {last}" if status == "autograde failed"
+                      else "the notebook's processes stopped before it finished")
+        elif problems:
+            status, detail = "missing notebook", "; ".join(problems)
+        else:
+            status, detail = "graded", ""
+        if status == "timeout" and runs > 1:
+            detail += " (in both of its runs: a notebook stopped by the clock is run once more before it counts)"
+        elif runs > 1:
+            detail = (detail + "; " if detail else "") + ("graded on its second run: the first was stopped by the "
+                                                           "clock, so it ran once more from the start")
+        score = round(sum(s.score for s in scores), 4)
+        result = SubmissionResult(student, a.name, score, a.max_score, status, detail, tuple(scores),
+                                  time.monotonic() - t0)
+        dest = self.course / "autograded" / student / a.name
+        if executed:  # for the TA (formgrader): the notebook as it ran, hidden tests included, with the verdicts
+            shutil.rmtree(dest, ignore_errors=True)
+            dest.mkdir(parents=True)
+            for name, nb in executed.items():
+                mine = [s for s in scores if a.tests[s.grade_id].notebook == name]
+                nbformat.write(feedback.annotate_notebook(nb, dataclasses.replace(result, exercises=tuple(mine)),
+                                               stopped=stopped.get(name), timeout=self.timeout), dest / f"{name}.ipynb")
+            if self.draw is not None:  # the trajectory at the spec's values, for `snakekit lab`
+                self.hooks.graded(self.course, a.name, student, work, self.draw)
+        return self.feedback(result, nbs, executed, stopped)
+
+    def zero(self, student, status, detail, t0) -> SubmissionResult:
+        scores = tuple(ExerciseScore(g, 0.0, c.max_score, "missing", detail) for g, c in self.a.tests.items())
+        r = SubmissionResult(student, self.a.name, 0.0, self.a.max_score, status, detail, scores, time.monotonic() - t0)
+        return self.feedback(r, {}, {})
+
+    def feedback(self, result, submitted, executed, stopped=None) -> SubmissionResult:
+        a = self.a
+        sources = {g: c.source for g, c in a.tests.items()}
+        path = self.course / "feedback" / result.student / a.name
+        if path.exists():
+            shutil.rmtree(path)
+        written = None
+        for name in a.notebooks or [a.name]:
+            nb = executed.get(name) or submitted.get(name)
+            if nb is None:
+                nb = nbformat.v4.new_notebook()
+            elif name not in executed:
+                nb = nbformat.from_dict(nb)
+                for c in nb.cells:
+                    if c.cell_type == "code":
+                        c.outputs = []
+            fb = feedback.build(nb, student=result.student, assignment=a.name, result=result, test_sources=sources,
+                                stopped=(stopped or {}).get(name), timeout=self.timeout,
+                                hide_paths={str(self.base): "<sandbox>"})
+            written = feedback.write_html(fb, path / f"{name}.html")
+        self.hooks.pages(self.course, a.name, result.student)  # the lab's result, when the lab ran the student's sweep
+        return SubmissionResult(**{**result.__dict__, "feedback": written})
+
+
+def kernel_score(gid, cell, nb) -> ExerciseScore:
+    """No reference: nbgrader's own verdict (the cell ran without an error).
+
+    The error's message is shown only if a visible check raised it; a hidden test's
+    message (its inputs, its expected values) stays hidden.
+    """
+    if nb is None:
+        return ExerciseScore(gid, 0.0, cell.max_score, "missing", "the notebook did not finish running.")
+    c = find_cell(nb, gid)
+    if c is None:
+        return ExerciseScore(gid, 0.0, cell.max_score, "missing", "the test cell is missing.")
+    if c.get("execution_count") is None and not c.get("outputs"):
+        return ExerciseScore(gid, 0.0, cell.max_score, "missing",
+                             "the test cell did not run: the notebook was stopped before it.")
+    err = feedback.cell_error(c)
+    if err is None:
+        return ExerciseScore(gid, cell.max_score, cell.max_score, "scored", "the test cell passed.")
+    ename, evalue, where = err
+    if where == "visible":
+        msg = f"a visible check failed: {ename}: {evalue}"
+    else:
+        msg = (f"a hidden test failed ({ename}). Test your code on more cases than the visible checks use: "
+               "other inputs, edge cases.")
+    return ExerciseScore(gid, 0.0, cell.max_score, "scored", msg)
+
+
+def stopped_cells(reported, executed: dict) -> dict[str, int]:
+    """Where the worker stopped each notebook whose time ran out: notebook name -> cell index.
+
+    Only a report that points at a cell of a notebook that came back counts (the worker's
+    ``result.json`` shows where, never how many points).
+    """
+    out = {}
+    for item in reported if isinstance(reported, list) else []:
+        if not isinstance(item, dict):
+            continue
+        name, index = item.get("notebook"), item.get("cell")
+        if isinstance(name, str) and name in executed and isinstance(index, int) \
+                and 0 <= index < len(executed[name].cells):
+            out[name] = index
+    return out
+
+
+def find_cell(nb, gid):
+    if nb is None:
+        return None
+    return next((c for c in nb.cells if c.get("metadata", {}).get("nbgrader", {}).get("grade_id") == gid), None)
+
+
+def why_missing(cell, message: str) -> str:
+    """The reason a test cell handed nothing in, from how it stopped.
+
+    A test cell hands in first, so a cell that handed nothing in stopped before that line
+    (the function it hands in is not defined: an error in the answer cell, or it was never
+    run) or the notebook stopped before the cell. The cell's error is the student's own to see.
+    """
+    err = feedback.cell_error(cell) if cell is not None else None
+    if err is None:
+        return message
+    ename, evalue, _ = err
+    hint = ""
+    if ename == "NameError":
+        hint = (" The function is not defined: the answer cell above raised an error (a syntax error?), or it "
+                "was not run.")
+    return f"nothing was handed in: the test cell stopped before it handed in your results, with {ename}: {evalue}.{hint}"

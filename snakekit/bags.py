@@ -1,0 +1,230 @@
+"""A run as ROS bags: ``.mcap`` (ROS 2, rosbag2's MCAP storage) and ``.bag`` (ROS 1).
+
+No ROS install is needed: the bags are written and read with ``rosbags``, pure Python. They open
+in ``ros2 bag``, ``rosbag``, RViz (played back), Foxglove and Lichtblick. The topics:
+
+| topic | type | what |
+|---|---|---|
+| ``/joint_states`` | ``sensor_msgs/JointState`` | the measured positions, velocities and efforts, one message per sample |
+| ``/joint_trajectory`` | ``trajectory_msgs/JointTrajectory`` | the goals as sent, one message (``time_from_start`` from the first goal) |
+| ``/tf`` | ``tf2_msgs/TFMessage`` | each link's frame in its parent's, one message per sample |
+| ``/tf_static`` | ``tf2_msgs/TFMessage`` | the tool's frame in link5's (latched) |
+| ``/robot_description`` | ``std_msgs/String`` | the URDF (latched; transient local in ROS 2) |
+| ``/snakekit/run`` | ``std_msgs/String`` | the run's backend, wall time and real-time flag (JSON) |
+
+Times are the robot's clock, in nanoseconds: a run that starts at t = 0 s starts at the epoch.
+:meth:`snakekit.Run.save` and :meth:`snakekit.Run.load` use this module by the file's suffix.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .errors import FileFormatError
+from .model import SPEC
+from .trajectory import Trajectory
+from .validate import write_failed
+from .validate.files import readable_file
+
+#: The suffixes of the bags a run is saved to, and the ROS each is for.
+SUFFIXES = {".mcap": "ROS 2 (rosbag2, MCAP storage)", ".bag": "ROS 1"}
+
+JOINT_STATES, TRAJECTORY, TF, TF_STATIC = "/joint_states", "/joint_trajectory", "/tf", "/tf_static"
+DESCRIPTION, RUN_INFO = "/robot_description", "/snakekit/run"
+_STRING, _JOINT_STATE = "std_msgs/msg/String", "sensor_msgs/msg/JointState"
+_TRAJECTORY, _TF_MESSAGE = "trajectory_msgs/msg/JointTrajectory", "tf2_msgs/msg/TFMessage"
+_FIX = "save runs with Run.save (.npz, .mcap or .bag)"
+
+
+def _ns(t) -> np.ndarray:
+    """Robot times [s] as ROS times [ns] (rounded to the nanosecond)."""
+    return np.rint(np.asarray(t, dtype=float) * 1e9).astype(np.int64)
+
+
+@functools.lru_cache(maxsize=None)
+def _typestore(ros: int):
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    if ros == 2:
+        return get_typestore(Stores.ROS2_HUMBLE)
+    ts = get_typestore(Stores.ROS1_NOETIC)  # its store lacks tf2_msgs: the message as Noetic defines it
+    ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", _TF_MESSAGE))
+    return ts
+
+
+def _header(ts, ns: int, frame: str, seq: int, ros: int):
+    sec, nsec = divmod(int(ns), 1_000_000_000)
+    stamp = ts.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
+    Header = ts.types["std_msgs/msg/Header"]
+    return Header(seq=seq, stamp=stamp, frame_id=frame) if ros == 1 else Header(stamp=stamp, frame_id=frame)
+
+
+def _transform(ts, ns: int, names: tuple[str, str], T: np.ndarray, q: np.ndarray, seq: int, ros: int):
+    types = ts.types
+    x, y, z, w = (float(v) for v in q)
+    return types["geometry_msgs/msg/TransformStamped"](
+        header=_header(ts, ns, names[0], seq, ros), child_frame_id=names[1],
+        transform=types["geometry_msgs/msg/Transform"](
+            translation=types["geometry_msgs/msg/Vector3"](x=float(T[0, 3]), y=float(T[1, 3]), z=float(T[2, 3])),
+            rotation=types["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)))
+
+
+def quaternions(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(x, y, z, w)``, ``w >= 0``, of rotation matrices ``R`` (..., 3, 3), by
+    Shepperd's method: each from the largest of its four squares, never dividing by a small one."""
+    R = np.asarray(R, dtype=float)
+    t = np.trace(R, axis1=-2, axis2=-1)
+    d = np.diagonal(R, axis1=-2, axis2=-1)
+    squares = np.stack([1 + t, 1 + 2 * d[..., 0] - t, 1 + 2 * d[..., 1] - t, 1 + 2 * d[..., 2] - t], -1)
+    k = np.argmax(squares, -1)[..., None]
+    r = np.sqrt(np.take_along_axis(squares, k, -1))[..., 0]
+    skew = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
+    sym = np.stack([R[..., 0, 1] + R[..., 1, 0], R[..., 0, 2] + R[..., 2, 0], R[..., 1, 2] + R[..., 2, 1]], -1)
+    x, y, z = skew[..., 0], skew[..., 1], skew[..., 2]
+    xy, xz, yz = sym[..., 0], sym[..., 1], sym[..., 2]
+    rr = r * r
+    q = np.select([k == 0, k == 1, k == 2],
+                  [np.stack([x, y, z, rr], -1), np.stack([rr, xy, xz, x], -1), np.stack([xy, rr, yz, y], -1)],
+                  np.stack([xz, yz, rr, z], -1)) / (2 * r)[..., None]
+    return np.where(q[..., 3:] < 0, -q, q)
+
+
+def link_transforms(qs, spec=SPEC) -> tuple[list[tuple[str, str]], np.ndarray]:
+    """Each link's frame in its parent's, for each row of joint angles ``qs`` (n, n_joints):
+    the ``(parent, child)`` names, base_link to link1 first, then link5 to the tool (what
+    robot_state_publisher sends), and the transforms ``T_parent_child``, shape (n, n_joints + 1, 4, 4)."""
+    from .kinematics import joint_frames
+
+    frames = np.stack([joint_frames(q, spec=spec) for q in np.atleast_2d(qs)])  # T_world_link, (n, links, 4, 4)
+    parents = np.concatenate([np.broadcast_to(np.eye(4), (len(frames), 1, 4, 4)), frames[:, :-1]], 1)
+    inverse = np.zeros_like(parents)  # a rigid transform's inverse: R^T, -R^T p
+    inverse[..., :3, :3] = np.swapaxes(parents[..., :3, :3], -1, -2)
+    inverse[..., :3, 3] = -np.einsum("...ji,...j->...i", parents[..., :3, :3], parents[..., :3, 3])
+    inverse[..., 3, 3] = 1
+    names = ["base_link"] + [f"link{i + 1}" for i in range(spec.n_joints)] + ["tool"]
+    return list(zip(names[:-1], names[1:])), inverse @ frames
+
+
+def _messages(run, ros: int):
+    """``(topic, type, latched, [(ns, message), ...])`` for every topic of a run."""
+    from .model import urdf
+
+    ts = _typestore(ros)
+    types, spec = ts.types, run.spec
+    names = [f"joint{i + 1}" for i in range(spec.n_joints)]
+    t_meas = _ns(run.measured.times)
+    states, tfs = [], []
+    pairs, T = link_transforms(run.measured.positions, spec)
+    quats = quaternions(T[..., :3, :3])
+    for k, ns in enumerate(t_meas):
+        states.append((ns, types[_JOINT_STATE](
+            header=_header(ts, ns, "", k, ros), name=names,
+            position=np.array(run.measured.positions[k], dtype=np.float64),
+            velocity=np.array(run.measured.velocities[k], dtype=np.float64),
+            effort=np.array(run.efforts[k], dtype=np.float64))))
+        tfs.append((ns, types[_TF_MESSAGE](transforms=[_transform(ts, ns, pair, T[k, j], quats[k, j], k, ros)
+                                                         for j, pair in enumerate(pairs[:-1])])))
+    t_cmd = _ns(run.commanded.times)
+    Point, Duration = types["trajectory_msgs/msg/JointTrajectoryPoint"], types["builtin_interfaces/msg/Duration"]
+    empty = np.zeros(0)
+    points = [Point(positions=np.array(q, dtype=np.float64), velocities=empty, accelerations=empty, effort=empty,
+                    time_from_start=Duration(*divmod(int(ns - t_cmd[0]), 1_000_000_000)))
+              for q, ns in zip(run.commanded.positions, t_cmd)]
+    trajectory = types[_TRAJECTORY](header=_header(ts, t_cmd[0], "base_link", 0, ros), joint_names=names,
+                                    points=points)
+    first = int(min(t_meas[0], t_cmd[0]))
+    info = json.dumps({"backend": run.backend, "wall_time": run.wall_time, "realtime": run.realtime,
+                       "format": "snakekit run 1"})
+    return [
+        (DESCRIPTION, _STRING, True, [(first, types[_STRING](data=urdf(spec)))]),
+        (RUN_INFO, _STRING, True, [(first, types[_STRING](data=info))]),
+        (TF_STATIC, _TF_MESSAGE, True, [(first, types[_TF_MESSAGE](
+            transforms=[_transform(ts, first, pairs[-1], T[0, -1], quats[0, -1], 0, ros)]))]),
+        (TRAJECTORY, _TRAJECTORY, False, [(int(t_cmd[0]), trajectory)]),
+        (JOINT_STATES, _JOINT_STATE, False, states),
+        (TF, _TF_MESSAGE, False, tfs),
+    ]
+
+
+def _latched_qos():
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    never = QosTime(0, 0)
+    return [Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, never, never,
+                QosLiveliness.AUTOMATIC, never, False)]
+
+
+def write(run, path: Path) -> Path:
+    """Write ``run`` to ``path`` (``.mcap`` or ``.bag``): the whole file or none of it."""
+    ros = 2 if path.suffix == ".mcap" else 1
+    ts = _typestore(ros)
+    topics = _messages(run, ros)
+    tmp = Path(tempfile.mkdtemp(prefix=".run-", dir=path.parent))
+    try:
+        if ros == 2:
+            from rosbags.rosbag2 import StoragePlugin, Writer
+
+            bag = Writer(tmp / "bag", version=8, storage_plugin=StoragePlugin.MCAP)
+            add = lambda topic, kind, latched: bag.add_connection(  # noqa: E731
+                topic, kind, typestore=ts, offered_qos_profiles=_latched_qos() if latched else ())
+            serialize = ts.serialize_cdr
+        else:
+            from rosbags.rosbag1 import Writer
+
+            bag = Writer(tmp / "run.bag")
+            add = lambda topic, kind, latched: bag.add_connection(  # noqa: E731
+                topic, kind, typestore=ts, callerid="/snakekit", latching=1 if latched else None)
+            serialize = ts.serialize_ros1
+        with bag:
+            for topic, kind, latched, msgs in topics:
+                conn = add(topic, kind, latched)
+                for ns, msg in msgs:
+                    bag.write(conn, int(ns), bytes(serialize(msg, kind)))
+        written = next((tmp / "bag").glob("*.mcap")) if ros == 2 else tmp / "run.bag"
+        written.replace(path)
+    except OSError as e:
+        raise write_failed(path, "run file", e) from e
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return path
+
+
+def read(path: Path) -> dict:
+    """What a ``.mcap`` or ``.bag`` written by :func:`write` holds, as :class:`snakekit.Run`'s fields
+    (``Run.load`` makes the run of them)."""
+    from rosbags.highlevel import AnyReader
+
+    readable_file(path, "run file")
+    found: dict[str, list] = {}
+    try:
+        with AnyReader([path], default_typestore=_typestore(2 if path.suffix == ".mcap" else 1)) as bag:
+            wanted = [c for c in bag.connections if c.topic in (JOINT_STATES, TRAJECTORY, RUN_INFO)]
+            for conn, _, raw in bag.messages(connections=wanted):
+                found.setdefault(conn.topic, []).append(bag.deserialize(raw, conn.msgtype))
+    except Exception as e:  # rosbags raises its own classes, and struct's and KeyError on damage
+        raise FileFormatError(f"{path} is not a readable {SUFFIXES[path.suffix]} bag ({type(e).__name__}: "
+                              f"{str(e)[:120]}); {_FIX}") from None
+    missing = [t for t in (JOINT_STATES, TRAJECTORY, RUN_INFO) if t not in found]
+    if missing:
+        raise FileFormatError(f"{path} is not a snakekit run: it has no {', '.join(missing)} topic; {_FIX}")
+    states, trajectory = found[JOINT_STATES], found[TRAJECTORY][-1]
+    ns = lambda t: t.sec * 1_000_000_000 + t.nanosec  # noqa: E731
+    try:
+        info = json.loads(found[RUN_INFO][-1].data)
+        fields = {"backend": info["backend"], "wall_time": info["wall_time"], "realtime": info["realtime"]}
+    except (ValueError, KeyError, TypeError) as e:
+        raise FileFormatError(f"{path} is not a snakekit run: its {RUN_INFO} message is not the run's "
+                              f"information ({type(e).__name__}); {_FIX}") from None
+    start = ns(trajectory.header.stamp)
+    return dict(
+        commanded=Trajectory(np.array([(start + ns(p.time_from_start)) * 1e-9 for p in trajectory.points]),
+                             np.array([p.positions for p in trajectory.points])),
+        measured=Trajectory(np.array([ns(m.header.stamp) * 1e-9 for m in states]),
+                            np.array([m.position for m in states]), np.array([m.velocity for m in states])),
+        efforts=np.array([m.effort for m in states]), **fields)
