@@ -49,7 +49,7 @@ FIGURES = {
     "login_prestarted_median_s": r"servers started before the lesson, log-in to a ready server: median ([\d.]+) s",
     "login_prestarted_max_s": r"servers started before the lesson, log-in to a ready server: median [\d.]+ s, "
                               r"max ([\d.]+) s",
-    "start_all_s": r"every student's server started before the lesson \(Start All\) in ([\d.]+) s",
+    "start_all_s": r"every student's server started before the lesson \(five at a time\) in ([\d.]+) s",
     "mem_started_median_mib": r"servers, started and logged in to, each container's peak: median (\d+) MiB",
     "mem_started_max_mib": r"servers, started and logged in to, each container's peak: median \d+ MiB, max (\d+) MiB",
     "mem_lesson_usage_mib": r"3D view open in Chromium: usage (\d+) MiB",
@@ -105,7 +105,7 @@ def main(argv=None) -> int:
     n = int(result["login_at_once_n"] or 0)
     print(f"| {n} students logging in at once, no server running, log-in to a ready server: median / max | "
           f"{result['login_at_once_median_s']} / {result['login_at_once_max_s']} s | <= 30 s each |")
-    print(f"| the same, their servers started before the lesson (the teacher's Start All: "
+    print(f"| the same, their servers started before the lesson (the teacher started them, five at a time: "
           f"{result['start_all_s']} s): median / max | "
           f"{result['login_prestarted_median_s']} / {result['login_prestarted_max_s']} s | <= 30 s each |")
     print(f"| one student's server with lesson 00 run and its 3D view open (Chromium): usage / peak | "
