@@ -11,7 +11,9 @@
 # (NativeAuthenticator) and for LTI 1.3 (check-config); the start command as docker/hub/README.md
 # writes it (a single-node swarm, SwarmSpawner; it makes the instructor's and TA's accounts);
 # the students' accounts from a roster (docker/hub/accounts); then loop.py: the refused log-ins,
-# 20 students, the instructor, the TA, the refusals and limits, one student's lesson 00 in
+# 25 students logging in at once (the time to a ready server for each), the kit's commands in
+# every terminal, the instructor's and TA's commands as docker/hub/README.md gives them (grading
+# through the hub's grading service; a student refused), the refusals and limits, one student's lesson 00 in
 # headless Chromium through the hub's proxy (docker/browser-check), and that student's 3D view
 # refused to another student (on the network and through the hub). On exit the engine stops and
 # the host is checked and restored (engine_stop), as after docker/test.sh.
@@ -23,7 +25,7 @@ set -uo pipefail
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$ROOT"
 VENV_BIN="$ROOT/${SNAKEKIT_VENV:-.venv}/bin"
-STUDENTS=${SNAKEKIT_HUB_STUDENTS:-20}
+STUDENTS=${SNAKEKIT_HUB_STUDENTS:-25}
 say() { echo "hub-test: $*"; }
 figure() { echo "figure: $*"; }
 die() { echo "hub-test: FAILED: $*" >&2; exit 1; }
@@ -91,6 +93,8 @@ fi
 OLD_SHARED=week-of-class-$$
 export SNAKEKIT_DUMMY_PASSWORD=$OLD_SHARED SNAKEKIT_HUB_BIND=127.0.0.1:18000
 export SNAKEKIT_SUBMIT_LIMIT_MB=8 SNAKEKIT_EXCHANGE_QUOTA_MB=64 SNAKEKIT_MEM_LIMIT=768M SNAKEKIT_CPU_LIMIT=1
+# bounds for a hang, not speeds: 25 servers starting at once on a busy 2-core machine take minutes
+export SNAKEKIT_START_TIMEOUT=900 SNAKEKIT_HTTP_TIMEOUT=900
 # The start command exactly as docker/hub/README.md gives it (the settings above in the environment)
 start=$(awk '/^## Start it/ {f = 1} f && /^```sh$/ {getline; print; exit}' docker/hub/README.md)
 [ "$start" = "SNAKEKIT_INSTRUCTORS=teacher,ta docker/hub/up" ] \
