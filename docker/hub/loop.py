@@ -439,7 +439,7 @@ def main() -> int:
             if line.startswith("browser:"):
                 say(line)
         if r.returncode != 0:
-            fail(f"lesson 00 in Chromium through the hub: {r.stdout[-1500:]}\n{r.stderr[-1500:]}")
+            fail(f"lesson 00 in Chromium through the hub: exit {r.returncode}: {r.stdout[-1500:]}\n{r.stderr[-1500:]}")
         print(f"figure: lesson 00 in headless Chromium through the hub's proxy, the arm drawn and moved: "
               f"{time.monotonic() - t:.0f} s", flush=True)
         mem = memory_of(a.container(), DOCKER)
