@@ -15,8 +15,9 @@ For each ``<course>/submitted/<student>/<assignment>/`` the grader
    instructor notebook's results at the same cases: the batch runs it first, in a sandbox like
    the students' (:mod:`grader.scoring.verdict`, :mod:`grader.scoring.score`, :func:`grader.scoring.references.expected`);
 4. writes the scores into the course's gradebook (only this process writes it, one
-   submission at a time), the executed notebook into ``autograded/``, and the feedback HTML
-   (:mod:`grader.course.gradebook`, :mod:`grader.feedback.report`).
+   submission at a time), the executed notebook into ``autograded/``, and then the feedback HTML
+   from the gradebook, a score set by hand and the late penalty included
+   (:mod:`grader.course.gradebook`, :mod:`grader.feedback.scores`).
 """
 
 from __future__ import annotations
@@ -43,7 +44,8 @@ from grader.scoring.cases import CaseServer, draw
 from grader.errors import CasesError, GradingError, InstructorReferenceError
 from grader.files import uninterrupted
 from grader.hooks import NO_HOOKS, BatchHooks
-from grader.course.gradebook import late_penalties, write_grade
+from grader.course.gradebook import keep_release_files, late_penalties, write_grade
+from grader.feedback import scores
 from grader.scoring.references import REFERENCES, expected
 from grader.sandbox.runner import Runner
 from grader.scoring.verdict import SubmissionResult, Verdicts
@@ -220,13 +222,32 @@ class Grader:
                     else:
                         pending[post.submit(r)] = s
                     continue
-                try:
-                    with uninterrupted():  # a Ctrl-C waits until the student's rows are written whole
+                with uninterrupted():  # a Ctrl-C waits until the student's rows and pages are written whole
+                    try:
                         write_grade(self.course, self.a, r, self.late_plugin, self._lock)  # only this thread writes
-                        results.append(r)
-                except Exception as e:  # noqa: BLE001
-                    raise GradingError(f"cannot write {s}'s grade to the gradebook: {e}") from e
+                    except Exception as e:  # noqa: BLE001
+                        raise GradingError(f"cannot write {s}'s grade to the gradebook: {e}") from e
+                    try:
+                        r = self.pages(r)
+                    except Exception as e:  # noqa: BLE001 - the grade is in the gradebook; only its page is missing
+                        print(f"snakekit grade: {s}: the feedback page was not written ({type(e).__name__}: {e}); "
+                              f"`snakekit return {self.a.name}` writes it", file=sys.stderr)
+                    results.append(r)
                 bar.update(r.status != "graded")
+
+    def pages(self, r: SubmissionResult) -> SubmissionResult:
+        """The student's feedback pages, written from the gradebook now that it holds ``r``'s scores
+        (:mod:`grader.feedback.scores`): a score set by hand and the late penalty are on them."""
+        folder = self.course / "feedback" / r.student / self.a.name
+        if folder.exists():
+            shutil.rmtree(folder)
+        kept = (r.status, r.detail, None, None, list(r.exercises), {})  # for a notebook that never ran
+        bases = self.verdicts.pending.pop(r.student, None) or {n: nbformat.v4.new_notebook() for n in self.a.notebooks}
+        written = scores.write_pages(self.course, self.a.name, r.student, bases=bases, kept=kept,
+                                     hide_paths={str(self.base): "<sandbox>"})
+        self.hooks.pages(self.course, self.a.name, r.student)  # the lab's result, when the lab ran the student's sweep
+        keep_release_files(self.course, self.a.name, r.student)
+        return dataclasses.replace(r, feedback=written[-1] if written else None)
 
     def _run_reference(self) -> dict:
         """The instructor notebook, run in a sandbox at the batch's cases: the expected results."""

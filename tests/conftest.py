@@ -109,7 +109,9 @@ def _last_durations() -> dict[str, float]:
 SERIAL_FILES = {"tests/grader/test_arm_lab.py", "tests/grader/test_lab_safety.py", "tests/grader/test_return_lab.py",
                 "tests/grader/test_grader_adversarial.py", "tests/kit/test_bridge.py", "tests/kit/test_emulator.py",
                 "tests/kit/test_hardware.py", "tests/kit/test_late_replies.py", "tests/kit/test_servo_path.py",
-                "tests/kit/test_safety.py", "tests/kit/test_bus_protocol.py"}
+                "tests/kit/test_safety.py", "tests/kit/test_bus_protocol.py",
+                # module fixtures that run lesson 07 with the others (graded all at once)
+                "tests/lessons/test_course.py", "tests/lessons/test_lessons_4_to_7.py"}
 #: ...and every test of lesson 07 (the real robot's lesson runs on the emulated bus in real time)
 SERIAL_IDS = ("07_real_robot",)
 
@@ -148,6 +150,7 @@ def pytest_collection_modifyitems(config, items):
 
 
 # --- every run's durations, in artifacts/test-durations.txt --------------------------------------
+# (and each failure as it happens, in artifacts/test-failures.txt)
 # Every phase of every test, the longest first (what --durations=0 prints), with the run's wall
 # time: kept where the terminal's 30 slowest scroll away. Written by the main process (with xdist,
 # the workers' reports reach it); a run that ran no test (--collect-only) leaves the last file.
@@ -156,8 +159,23 @@ _reports: list[tuple[float, str, str, str]] = []
 _started = time.time()
 
 
+FAILURES = os.path.join(ROOT, "artifacts", "test-failures.txt")
+
+
+def pytest_sessionstart(session):
+    if not hasattr(session.config, "workerinput") and not os.environ.get("SNAKEKIT_DURATIONS_APPEND"):
+        if os.path.exists(FAILURES):
+            os.remove(FAILURES)
+
+
 def pytest_runtest_logreport(report):
     _reports.append((report.duration, report.when, report.nodeid, report.outcome))
+    if report.failed and not os.environ.get("PYTEST_XDIST_WORKER"):
+        # as it happens (the terminal's summary comes only at the end of a long run)
+        os.makedirs(os.path.dirname(FAILURES), exist_ok=True)
+        with open(FAILURES, "a") as f:
+            f.write(f"{time.strftime('%H:%M:%S')} FAILED ({report.when}) {report.nodeid}\n"
+                    f"{str(report.longrepr)[-3000:]}\n\n")
 
 
 def pytest_sessionfinish(session, exitstatus):

@@ -9,6 +9,10 @@ TOLERANCES = {"ex02_1_planar_jacobian_test": {"rtol": 1e-9, "atol": 1e-12},
               "ex02_2_numerical_jacobian_test": {"rtol": 0.0, "atol": 1e-6},
               "ex02_3_manipulability_test": {"rtol": 1e-9, "atol": 1e-8}}
 
+#: 2.3 may take J from the student's own 2.1 (its text allows it): a slip there is graded again with the
+#: lesson's own 2.1.
+DEPENDS = {"ex02_3_manipulability_test": ["ex02_1_planar_jacobian"]}
+
 
 def ex02_1_planar_jacobian_test(rng, spec):
     """planar_jacobian(q): 9 cases, random poses inside the limits, the limits, the straight arm."""

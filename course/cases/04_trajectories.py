@@ -11,20 +11,32 @@ DEPENDS = {"ex04_3_sample_10hz_test": ["ex04_1_quintic"]}
 
 
 def ex04_1_quintic_test(rng, spec):
-    """quintic(T, t): 5 durations with 20 times each (before 0, inside, after T), and a scalar t."""
+    """quintic(T, t): the polynomial and the hold are judged at cases of their own: 2 durations with 20 times
+    inside the move, 3 with 20 times that run past both ends (3 before 0, 14 inside, 3 after T), and a
+    scalar t inside. A cubic for the quintic is wrong at every case; a quintic never clipped is right at the
+    three inside it, half the exercise."""
     cases = []
-    for T in rng.uniform(0.1, 10.0, 5):
-        cases.append((float(T), np.sort(rng.uniform(-0.2 * T, 1.2 * T, 20))))
+    for T in rng.uniform(0.1, 10.0, 2):
+        cases.append((float(T), np.sort(rng.uniform(0.0, T, 20))))
+    for T in rng.uniform(0.1, 10.0, 3):
+        cases.append((float(T), np.sort(np.concatenate([rng.uniform(-0.2 * T, 0.0, 3), rng.uniform(0.0, T, 14),
+                                                        rng.uniform(T, 1.2 * T, 3)]))))
     T = float(rng.uniform(0.5, 5.0))
     cases.append((T, float(rng.uniform(0.0, T))))
     return cases
 
 
 def ex04_2_trapezoid_test(rng, spec):
-    """trapezoid(distance, v_max, a_max): 9 moves of either sign (trapezoids and triangles), no move at
-    all, a move backwards, and one exactly on the border between triangle and trapezoid."""
-    cases = [(float(d), float(v), float(a)) for d, v, a in
-             zip(rng.uniform(-2.0, 2.0, 9), rng.uniform(0.2, 3.0, 9), rng.uniform(0.5, 40.0, 9))]
+    """trapezoid(distance, v_max, a_max): 8 moves, as many triangles as trapezoids and as many backwards as
+    forwards (a triangle: |d| below v_max^2 / a_max, from 5 % of it; a trapezoid: 1.2 to 4 times it), no
+    move at all, a move backwards, and one exactly on the border between triangle and trapezoid. Drawn at
+    random sizes alone, trapezoids would be most moves, and a trapezoid with no triangle nearly right."""
+    cases = []
+    for share, sign in ((0.05, 1.0), (0.05, -1.0), (0.05, 1.0), (0.05, -1.0),
+                        (1.2, 1.0), (1.2, -1.0), (1.2, 1.0), (1.2, -1.0)):
+        v, a = float(rng.uniform(0.2, 3.0)), float(rng.uniform(0.5, 40.0))
+        factor = rng.uniform(share, 0.95) if share < 1.0 else rng.uniform(share, 4.0)
+        cases.append((float(sign * factor * v * v / a), v, a))
     v, a = float(rng.uniform(0.5, 2.0)), float(rng.uniform(1.0, 10.0))
     cases += [(0.0, v, a), (-float(rng.uniform(1.0, 2.0)) * v * v / a, v, a), (v * v / a, v, a)]
     return cases
@@ -47,10 +59,23 @@ def _random_walk(rng, n, step):
     return times, np.cumsum(rng.normal(0.0, step, (n, 5)), axis=0)
 
 
+def _beyond(rng, times, positions, spec, sides):
+    """The walk held inside the position limits, then 1 to 3 goals put beyond them on each of ``sides``
+    (+1 upper, -1 lower): which limit a case breaks is part of the case, not of the draw's luck."""
+    q = np.clip(positions, -0.9 * spec.upper, 0.9 * spec.upper)
+    for side in sides:
+        for _ in range(int(rng.integers(1, 4))):
+            k, j = int(rng.integers(len(times))), int(rng.integers(5))
+            q[k, j] = side * float(spec.upper + rng.uniform(0.01, 0.3))
+    return times, q
+
+
 def ex04_4_limit_check_test(rng, spec):
-    """limit_violations, as (times, positions): 5 random walks that break both limits here and there,
-    and one slow walk inside them (no violation)."""
-    cases = [_random_walk(rng, int(rng.integers(5, 30)), 0.15) for _ in range(5)]
+    """limit_violations, as (times, positions): 5 random walks (every one also too fast here and there), two
+    beyond the upper position limit only, two beyond the lower only, one beyond both, and one slow walk
+    inside them (no violation)."""
+    cases = [_beyond(rng, *_random_walk(rng, int(rng.integers(5, 30)), 0.15), spec, sides)
+             for sides in ((1,), (1,), (-1,), (-1,), (1, -1))]
     times = np.arange(10) * 0.1
     cases.append((times, 0.5 * np.sin(np.outer(times, rng.uniform(0.5, 1.0, 5)))))
     return cases

@@ -6,9 +6,13 @@ does). Then:
 * ``nbgrader generate_feedback``, and formgrader's Generate Feedback buttons, write the
   grader's safe pages (:mod:`grader.feedback.report`: no hidden tests, nothing loaded from the
   network), never nbgrader's own (which keep the hidden tests, its issue #917). The pages are
-  built from the gradebook's scores, so a score or comment a TA entered in formgrader is on
-  the page, beside the grader's verdict (kept in the autograded notebook by the grader), and
-  the lab's result when ``snakekit lab`` ran the student's sweep (docs/lab.md).
+  built from the gradebook's scores (:mod:`grader.feedback.scores`), so a score or comment a TA
+  entered in formgrader and the late penalty are on the page, beside the grader's verdict (kept
+  in the autograded notebook by the grader), and the lab's result when ``snakekit lab`` ran the
+  student's sweep (docs/lab.md).
+* saving a score, extra credit or comment in formgrader writes that student's pages and the
+  class CSV again from the gradebook at once: the page, the CSV, ``snakekit export`` and
+  formgrader show the same score.
 * formgrader's Autograde button grades the submission with ``snakekit grade ASSIGNMENT
   --student STUDENT`` (the sandbox, the out-of-kernel scoring, the feedback), not with
   nbgrader's in-kernel autograde. Its options come from the config's ``SnakekitGrade``
@@ -28,7 +32,7 @@ from pathlib import Path
 
 from nbconvert.exporters import HTMLExporter
 
-from grader.feedback import report as feedback
+from grader.feedback import scores
 from grader.arm import feedback as lab_feedback
 
 #: where formgrader's request handlers live (imported only by a server that runs formgrader)
@@ -42,6 +46,7 @@ def use_safe_grading(c) -> None:
     handlers = sys.modules.get(FORMGRADER)
     if handlers is not None:
         handlers.AutogradeHandler.post = _autograde_post(handlers)
+        saved_in_formgrader(handlers)
 
 
 class SafeFeedbackExporter(HTMLExporter):
@@ -66,97 +71,66 @@ class SafeFeedbackExporter(HTMLExporter):
 def safe_page(nb, *, root, student: str, assignment: str, notebook: str, db_url: str, course_id: str) -> str:
     """The grader's page of an autograded notebook, from the gradebook's scores and comments (and
     the lab's result, when the lab ran the student's sweep)."""
-    page = regenerate(nb, student=student, assignment=assignment, notebook=notebook, db_url=db_url, course_id=course_id)
-    body, _ = feedback.page_exporter().from_notebook_node(page)
+    page, numbers = regenerate(nb, student=student, assignment=assignment, notebook=notebook, db_url=db_url,
+                               course_id=course_id, root=root)
+    body = scores.html(page, numbers)
     if root and student and assignment:
         body = lab_feedback.add_to(body, Path(root), assignment, student)
     return body
 
 
-def rewrite_hand_set(course: Path, assignment: str, out) -> list[str]:
-    """The feedback pages of the students with a score or comment set in formgrader, written again
-    from the gradebook (what formgrader's Generate Feedback does with the course's config), so the
-    page ``snakekit return`` hands back says the score the student gets."""
-    import nbformat
+def rewrite_stale(course: Path, assignment: str, out) -> list[str]:
+    """The feedback pages whose numbers are no longer the gradebook's (a score or comment set in formgrader,
+    a late penalty) written again, and the class CSV with them (:func:`grader.feedback.scores.refresh`), so
+    the page ``snakekit return`` hands back says the score the student gets."""
+    from grader.arm.keep import HOOKS
 
-    from grader.course.folder import course_id, db_url
-    from grader.lms.export import hand_set
-
-    students = [s for s in hand_set(course, assignment) if (course / "autograded" / s / assignment).is_dir()]
-    for s in students:
-        for graded in sorted((course / "autograded" / s / assignment).glob("*.ipynb")):
-            page = safe_page(nbformat.read(graded, as_version=4), root=course, student=s, assignment=assignment,
-                             notebook=graded.stem, db_url=db_url(course), course_id=course_id(course))
-            folder = course / "feedback" / s / assignment
-            folder.mkdir(parents=True, exist_ok=True)
-            tmp = folder / f".{graded.stem}.html.tmp"
-            tmp.write_text(page)
-            os.replace(tmp, folder / f"{graded.stem}.html")
+    students = scores.refresh(course, assignment, after=HOOKS.pages)
     if students:
-        print(f"feedback pages written again with the scores and comments set in formgrader: {', '.join(students)}",
-              file=out)
+        print(f"feedback pages written again with the gradebook's scores: {', '.join(students)}", file=out)
     return students
 
 
 def return_main(argv: list[str] | None = None, out=None) -> int:
-    """``snakekit return``: :func:`grader.lms.export.return_main`, the pages of hand-set scores written again first."""
+    """``snakekit return``: :func:`grader.lms.export.return_main`, the stale pages written again first."""
     from grader.lms.export import return_main as hand_back
 
-    return hand_back(argv, out, before=rewrite_hand_set)
+    return hand_back(argv, out, before=rewrite_stale)
 
 
-def regenerate(nb, *, student: str, assignment: str, notebook: str, db_url: str, course_id: str):
-    """The feedback notebook of an autograded notebook, with the gradebook's scores and comments.
+def regenerate(nb, *, student: str, assignment: str, notebook: str, db_url: str, course_id: str, root=None):
+    """The feedback notebook of an autograded notebook, with the gradebook's scores and comments
+    (:func:`grader.feedback.scores.page`), and those numbers."""
+    from nbgrader.api import Gradebook
 
-    A score the TA set by hand replaces the grader's (the verdict says so); a TA's comment on
-    a cell follows that cell. A notebook the grader did not autograde (no verdicts kept in it)
-    gets the gradebook's points with no messages, never its own test cells' output.
-    """
-    from nbgrader.api import Gradebook, MissingEntry
+    from grader.course.gradebook import cell_order, submission_scores
 
-    from grader.scoring.verdict import SubmissionResult
-
-    kept = feedback.recorded(nb)
-    status, detail, stopped, timeout, exercises, plots = kept or ("graded", "", None, None, [], {})
-    by_id = {e.grade_id: e for e in exercises}
     with Gradebook(db_url, course_id) as gb:
-        source = gb.find_notebook(notebook, assignment)
-        solution = {c.name for c in source.solution_cells}
-        sources = {c.name: c.source for c in source.source_cells}
-        tests = {g.name: sources[g.name] for g in source.grade_cells if g.cell_type == "code" and g.name not in solution}
-        final, comments = [], {}
-        for gid in tests:
-            try:
-                grade = gb.find_grade(gid, notebook, assignment, student)
-            except MissingEntry:
-                continue
-            mine = by_id.get(gid)
-            score = float(grade.score or 0.0)
-            if mine is None:
-                from grader.scoring.score import ExerciseScore
+        numbers = submission_scores(gb, gb.find_submission(assignment, student),
+                                    cell_order(Path(root), assignment) if root else None)
+        tests = scores.test_sources(gb, assignment, notebook)
+    return scores.page(nb, numbers, notebook, tests), numbers
 
-                mine = ExerciseScore(gid, score, float(grade.max_score), "scored", "")
-            if grade.manual_score is not None and abs(grade.manual_score - mine.score) > 1e-9:
-                mine = type(mine)(gid, score, mine.max_score, mine.status,
-                                  f"Your teacher set the points to {score:g} (the grader gave {mine.score:g}). "
-                                  + mine.message, mine.checks)
-            final.append(mine)
-        for name in solution | {c.name for c in source.task_cells}:
-            try:
-                comment = gb.find_comment(name, notebook, assignment, student)
-            except MissingEntry:
-                continue
-            if comment.manual_comment:
-                comments[name] = comment.manual_comment
-        sub = gb.find_submission(assignment, student)
-        total, max_total = float(sub.score), float(sub.max_score)
-        late = float(sub.late_submission_penalty or 0.0)
-    if late:
-        detail = f"{detail}; " if detail else ""
-        detail += f"late submission: {late:g} points taken off"
-    result = SubmissionResult(student, assignment, total - late, max_total, status, detail, tuple(final))
-    return feedback.build(nb, student=student, assignment=assignment, result=result, test_sources=tests,
-                          stopped=stopped, timeout=timeout, plots=plots, comments=comments)
+
+def saved_in_formgrader(handlers) -> None:
+    """formgrader's saving of a score or comment, followed by the student's pages and the class CSV
+    written again from the gradebook (:func:`grader.feedback.scores.refresh`)."""
+    from grader.arm.keep import HOOKS
+
+    for name, find in (("GradeHandler", "find_grade_by_id"), ("CommentHandler", "find_comment_by_id")):
+        cls = getattr(handlers, name)
+        if getattr(cls.put, "_snakekit", False):
+            continue
+        saved = cls.put
+
+        def put(self, item_id, _saved=saved, _find=find):
+            _saved(self, item_id)
+            sub = getattr(self.gradebook, _find)(item_id).notebook.assignment
+            scores.refresh(Path(self.coursedir.root), sub.assignment.name, {sub.student.id}, after=HOOKS.pages)
+
+        put.__wrapped__ = saved  # inspect.unwrap reaches formgrader's own handler through it
+        put._snakekit = True
+        cls.put = put
 
 
 def _autograde_post(handlers):

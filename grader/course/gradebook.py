@@ -1,5 +1,7 @@
 """What a batch writes for the TA: scores into nbgrader's gradebook (with nbgrader's late
-penalties), and the class CSV."""
+penalties), and the class CSV; and a submission's scores as the gradebook holds them
+(:func:`submission_scores`), which the CSV, ``snakekit export``, formgrader and the feedback
+pages (:mod:`grader.feedback.scores`) all show."""
 
 from __future__ import annotations
 
@@ -8,19 +10,95 @@ import csv
 import os
 import shutil
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import nbformat
 
 from grader.course.folder import db_url as _db_url
 
+#: The class CSV's columns; after them, one per graded cell (its grade id) with its points in the gradebook.
 CSV_COLUMNS = ["student", "assignment", "score", "max_score", "status", "raw_score", "late_penalty", "submitted_at",
                "detail"]
 
 
+@dataclass(frozen=True)
+class ExerciseGrade:
+    """One graded cell's points as the gradebook holds them: the grader's (``auto``), a TA's
+    (``manual``, which replaces it) and a TA's extra credit, as nbgrader's ``Grade.score`` adds them."""
+
+    grade_id: str
+    notebook: str
+    max_score: float
+    auto: float | None
+    manual: float | None = None
+    extra: float = 0.0
+
+    @property
+    def score(self) -> float:
+        base = self.manual if self.manual is not None else self.auto
+        return 0.0 if base is None else round(base + self.extra, 4)
+
+
+@dataclass(frozen=True)
+class SubmissionScores:
+    """A submission's numbers in the gradebook: every graded cell, nbgrader's late penalty
+    (``raw - late_penalty`` is the score every place shows) and the TA's comments
+    (``(notebook, cell, text)``)."""
+
+    student: str
+    assignment: str
+    max_score: float
+    raw: float
+    late_penalty: float
+    seconds_late: float
+    exercises: tuple[ExerciseGrade, ...]
+    comments: tuple[tuple[str, str, str], ...] = ()
+
+    @property
+    def score(self) -> float:
+        return round(self.raw - self.late_penalty, 4)
+
+
+def cell_order(course: Path, assignment: str) -> dict[str, int]:
+    """Each cell's place in the assignment's source notebooks (grade id -> index), to list exercises as the
+    lesson does; empty when the course has no source (then the gradebook's order)."""
+    from grader.course.restore import release_order
+
+    names = sorted(p.stem for p in (Path(course) / "source" / assignment).glob("*.ipynb"))
+    cells = [gid for name in names for gid, _ in release_order(course, assignment, name) if gid]
+    return {gid: i for i, gid in enumerate(cells)}
+
+
+def submission_scores(gb, sub, order: dict[str, int] | None = None) -> SubmissionScores:
+    """The numbers of ``sub`` (an nbgrader ``SubmittedAssignment`` of the open gradebook ``gb``)."""
+    order = order or {}
+    grades, comments = [], []
+    for nb in sorted(sub.notebooks, key=lambda n: n.name):
+        for g in nb.grades:
+            grades.append(ExerciseGrade(g.name, nb.name, float(g.max_score), g.auto_score, g.manual_score,
+                                        float(g.extra_credit or 0.0)))
+        comments += [(nb.name, c.name, c.manual_comment) for c in nb.comments if c.manual_comment]
+    grades.sort(key=lambda g: (order.get(g.grade_id, len(order)), g.notebook, g.grade_id))
+    return SubmissionScores(sub.student.id, sub.assignment.name, float(sub.max_score), float(sub.score or 0.0),
+                            float(sub.late_submission_penalty or 0.0), float(sub.total_seconds_late or 0.0),
+                            tuple(grades), tuple(sorted(comments)))
+
+
+def scores_of(course: Path, assignment: str, students=None) -> dict[str, SubmissionScores]:
+    """:class:`SubmissionScores` of every submission of ``assignment`` in the gradebook (or of ``students``)."""
+    from grader.course.folder import gradebook
+
+    order = cell_order(course, assignment)
+    with gradebook(course) as gb:
+        subs = gb.find_assignment(assignment).submissions
+        return {sub.student.id: submission_scores(gb, sub, order) for sub in subs
+                if students is None or sub.student.id in students}
+
+
 def write_grade(course: Path, a, r, late_plugin=None, lock=None) -> None:
     """Write one submission's scores to the course's gradebook (one writer: the batch's main
-    thread), its late penalty, and what nbgrader's ``release_feedback`` reads beside its page."""
+    thread) and its late penalty."""
     from nbgrader.api import Gradebook
     from nbgrader.coursedir import CourseDirectory
 
@@ -40,11 +118,14 @@ def write_grade(course: Path, a, r, late_plugin=None, lock=None) -> None:
             nb.flagged = r.status != "graded"  # formgrader shows the flag: look at this one
         gb.db.commit()
     late_penalties(course, a.name, r.student, late_plugin)
-    fb = course / "feedback" / r.student / a.name
-    for name in ("timestamp.txt", "submission_secret.txt"):  # what nbgrader's release_feedback reads
+
+
+def keep_release_files(course: Path, assignment: str, student: str) -> None:
+    """Copy what nbgrader's ``release_feedback`` reads beside the student's pages."""
+    src, fb = course / "submitted" / student / assignment, course / "feedback" / student / assignment
+    for name in ("timestamp.txt", "submission_secret.txt"):
         if fb.is_dir() and (src / name).is_file() and not (src / name).is_symlink():
             shutil.copyfile(src / name, fb / name)
-
 
 
 def late_penalties(course: Path, assignment: str, student: str, plugin=None) -> None:
@@ -85,35 +166,36 @@ class _throwaway_log:
         self.log.setLevel(self.level)
 
 
-def class_rows(course: Path, assignment: str, results: list[SubmissionResult] = (), previous: dict | None = None) -> list[dict]:
+def class_rows(course: Path, assignment: str, results: list = (), previous: dict | None = None) -> list[dict]:
     """One row per student with a submission of ``assignment`` in the gradebook.
 
     Scores are the gradebook's (so a score a grader changed in formgrader is there) minus
-    nbgrader's late penalty; the status is this run's, else the previous CSV's.
+    nbgrader's late penalty, and each graded cell's points under its grade id; the status is
+    this run's, else the previous CSV's.
     """
     from grader.course.folder import gradebook
 
     now = {r.student: r for r in results}
     previous = previous or {}
     rows = []
+    order = cell_order(course, assignment)
     with gradebook(course) as gb:
         a = gb.find_assignment(assignment)
         for sub in sorted(a.submissions, key=lambda s: s.student.id):
             s = sub.student.id
-            raw = float(sub.score or 0.0)
-            penalty = float(sub.late_submission_penalty or 0.0)
+            got = submission_scores(gb, sub, order)
             if s in now:
                 status, detail = now[s].status, now[s].detail
             else:
                 status, detail = previous.get(s, {}).get("status") or "graded", previous.get(s, {}).get("detail", "")
-            manual = [g.name for nb in sub.notebooks for g in nb.grades if g.manual_score is not None]
+            manual = [g.grade_id for g in got.exercises if g.manual is not None]
             if manual and "set by hand" not in detail:
                 detail = "; ".join(x for x in (detail, f"score of {', '.join(manual)} set by hand in formgrader") if x)
-            rows.append({"student": s, "assignment": assignment, "score": f"{round(raw - penalty, 4):g}",
-                         "max_score": f"{float(a.max_score):g}", "status": status, "raw_score": f"{round(raw, 4):g}",
-                         "late_penalty": f"{round(penalty, 4):g}",
+            rows.append({"student": s, "assignment": assignment, "score": f"{got.score:g}",
+                         "max_score": f"{float(a.max_score):g}", "status": status, "raw_score": f"{round(got.raw, 4):g}",
+                         "late_penalty": f"{round(got.late_penalty, 4):g}",
                          "submitted_at": sub.timestamp.strftime("%Y-%m-%d %H:%M:%S UTC") if sub.timestamp else "",
-                         "detail": detail})
+                         "detail": detail, **{g.grade_id: f"{g.score:g}" for g in got.exercises}})
     return rows
 
 
@@ -127,12 +209,16 @@ def read_class_csv(path: Path) -> dict[str, dict]:
 
 
 def write_csv(rows: list[dict], path: Path) -> Path:
-    """Write the class CSV (to a temporary file first, then in place: never a half-written CSV)."""
+    """Write the class CSV (to a temporary file first, then in place: never a half-written CSV): the
+    :data:`CSV_COLUMNS`, then one column per graded cell, in the order the rows give them."""
+    columns = list(CSV_COLUMNS)
+    for r in rows:
+        columns += [k for k in r if k not in columns]
     tmp = Path(path).with_name(f".{Path(path).name}.tmp")
     with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, CSV_COLUMNS)
+        w = csv.DictWriter(f, columns)
         w.writeheader()
         for r in rows:
-            w.writerow({k: r.get(k, "") for k in CSV_COLUMNS})
+            w.writerow({k: r.get(k, "") for k in columns})
     os.replace(tmp, path)
     return Path(path)

@@ -320,14 +320,15 @@ STOPPED = "stopped here: the notebook ran longer than {timeout:g} s"  # as grade
 
 def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, str], stopped: int | None = None,
           timeout: float | None = None, hide_paths: dict[str, str] | None = None, plots: dict | None = None,
-          comments: dict[str, str] | None = None):
+          comments: dict[str, str] | None = None, head: str | None = None):
     """The feedback notebook: ``nb`` (executed or as submitted) made safe, with verdicts.
 
     ``test_sources`` maps each test cell's grade id to its instructor source (with hidden tests).
     ``stopped``: the index of the cell at which the notebook's time (``timeout`` s) ran out; it
     gets a note. ``hide_paths`` adds machine paths (path -> neutral name) to :func:`machine_paths`.
     ``plots``: a trajectory exercise's plot (PNG bytes) by grade id, when its curves are gone;
-    ``comments``: the teacher's comment on a cell, by grade id.
+    ``comments``: the teacher's comment on a cell, by grade id; ``head``: the first cell's markdown
+    (default: the score and exercises of ``result``; pages use the gradebook's, :func:`grader.feedback.scores.head`).
     """
     plots, comments = plots or {}, comments or {}
     secret = hidden_lines(test_sources.values())
@@ -365,7 +366,7 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
         if gid not in seen:
             cells.append(nbformat.v4.new_markdown_cell(f"**Test cell `{gid}` was missing from your notebook.**"))
             cells.append(_verdict_cell(ex, gid, plots.get(gid)))
-    head = (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{result.score:g} / {result.max_score:g}**"
+    head = head or (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{result.score:g} / {result.max_score:g}**"
             + (f" ({result.status})" if result.status != "graded" else "") + "\n\n"
             + (f"{result.detail}\n\n" if result.detail else "")
             + "| exercise | points | |\n|---|---|---|\n"

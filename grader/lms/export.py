@@ -203,33 +203,18 @@ class Interrupted(KeyboardInterrupt):
         self.released, self.zips = released, list(zips or [])
 
 
-def hand_set(course: Path, assignment: str) -> list[str]:
-    """Students with a score or a comment a TA set in formgrader on a graded submission of ``assignment``."""
-    from nbgrader.api import MissingEntry
-
-    if not (course / "gradebook.db").is_file():
-        return []
-    with gradebook(course) as gb:
-        try:
-            subs = gb.find_assignment(assignment).submissions
-        except MissingEntry:
-            return []
-        return sorted({sub.student.id for sub in subs for nb in sub.notebooks
-                       if any(g.manual_score is not None for g in nb.grades)
-                       or any(c.manual_comment for c in nb.comments)})
-
-
 def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip_path: Path | None, out,
                     before=None) -> tuple[int, list]:
-    """Hand the pages back; ``before(course, assignment, out)`` runs first (``snakekit return`` writes
-    the pages of hand-set scores again there: :func:`grader.commands.nbgrader_plugins.return_main`)."""
-    if before is not None:
-        before(course, assignment, out)
+    """Hand the pages back; ``before(course, assignment, out)`` runs once the pages and the manifest
+    are read (``snakekit return`` writes the pages whose scores are not the gradebook's again there:
+    :func:`grader.commands.nbgrader_plugins.return_main`)."""
     pages = _pages(course, assignment)
     if not pages:
         raise CourseError(f"no feedback pages of {assignment} in {course}/feedback/<student>/{assignment}/; "
                           f"run `snakekit grade {assignment}` first")
-    manifest = read_manifest(course, assignment)
+    manifest = read_manifest(course, assignment)  # a damaged manifest stops it before anything is written
+    if before is not None:
+        before(course, assignment, out)
     problems, done = [], {"exchange": 0, "zip": 0}
     entries: dict[str, dict[str, Path]] = {}
     written: list[Path] = []

@@ -110,7 +110,9 @@ def check_available() -> None:
 
 def default_binds() -> list[str]:
     """Host paths the sandbox sees read-only: the system, the interpreter, the packages."""
-    paths = ["/usr", "/bin", "/sbin", "/lib", "/lib64", "/lib32", "/libx32", "/etc", "/opt"]
+    # not /opt as a whole: the grader's image keeps the instructor's course there
+    # (/opt/snakekit/course, solutions included); the venv under it is bound as the prefix below
+    paths = ["/usr", "/bin", "/sbin", "/lib", "/lib64", "/lib32", "/libx32", "/etc"]
     for p in {sys.base_prefix, sys.prefix, sys.exec_prefix, sysconfig.get_paths()["purelib"]}:
         paths.append(os.path.realpath(p))
     paths += [str(PACKAGE_ROOT / "snakekit"), str(PACKAGE_ROOT / "grader")]

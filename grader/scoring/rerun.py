@@ -43,12 +43,13 @@ def needed(depends: dict, scores: dict, written: dict) -> dict[str, list[str]]:
     ``scores``: test cell grade id -> :class:`ExerciseScore` of the first run; ``written``: answer
     cell grade id -> whether the student changed it from the release (an exercise left
     unwritten has nothing to grade, whatever it builds on). A dependency is replaced when a
-    test cell of its exercise scored less than full.
+    test cell of its exercise scored less than full. A written dependent exercise that handed in
+    nothing (``missing``: its test cell was stopped, as when a part loops endlessly) is run again too.
     """
     out = {}
     for gid, cells in depends.items():
         sc = scores.get(gid)
-        if sc is None or sc.status != "scored" or sc.score >= sc.max_score:
+        if sc is None or sc.status not in ("scored", "missing") or sc.score >= sc.max_score:
             continue
         own = [c for c in written if exercise(c) == exercise(gid)]
         if own and not any(written[c] for c in own):

@@ -50,6 +50,7 @@ class Verdicts:
         self.timeout, self.cell_timeout, self.memory = timeout, cell_timeout, memory
         self.expected: dict = {}
         self.draw = None  # the batch's cases (set with the expected results)
+        self.pending: dict[str, dict] = {}  # student -> the notebooks their pages are made of (see feedback)
 
     def handin_scores(self, work, tampered) -> dict[str, ExerciseScore]:
         """The score of every test cell with expected results, from the hand-ins in ``work``."""
@@ -159,8 +160,9 @@ class Verdicts:
             dest.mkdir(parents=True)
             for name, nb in executed.items():
                 mine = [s for s in scores if a.tests[s.grade_id].notebook == name]
-                nbformat.write(feedback.annotate_notebook(nb, dataclasses.replace(result, exercises=tuple(mine)),
-                                               stopped=stopped.get(name), timeout=self.timeout), dest / f"{name}.ipynb")
+                executed[name] = feedback.annotate_notebook(nb, dataclasses.replace(result, exercises=tuple(mine)),
+                                                            stopped=stopped.get(name), timeout=self.timeout)
+                nbformat.write(executed[name], dest / f"{name}.ipynb")
             if self.draw is not None:  # the trajectory at the spec's values, for `snakekit lab`
                 self.hooks.graded(self.course, a.name, student, work, self.draw)
         return self.feedback(result, nbs, executed, stopped)
@@ -171,13 +173,11 @@ class Verdicts:
         return self.feedback(r, {}, {})
 
     def feedback(self, result, submitted, executed, stopped=None) -> SubmissionResult:
-        a = self.a
-        sources = {g: c.source for g, c in a.tests.items()}
-        path = self.course / "feedback" / result.student / a.name
-        if path.exists():
-            shutil.rmtree(path)
-        written = None
-        for name in a.notebooks or [a.name]:
+        """Keep what the student's pages are made of until the gradebook has the scores (:meth:`grader.batch.Grader.pages`):
+        the executed notebook (annotated: the verdicts kept in it), else the submitted one without outputs,
+        else an empty one."""
+        bases = {}
+        for name in self.a.notebooks or [self.a.name]:
             nb = executed.get(name) or submitted.get(name)
             if nb is None:
                 nb = nbformat.v4.new_notebook()
@@ -186,12 +186,9 @@ class Verdicts:
                 for c in nb.cells:
                     if c.cell_type == "code":
                         c.outputs = []
-            fb = feedback.build(nb, student=result.student, assignment=a.name, result=result, test_sources=sources,
-                                stopped=(stopped or {}).get(name), timeout=self.timeout,
-                                hide_paths={str(self.base): "<sandbox>"})
-            written = feedback.write_html(fb, path / f"{name}.html")
-        self.hooks.pages(self.course, a.name, result.student)  # the lab's result, when the lab ran the student's sweep
-        return SubmissionResult(**{**result.__dict__, "feedback": written})
+            bases[name] = nb
+        self.pending[result.student] = bases
+        return result
 
 
 def kernel_score(gid, cell, nb) -> ExerciseScore:

@@ -1,8 +1,10 @@
-"""Two classes of hand-written submissions graded as a TA grades them: fair ranges, more right never less.
+"""Four classes of hand-written submissions graded as a TA grades them: fair ranges, more right never less.
 
-Lesson 03 (a values lesson, 31 submissions) and lesson 06 (the Task 2 lesson, 34), each graded in
-one batch with ``snakekit grade --jobs 2``. Every submission must score inside the range a fair
-human grader gives it (``tests/grader/class_submissions/lesson0*.py``, with the reason), and a
+Lessons 02 and 03 (values lessons, 30 and 31 submissions), lesson 04 (trajectories, 32) and lesson
+06 (the Task 2 lesson, 34), each graded in one batch with ``snakekit grade --jobs 2``. Every
+submission must score inside the range a fair human grader gives it
+(``tests/grader/class_submissions/lesson0*.py``, with the reason) with the CSV status the TA must see
+(``graded``, or ``tests restored`` for an edited test cell, ``timeout`` for an infinite loop), and a
 submission that did at least as much right as another must not score less.
 
 The grader before hidden cases were drawn per batch fails many of these ranges (its scores are in
@@ -11,8 +13,8 @@ is True; ``SNAKEKIT_CLASS_GRADES=1`` grades them anyway (``-k lesson06`` for one
 hidden cases are drawn anew for every batch; a failure names the batch's seed, and
 ``SNAKEKIT_CLASS_SEED=<seed>`` draws them again.
 
-``python tests/grader/test_class_grades.py [03_inverse_kinematics|06_coded_sweep ...]`` grades the
-classes and prints each student's score against its range, as a Markdown table.
+``python tests/grader/test_class_grades.py [02_jacobian|03_inverse_kinematics|04_trajectories|06_coded_sweep ...]``
+grades the classes and prints each student's score against its range, as a Markdown table.
 """
 
 from __future__ import annotations
@@ -34,14 +36,15 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from class_submissions import exercise_of, hand_in, points, score_range  # noqa: E402
-from class_submissions import lesson03, lesson06  # noqa: E402
+from class_submissions import lesson02, lesson03, lesson04, lesson06  # noqa: E402
 
 #: the grader of issue 20 (partial credit that follows the work) grades the classes in the suite
 NEW_GRADER = True
 RUN = NEW_GRADER or os.environ.get("SNAKEKIT_CLASS_GRADES") == "1"
 
 REPO = HERE.parents[1]
-CLASSES = {lesson03.LESSON: lesson03, lesson06.LESSON: lesson06}
+CLASSES = {m.LESSON: m for m in (lesson02, lesson03, lesson04, lesson06)}
+IDS = [f"lesson{lesson[:2]}" for lesson in sorted(CLASSES)]
 
 
 def grade_class(lesson: str, tmp: Path) -> dict:
@@ -61,6 +64,8 @@ def grade_class(lesson: str, tmp: Path) -> dict:
     # a loaded machine must not turn a right notebook into a timeout: 300 s a notebook, not 120
     command = [sys.executable, "-m", "snakekit.cli", "grade", lesson, "--course", str(course), "--jobs", "2",
                "--timeout", "300"]
+    if getattr(module, "CELL_TIMEOUT", None):   # a class with an infinite loop waits this long for it, twice
+        command += ["--cell-timeout", str(module.CELL_TIMEOUT)]
     if os.environ.get("SNAKEKIT_CLASS_SEED"):   # the hidden cases of an earlier batch, drawn again
         command += ["--seed", os.environ["SNAKEKIT_CLASS_SEED"]]
     started = time.monotonic()
@@ -108,8 +113,9 @@ def range_failures(module, result) -> list[str]:
     for s in module.STUDENTS:
         low, high = score_range(s, pts, module.SLIP_FLOOR)
         score, max_score, status = result["rows"].get(s.name, (None, None, "no row in the CSV"))
-        if status != "graded" or max_score != total:
-            out.append(f"{_describe(s, result, pts)}: status {status!r}, max {max_score} (the lesson has {total:g}): "
+        if status != s.status or max_score != total:
+            out.append(f"{_describe(s, result, pts)}: status {status!r} (expected {s.status!r}), max {max_score} "
+                       f"(the lesson has {total:g}): "
                        f"{result.get('details', {}).get(s.name, '')}")
         elif not low - 1e-9 <= score <= high + 1e-9:
             out.append(f"{_describe(s, result, pts)}: a fair grader gives {low:g} to {high:g}: {s.why}")
@@ -134,7 +140,7 @@ needs_new_grader = pytest.mark.skipif(not RUN, reason="the classes' ranges need 
                                       "NEW_GRADER (or SNAKEKIT_CLASS_GRADES=1)")
 
 
-@pytest.mark.parametrize("lesson", sorted(CLASSES), ids=["lesson03", "lesson06"])
+@pytest.mark.parametrize("lesson", sorted(CLASSES), ids=IDS)
 def test_each_class_has_30_submissions_with_ranges_reasons_and_cells_of_the_release(lesson):
     module = CLASSES[lesson]
     names = [s.name for s in module.STUDENTS]
@@ -156,14 +162,16 @@ def test_each_class_has_30_submissions_with_ranges_reasons_and_cells_of_the_rele
         assert high > low or (high == low and not p.strict), f"{p}: {p.better} can reach {high}, {p.worse} {low}"
 
 
-@pytest.fixture(scope="module", params=sorted(CLASSES), ids=["lesson03", "lesson06"])
+@pytest.fixture(scope="module", params=sorted(CLASSES), ids=IDS)
 def graded(request, tmp_path_factory):
     from conftest import need_program
 
     need_program("unshare")
     lesson = request.param
     result = grade_class(lesson, tmp_path_factory.mktemp(f"class{lesson[:2]}"))
-    again = sorted(n for n, d in result["details"].items() if "second run" in d or "both of its runs" in d)
+    hangs = {s.name for s in CLASSES[lesson].STUDENTS if s.status == "timeout"}   # an infinite loop runs twice
+    again = sorted(n for n, d in result["details"].items()
+                   if ("second run" in d or "both of its runs" in d) and n not in hangs)
     print(f"\n{lesson}: {len(CLASSES[lesson].STUDENTS)} submissions graded in {result['seconds']:.1f} s"
           + (f"; stopped by the clock in a first run and run again: {', '.join(again)}" if again else ""))
     if result["late"]:   # a kernel's lost reply, taken as finished: said where CI's summary shows it
@@ -202,7 +210,7 @@ def table(module, result) -> str:
         low, high = score_range(s, pts, module.SLIP_FLOOR)
         score, max_score, status = result["rows"].get(s.name, (float("nan"), float("nan"), "no row"))
         per = result["exercises"].get(s.name, {})
-        inside = status == "graded" and low - 1e-9 <= score <= high + 1e-9
+        inside = status == s.status and low - 1e-9 <= score <= high + 1e-9
         lines.append(f"| {s.name} | {s.did} | {score:g}/{max_score:g}{'' if status == 'graded' else f' ({status})'} | "
                      f"{' '.join(f'{per.get(ex, 0):g}' for ex in sorted(pts))} | {low:g}-{high:g} | {s.why} | "
                      f"{'yes' if inside else '**no**'} |")

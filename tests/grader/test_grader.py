@@ -9,12 +9,13 @@ import shutil
 import sqlite3
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import need_program
+from conftest import IN_CI, need_program
 from grader.scoring import compare
 from grader.scoring.references import REFERENCES as COURSE_REFERENCES
 from grader.scoring.references import Reference, differences, main as references_main, spec_hash
@@ -265,7 +266,9 @@ def graded(tmp_path_factory):
     second = grade("--seed", "20261124")
     csv2 = (course / f"grades-{ASSIGNMENT}.csv").read_text()
     third = grade()
-    return {"course": course, "first": first, "second": second, "third": third, "csv1": csv1, "csv2": csv2}
+    csv3 = (course / f"grades-{ASSIGNMENT}.csv").read_text()
+    return {"course": course, "first": first, "second": second, "third": third, "csv1": csv1, "csv2": csv2,
+            "csv3": csv3}
 
 
 def test_batch_writes_csv_with_scores(graded):
@@ -279,13 +282,16 @@ def test_batch_writes_csv_with_scores(graded):
     assert rows["bob"]["status"] == "graded" and 1 < float(rows["bob"]["score"]) < 4
 
 
-def test_the_seed_repeats_a_batch_and_a_new_batch_draws_new_cases(graded):
+def test_the_seed_repeats_a_batch_and_an_unchanged_attempt_keeps_its_cases(graded):
+    """--seed grades at that seed; a batch without it grades the attempts already graded (the same
+    notebooks) at the seed they met (grader.scoring.draws: a regrade changes no grade no one
+    touched); a new attempt's fresh draw: tests/grader/test_grader_regrade.py."""
     assert "hidden cases drawn with seed 20261124" in graded["first"].stderr
     assert graded["second"].returncode == 0 and graded["csv2"] == graded["csv1"]   # the same cases: the same grades
-    assert graded["third"].returncode == 0
-    seed = graded["third"].stderr.split("hidden cases drawn with seed ")[1].split()[0]
-    assert seed != "20261124"
-    assert read_csv(graded["course"] / f"grades-{ASSIGNMENT}.csv")["alice"]["score"] == "7"  # right at any cases
+    assert graded["third"].returncode == 0, graded["third"].stderr[-3000:]
+    assert "hidden cases drawn with seed 20261124" in graded["third"].stderr
+    assert graded["csv3"] == graded["csv1"]
+    assert read_csv(graded["course"] / f"grades-{ASSIGNMENT}.csv")["alice"]["score"] == "7"
 
 
 def test_scores_land_in_nbgraders_gradebook(graded):
@@ -358,7 +364,8 @@ def test_grader_depends_only_on_trajectory_model_and_run():
         assert f"'{banned}'" not in mods
 
 
-@pytest.mark.parametrize("name", ["grader.scoring.compare", "grader.feedback.report", "grader.scoring.score"])
+@pytest.mark.parametrize("name", ["grader.scoring.compare", "grader.feedback.report", "grader.scoring.score",
+                                  "grader.feedback.scores"])
 def test_docstring_examples(name):
     import doctest
     import importlib
@@ -587,6 +594,35 @@ def test_a_kit_installed_under_tmp_is_seen_inside_the_sandbox(tmp_path, monkeypa
     assert outcome.returncode == 0, text
     assert "the kit is here" in text
     assert not (Path("/tmp") / "scratch").exists() or (Path("/tmp") / "scratch").read_text() != "x"  # private /tmp
+
+
+def test_the_instructors_course_beside_the_venv_is_not_seen_inside_the_sandbox(tmp_path):
+    """The grader's image keeps the instructor's course, solutions included, in /opt/snakekit/course,
+    beside its venv in /opt/venv: a submission's code must not read it (it could run the solution)."""
+    need_program("unshare")
+    from grader.sandbox import namespaces as sandbox
+
+    if not os.access("/opt", os.W_OK):
+        if IN_CI:
+            pytest.fail("this test writes a folder under /opt (as the grader's image has one): run it as root")
+        pytest.skip("needs to write a folder under /opt")
+    probe = Path(tempfile.mkdtemp(prefix="snakekit-course-", dir="/opt"))
+    try:
+        (probe / "solution.txt").write_text("BEGIN SOLUTION")
+        probe.chmod(0o755)
+        (probe / "solution.txt").chmod(0o644)
+        work = tmp_path / "work"
+        work.mkdir()
+        script = (f"import os; print('seen' if os.path.exists({str(probe / 'solution.txt')!r}) else 'not seen'); "
+                  "import snakekit, grader; print('kit', snakekit.__name__)")
+        with open(tmp_path / "out.txt", "w") as out:
+            outcome = sandbox.run([sys.executable, "-c", script], workdir=work, env={"PATH": "/usr/bin:/bin"},
+                                  limits=sandbox.Limits(wall=60), stdout=out, stderr=subprocess.STDOUT)
+        text = (tmp_path / "out.txt").read_text()
+        assert outcome.returncode == 0, text
+        assert text.split() == ["not", "seen", "kit", "snakekit"], text
+    finally:
+        shutil.rmtree(probe, ignore_errors=True)
 
 
 # --- the warm fork server ----------------------------------------------------------------------

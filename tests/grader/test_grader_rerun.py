@@ -37,6 +37,17 @@ def test_a_second_run_replaces_only_the_parts_that_lost_points_under_an_exercise
         {"ex06_3_task2_test": ["ex06_1_sweep_times", "ex06_2_sweep_positions"]}
 
 
+def test_a_dependent_exercise_stopped_by_a_part_that_never_returns_is_run_again_with_the_lessons_part():
+    """6.1 loops endlessly: 6.3's test cell, which calls it, is stopped before it hands anything in."""
+    got = scores(ex06_1=0.0, ex06_2=1.0)
+    got["ex06_3_task2_test"] = ExerciseScore("ex06_3_task2_test", 0.0, 1.0, "missing", "nothing was handed in")
+    assert rerun.needed(DEPENDS, got, WRITTEN) == {"ex06_3_task2_test": ["ex06_1_sweep_times"]}
+    # ...but not when it was never written, nor when it tampered with its test cell
+    assert rerun.needed(DEPENDS, got, {**WRITTEN, "ex06_3_task2": False}) == {}
+    got["ex06_3_task2_test"] = ExerciseScore("ex06_3_task2_test", 0.0, 1.0, "tampered", "")
+    assert rerun.needed(DEPENDS, got, WRITTEN) == {}
+
+
 @pytest.mark.parametrize("got, written", [
     (dict(ex06_1=0.0, ex06_2=1.0, ex06_3=1.0), WRITTEN),                  # 6.3 full: nothing to gain
     (dict(ex06_1=1.0, ex06_2=1.0, ex06_3=0.3), WRITTEN),                  # 6.3's own slip
@@ -147,7 +158,8 @@ def test_an_ik_solution_near_the_target_earns_half_a_case_and_one_outside_the_li
     ("06_coded_sweep", {"ex06_3_task2_test"},
      ["imports", "ex06_1_sweep_times", "ex06_2_sweep_positions", "ex06_3_task2", "ex06_3_task2_test"]),
     ("03_inverse_kinematics", {"ex03_3_ik_loop_test"},
-     ["imports", "ex03_1_two_link_ik", "ex03_2_dls_step", "ex03_3_ik_loop", "ex03_3_ik_loop_test"]),
+     ["imports", "before the exercises", "ex03_1_two_link_ik", "ex03_2_dls_step", "ex03_3_ik_loop",
+      "ex03_3_ik_loop_test"]),   # lesson 03 draws its triangle before the first exercise
 ])
 def test_the_second_run_runs_the_imports_the_answers_and_the_test_read_from_it_and_nothing_after(lesson, tests, run):
     """Of the lesson's code cells, the second run skips the other test cells, the demonstrations between
@@ -157,6 +169,8 @@ def test_the_second_run_runs_the_imports_the_answers_and_the_test_read_from_it_a
     from grader.sandbox.inside.worker import runs_cell
 
     nb = nbformat.read(Path(__file__).resolve().parents[2] / "course" / "source" / lesson / f"{lesson}.ipynb", as_version=4)
-    ran = [c.metadata.get("nbgrader", {}).get("grade_id") or ("imports" if "import numpy" in c.source else c.source)
+    first = min(i for i, c in enumerate(nb.cells) if c.metadata.get("nbgrader", {}).get("grade_id"))
+    ran = [c.metadata.get("nbgrader", {}).get("grade_id") or ("imports" if "import numpy" in c.source else
+                                                              "before the exercises" if i < first else c.source)
            for i, c in enumerate(nb.cells) if c.cell_type == "code" and runs_cell(nb.cells, i, tests)]
     assert ran == run

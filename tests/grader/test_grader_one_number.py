@@ -1,0 +1,291 @@
+"""One number everywhere: the page, the class CSV, ``snakekit export`` and formgrader agree.
+
+A class of three (alice on time, bob late, carol with one slip) is collected from a Canvas
+download and graded once; each test works on its own copy. Random sequences of what a TA does
+(grade the class, ``grade --student``, a score, extra credit or comment saved in formgrader, a due
+date moved so a late penalty changes, ``return``, ``export``) are run on it, and after every step
+each student's score and each exercise's points are the same on the feedback page, in the
+CSV, in both exports and in the gradebook (what formgrader shows), and equal what the steps
+taken make of the first grading: nothing changed that no step touched. The numbers expected are
+worked here from the steps (a score set by hand replaces the grader's, extra credit adds to it,
+the course's rule of 1 point per started hour late is applied at grading, capped at the score).
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import inspect
+import io
+import math
+import random
+import re
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from conftest import need_program
+from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, make_course
+from test_grader_week import notebook_bytes
+
+A = ASSIGNMENT
+REPO = Path(__file__).resolve().parents[2]
+DUE = dt.datetime(2026, 3, 2, 22, 59)  # UTC, as the gradebook keeps it
+#: When each student handed in (canvas id, time); bob 2 h 30 min late: 3 started hours, 3 points at 1 per hour.
+HANDED_IN = {"alice": (101, DUE - dt.timedelta(hours=1)), "bob": (102, DUE + dt.timedelta(hours=2, minutes=30)),
+             "carol": (103, DUE - dt.timedelta(minutes=10))}
+SLIP = {"ex1_tool_xy": GOOD["ex1_tool_xy"].replace("np.cos(phi)", "np.sin(phi)")}
+STUDENTS = sorted(HANDED_IN)
+
+
+def snakekit(*args):
+    return subprocess.run([sys.executable, "-m", "snakekit.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=REPO, timeout=900)
+
+
+def grade(course, *extra):
+    r = snakekit("grade", A, "--course", course, "--references", REFERENCES, "--jobs", "2", "--timeout", "120", *extra)
+    assert r.returncode == 0, r.stderr[-3000:]
+
+
+@pytest.fixture(scope="module")
+def graded(tmp_path_factory):
+    """The class collected from a Canvas download (with its times), due at DUE, 1 point per started hour late,
+    graded once."""
+    from grader.commands.release import with_rules
+    from grader.course.folder import gradebook
+
+    need_program("unshare")
+    tmp = tmp_path_factory.mktemp("one-number")
+    course = make_course(tmp)
+    (course / "nbgrader_config.py").write_text(with_rules((course / "nbgrader_config.py").read_text(),
+                                                          {A: "per-hour:1"}))
+    with gradebook(course) as gb:
+        gb.update_or_create_assignment(A, duedate=DUE)
+    (course / "roster.csv").write_text("student,name,canvas_id\n" + "".join(
+        f"{s},{s.title()} Doe,{cid}\n" for s, (cid, _) in HANDED_IN.items()))
+    with zipfile.ZipFile(tmp / "download.zip", "w") as z:
+        for s, (cid, _) in HANDED_IN.items():
+            z.writestr(f"doe{s}_{cid}_{5000 + cid}_{A}.ipynb", notebook_bytes(course, SLIP if s == "carol" else None))
+    (tmp / "times.csv").write_text("canvas_id,submitted_at\n" + "".join(
+        f"{cid},{at:%Y-%m-%d %H:%M:%S}\n" for cid, at in HANDED_IN.values()))
+    r = snakekit("collect", A, "--course", course, "--from", tmp / "download.zip", "--times", tmp / "times.csv")
+    assert r.returncode == 0, r.stdout + r.stderr
+    grade(course)
+    return course
+
+
+@pytest.fixture
+def course(graded, tmp_path):
+    shutil.copytree(graded, tmp_path / "course")
+    return tmp_path / "course"
+
+
+# --- what each place says ----------------------------------------------------------------------
+
+
+def in_gradebook(course) -> dict:
+    """Per student: (score after the late penalty, {grade id: points}, {grade id: the grader's points}), as
+    formgrader shows them (nbgrader's own API)."""
+    from grader.course.folder import gradebook
+
+    out = {}
+    with gradebook(course) as gb:
+        for sub in gb.find_assignment(A).submissions:
+            grades = {g.name: g for nb in sub.notebooks for g in nb.grades}
+            out[sub.student.id] = (round(sub.score - (sub.late_submission_penalty or 0.0), 4),
+                                   {k: round(g.score, 4) for k, g in grades.items()},
+                                   {k: g.auto_score for k, g in grades.items()})
+    return out
+
+
+def on_page(course, student) -> tuple[float, dict[str, float], str]:
+    """The score and each exercise's points as the student's page shows them, and the page's text."""
+    text = (course / "feedback" / student / A / f"{A}.html").read_text()
+    total = re.search(r"Score: <strong>([-\d.e+]+) / 7</strong>", text)
+    rows = re.findall(r"<td><code>(\w+)</code></td>\s*<td>([-\d.e+]+) / \d+</td>", text)
+    return float(total.group(1)), {gid: float(x) for gid, x in rows}, text
+
+
+def exported(course, tmp, lms=None) -> dict[str, float]:
+    from grader.lms.export import export_main
+
+    out = tmp / f"export-{lms or 'plain'}.csv"
+    assert export_main(["--course", str(course), "-o", str(out), *(["--lms", lms] if lms else [])], io.StringIO()) == 0
+    rows = list(csv.reader(io.StringIO(out.read_text())))
+    if lms == "canvas":  # Student (the roster's name), ID, SIS User ID, SIS Login ID, Section, t1_sweep, Final Points
+        by_id = {str(cid): s for s, (cid, _) in HANDED_IN.items()}
+        return {by_id[r[1]]: float(r[5]) for r in rows[2:]}
+    return {r[0]: float(r[1]) for r in rows[1:]}
+
+
+def in_csv(course) -> dict[str, dict]:
+    with open(course / f"grades-{A}.csv", newline="") as f:
+        return {r["student"]: r for r in csv.DictReader(f)}
+
+
+# --- the TA's steps, and what each makes of the numbers ----------------------------------------
+
+
+class Class:
+    """What the numbers must be: the first grading's points, and what every step since changed."""
+
+    def __init__(self, course):
+        first = in_gradebook(course)
+        self.auto = {s: first[s][2] for s in first}
+        self.max = {"ex1_tool_xy_test": 2, "ex2_sweep_test": 4, "ex3_peak_speed_test": 1}
+        self.manual = {s: {} for s in first}
+        self.extra = {s: {} for s in first}
+        self.comments = {s: {} for s in first}
+        self.due = DUE
+        self.penalty = {s: 0.0 for s in first}
+        for s in first:
+            self.graded(s)
+
+    def points(self, s) -> dict[str, float]:
+        return {g: round((self.manual[s].get(g) if self.manual[s].get(g) is not None else a) + (self.extra[s].get(g)
+                         or 0.0), 4) for g, a in self.auto[s].items()}
+
+    def graded(self, s):
+        """nbgrader's late penalty as grading sets it: 1 point per started hour late, at most the score."""
+        late = (HANDED_IN[s][1] - self.due).total_seconds()
+        self.penalty[s] = min(sum(self.points(s).values()), math.ceil(late / 3600)) if late > 0 else 0.0
+
+    def score(self, s) -> float:
+        return round(sum(self.points(s).values()) - self.penalty[s], 4)
+
+
+def formgrader(course):
+    """formgrader's handlers that save a score and a comment (nbgrader's own code for them, without the web
+    server around it), with what the course's config adds to them."""
+    from nbgrader.server_extensions.formgrader import apihandlers
+
+    from grader.commands.nbgrader_plugins import saved_in_formgrader
+    from grader.course.folder import gradebook
+
+    class Request:
+        def __init__(self, body):
+            self.body, self.coursedir = body, SimpleNamespace(root=str(course))
+
+        def get_json_body(self):
+            return self.body
+
+        def write(self, _):
+            pass
+
+    handlers = SimpleNamespace(**{name: type(name, (Request,), {"put": inspect.unwrap(getattr(apihandlers, name).put)})
+                                  for name in ("GradeHandler", "CommentHandler")})
+    saved_in_formgrader(handlers)
+
+    def save(kind, student, cell, body):
+        with gradebook(course) as gb:
+            find = gb.find_grade if kind == "GradeHandler" else gb.find_comment
+            handler = getattr(handlers, kind)(body)
+            handler.gradebook = gb
+            handler.put(find(cell, A, A, student).id)
+    return save
+
+
+def step(name, course, tmp, rng, model):
+    s = rng.choice(STUDENTS)
+    if name == "grade":
+        grade(course)
+        for x in STUDENTS:
+            model.graded(x)
+    elif name == "grade --student":
+        grade(course, "--student", s)
+        model.graded(s)
+    elif name == "hand-set score":
+        gid = rng.choice(sorted(model.max))
+        manual = rng.choice([None, 0.0, rng.randint(0, 2 * model.max[gid]) / 2])
+        extra = rng.choice([None, None, 0.5, 1.0])
+        formgrader(course)("GradeHandler", s, gid, {"manual_score": manual, "extra_credit": extra})
+        model.manual[s][gid], model.extra[s][gid] = manual, extra
+    elif name == "comment":
+        cell = rng.choice(["ex1_tool_xy", "ex2_sweep"])
+        text = rng.choice([None, f"See the note {rng.randint(1, 99)} in the lesson."])
+        formgrader(course)("CommentHandler", s, cell, {"manual_comment": text})
+        model.comments[s][cell] = text
+    elif name == "late penalty":  # the due date moved (formgrader's Manage Assignments): the next grading applies it
+        from grader.course.folder import gradebook
+
+        model.due = DUE + dt.timedelta(hours=rng.choice([-4, -2, 1, 2]))
+        with gradebook(course) as gb:
+            gb.update_or_create_assignment(A, duedate=model.due)
+    elif name == "return":
+        from grader.commands.nbgrader_plugins import return_main
+
+        assert return_main([A, "--course", str(course), "-o", str(tmp / "feedback.zip")], io.StringIO()) == 0
+    elif name == "export":
+        exported(course, tmp, "canvas")
+
+
+def agree(course, tmp, model, after: str):
+    """Every place gives every student the numbers the steps make; the page says what a teacher set and what
+    the late penalty took."""
+    book, rows = in_gradebook(course), in_csv(course)
+    plain, canvas = exported(course, tmp), exported(course, tmp, "canvas")
+    for s in STUDENTS:
+        want, points = model.score(s), model.points(s)
+        where = f"{s} after {after}"
+        assert book[s][2] == model.auto[s], f"{where}: the grader's points changed"
+        assert (book[s][0], book[s][1]) == (want, points), where
+        total, shown, text = on_page(course, s)
+        assert (total, shown) == (want, points), where
+        assert (float(rows[s]["score"]), {g: float(rows[s][g]) for g in points}) == (want, points), where
+        assert float(rows[s]["late_penalty"]) == model.penalty[s], where
+        assert plain[s] == want and canvas[s] == want, where
+        for g, manual in model.manual[s].items():
+            if manual is not None and manual != model.auto[s][g]:
+                assert f"set by your teacher (the grader gave {model.auto[s][g]:g})" in text, where
+        if model.penalty[s]:
+            assert f"the late penalty took {model.penalty[s]:g} point(s) off" in text, where
+        for cell, comment in model.comments[s].items():
+            assert (f"Comment from your teacher:</strong> {comment}" in text) == bool(comment), where
+
+
+#: The steps of every sequence, in an order drawn from its seed, with one grading step after the due date moved.
+STEPS = ["hand-set score", "hand-set score", "hand-set score", "comment", "late penalty", "return", "export"]
+GRADING = ["grade", "grade --student"]
+
+
+def sequence(seed: int) -> list[str]:
+    rng = random.Random(seed)
+    steps = rng.sample(STEPS, len(STEPS))
+    after = steps.index("late penalty") + 1
+    steps.insert(rng.randint(after, len(steps)), GRADING[seed])
+    return steps
+
+
+@pytest.mark.parametrize("seed", range(len(GRADING)))
+def test_every_place_shows_the_same_score_after_any_sequence_of_a_tas_steps(course, tmp_path, seed):
+    rng = random.Random(1000 + seed)  # the students, cells, scores and times the steps take
+    model = Class(course)
+    agree(course, tmp_path, model, "the first grading")
+    taken = []
+    for name in sequence(seed):
+        step(name, course, tmp_path, rng, model)
+        taken.append(name)
+        agree(course, tmp_path, model, " > ".join(taken))
+
+
+def test_a_late_students_page_says_the_score_the_export_gives(course, tmp_path):
+    total, _, text = on_page(course, "bob")
+    assert total == exported(course, tmp_path)["bob"] == exported(course, tmp_path, "canvas")["bob"] == 4
+    assert "Handed in late (2 h 30 min after the due date): the late penalty took 3 point(s) off the 7 your " \
+           "exercises scored, so your score is 4." in text
+
+
+def test_after_grade_student_the_page_keeps_the_score_set_by_hand(course, tmp_path):
+    formgrader(course)("GradeHandler", "carol", "ex1_tool_xy_test", {"manual_score": 2.0, "extra_credit": None})
+    grade(course, "--student", "carol")
+    total, shown, text = on_page(course, "carol")
+    assert total == float(in_csv(course)["carol"]["score"]) == exported(course, tmp_path)["carol"] == 7
+    assert shown["ex1_tool_xy_test"] == float(in_csv(course)["carol"]["ex1_tool_xy_test"]) == 2
+    assert "set by your teacher (the grader gave 0)" in text
+    assert "Your teacher set the points to 2 (the grader gave 0)." in text
