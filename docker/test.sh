@@ -302,10 +302,14 @@ python3 - "$SNAKEKIT_COURSE" "$ASSIGNMENT" <<'EOF' || { tail -20 "$RUN/grader.lo
 import csv, os, sys
 course, assignment = sys.argv[1:]
 rows = list(csv.DictReader(open(f"{course}/gradebook/grades.csv")))
-assert rows and list(rows[0]) == ["student", "assignment", "score", "max_score", "status", "raw_score", "late_penalty",
-                                  "submitted_at", "detail"], rows[:1]
+assert rows and list(rows[0])[:9] == ["student", "assignment", "score", "max_score", "status", "raw_score",
+                                      "late_penalty", "submitted_at", "detail"], rows[:1]
 by = {r["student"]: r for r in rows}
 assert set(by) == {"alice", "bob"}, by
+exercises = list(rows[0])[9:]   # then one column per exercise: its points, which add up to the score
+assert exercises and all(e.startswith("ex") and e.endswith("_test") for e in exercises), exercises
+for r in rows:
+    assert abs(sum(float(r[e]) for e in exercises) - float(r["raw_score"])) < 1e-6, r
 for r in rows:
     assert r["assignment"] == assignment and r["status"] == "graded", r
     assert float(r["max_score"]) > 0, r

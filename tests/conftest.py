@@ -112,8 +112,12 @@ SERIAL_FILES = {"tests/grader/test_arm_lab.py", "tests/grader/test_lab_safety.py
                 "tests/kit/test_safety.py", "tests/kit/test_bus_protocol.py",
                 # module fixtures that run lesson 07 with the others (graded all at once)
                 "tests/lessons/test_course.py", "tests/lessons/test_lessons_4_to_7.py"}
-#: ...and every test of lesson 07 (the real robot's lesson runs on the emulated bus in real time)
-SERIAL_IDS = ("07_real_robot",)
+#: ...and every test of lesson 07 (the real robot's lesson runs on the emulated bus in real time),
+#: and the references' check
+SERIAL_IDS = ("07_real_robot",
+              # each lesson's instructor notebook run again (lesson 00's took 611 s beside the
+              # engine tests in the parallel part, 8 s alone)
+              "test_course_references_are_current")
 
 
 @pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the xdist_group marks
@@ -175,7 +179,7 @@ def pytest_runtest_logreport(report):
         os.makedirs(os.path.dirname(FAILURES), exist_ok=True)
         with open(FAILURES, "a") as f:
             f.write(f"{time.strftime('%H:%M:%S')} FAILED ({report.when}) {report.nodeid}\n"
-                    f"{str(report.longrepr)[-3000:]}\n\n")
+                    f"{str(report.longrepr)[-12000:]}\n\n")
 
 
 def pytest_sessionfinish(session, exitstatus):

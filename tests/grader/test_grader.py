@@ -572,6 +572,19 @@ def test_task1_judged_by_where_each_move_ends():
     assert lied.score == 0 and "but that move ended with the tool at" in lied.message
 
 
+def run_in_sandbox(script: str, tmp_path: Path) -> tuple[int, str]:
+    """``python -c script`` in a sandbox whose writable folder is ``tmp_path/work``: its exit code
+    and output."""
+    from grader.sandbox import namespaces as sandbox
+
+    work = tmp_path / "work"
+    work.mkdir()
+    with open(tmp_path / "out.txt", "w") as out:
+        outcome = sandbox.run([sys.executable, "-c", script], workdir=work, env={"PATH": "/usr/bin:/bin"},
+                              limits=sandbox.Limits(wall=60), stdout=out, stderr=subprocess.STDOUT)
+    return outcome.returncode, (tmp_path / "out.txt").read_text()
+
+
 def test_a_kit_installed_under_tmp_is_seen_inside_the_sandbox(tmp_path, monkeypatch):
     """A clone under /tmp (its venv and packages there) stays visible past the private /tmp."""
     need_program("unshare")
@@ -583,15 +596,10 @@ def test_a_kit_installed_under_tmp_is_seen_inside_the_sandbox(tmp_path, monkeypa
     assert str(kit).startswith("/tmp/")
     binds = sandbox.default_binds()
     monkeypatch.setattr(sandbox, "default_binds", lambda: binds + [str(kit)])
-    work = tmp_path / "work"
-    work.mkdir()
     script = (f"import os; print(open({str(kit / 'marker.txt')!r}).read()); "
               "open('/tmp/scratch', 'w').write('x'); print(sorted(os.listdir('/tmp')))")
-    with open(tmp_path / "out.txt", "w") as out:
-        outcome = sandbox.run([sys.executable, "-c", script], workdir=work, env={"PATH": "/usr/bin:/bin"},
-                              limits=sandbox.Limits(wall=60), stdout=out, stderr=subprocess.STDOUT)
-    text = (tmp_path / "out.txt").read_text()
-    assert outcome.returncode == 0, text
+    returncode, text = run_in_sandbox(script, tmp_path)
+    assert returncode == 0, text
     assert "the kit is here" in text
     assert not (Path("/tmp") / "scratch").exists() or (Path("/tmp") / "scratch").read_text() != "x"  # private /tmp
 
@@ -600,8 +608,6 @@ def test_the_instructors_course_beside_the_venv_is_not_seen_inside_the_sandbox(t
     """The grader's image keeps the instructor's course, solutions included, in /opt/snakekit/course,
     beside its venv in /opt/venv: a submission's code must not read it (it could run the solution)."""
     need_program("unshare")
-    from grader.sandbox import namespaces as sandbox
-
     if not os.access("/opt", os.W_OK):
         if IN_CI:
             pytest.fail("this test writes a folder under /opt (as the grader's image has one): run it as root")
@@ -611,15 +617,10 @@ def test_the_instructors_course_beside_the_venv_is_not_seen_inside_the_sandbox(t
         (probe / "solution.txt").write_text("BEGIN SOLUTION")
         probe.chmod(0o755)
         (probe / "solution.txt").chmod(0o644)
-        work = tmp_path / "work"
-        work.mkdir()
         script = (f"import os; print('seen' if os.path.exists({str(probe / 'solution.txt')!r}) else 'not seen'); "
                   "import snakekit, grader; print('kit', snakekit.__name__)")
-        with open(tmp_path / "out.txt", "w") as out:
-            outcome = sandbox.run([sys.executable, "-c", script], workdir=work, env={"PATH": "/usr/bin:/bin"},
-                                  limits=sandbox.Limits(wall=60), stdout=out, stderr=subprocess.STDOUT)
-        text = (tmp_path / "out.txt").read_text()
-        assert outcome.returncode == 0, text
+        returncode, text = run_in_sandbox(script, tmp_path)
+        assert returncode == 0, text
         assert text.split() == ["not", "seen", "kit", "snakekit"], text
     finally:
         shutil.rmtree(probe, ignore_errors=True)

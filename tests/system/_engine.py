@@ -50,11 +50,13 @@ def run_on_engine(script: str, capsys, *, what: str, show: tuple[str, ...], time
     proc = subprocess.run(["bash", str(ROOT / script)], cwd=ROOT, env=env, capture_output=True, text=True,
                           timeout=timeout_min * 60)
     out = proc.stdout + proc.stderr
+    shown = [line for line in out.splitlines() if line.startswith(show) or "FAILED" in line]
     with capsys.disabled():
         print()
-        for line in out.splitlines():
-            if line.startswith(show):
-                print(line)
-    assert proc.returncode == 0, out[-6000:]
+        for line in shown:
+            print(line)
+    # the script's own lines first: under xdist the lines printed above stay in the worker, and the
+    # output's end is mostly dockerd's log
+    assert proc.returncode == 0, "\n".join(shown)[-6000:] + "\n--- the output's end:\n" + out[-3000:]
     assert "host state checked" in out, out[-3000:]  # the engine stopped, the host as it was
     return out

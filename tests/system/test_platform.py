@@ -284,7 +284,7 @@ def without_wheels(platform: str, tmp_path: Path) -> set[str]:
         r = resolve(platform, tmp_path, missing, deps=False)
         if r.returncode == 0:
             return missing
-        m = NO_WHEEL.search(r.stderr)
+        m = NO_WHEEL.search(" ".join(r.stderr.split()))  # uv wraps its message at its own width
         if m is None:
             unreachable(r)
             pytest.fail(f"uv failed for {platform}:\n{r.stderr}")

@@ -200,8 +200,10 @@ def sweep_positions(times, sweeps, amplitude):
     S("max", "6.2: cos for sin", LOST_62, {"6.2": (0.0, 0.34), "6.3": (0.5, 1.0)}, True,
       T2=POS_A.replace("np.sin", "np.cos")),
     S("nia", "6.2: last row not zeroed (ends at ~1e-14 rad, the text asks exactly 0)",
-      "6.2 right but for the exact home the text insists on; 6.3 as good as right",
-      {"6.2": (0.0, 0.9), "6.3": (0.8, 1.0)}, True,
+      "6.2 right but for the exact home the text insists on: a home within 1e-12 rad is home (the "
+      "grader's near-zero rule), so full marks where the drawn sweep ends that close, less where "
+      "it does not; 6.3 as good as right",
+      {"6.2": (0.0, 1.0), "6.3": (0.8, 1.0)}, True,
       T2=POS_C.replace("    wave[-1] = 0\n", "")),
     S("oli", "6.2: period t_end + dt, so the sweeps do not fill the run (not home at the end)", LOST_62,
       {"6.2": (0.0, 0.34), "6.3": (0.5, 1.0)}, True, T2='''\
