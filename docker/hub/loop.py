@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """A week of the class on the hub, as its users do it (docker/hub/test.sh runs this).
 
-    loop.py HUB_URL --passwords CSV --students 20 [--old-shared-password PW] [--browser DIR]
+    loop.py HUB_URL --passwords CSV --students 20 [--submitting K] [--old-shared-password PW] [--browser DIR]
 
 First the log-ins the hub refuses: a student's name with another's password, the teacher's name
 with a student's password or none, the old shared password, a name without an account, and
@@ -9,7 +9,7 @@ the sign-up page. Then everyone logs in through the hub (its log-in form, with t
 password from CSV, ``username,password`` as docker/hub/accounts prints it, then a token from
 the hub's REST API) and
 works through their own server behind the hub's proxy: the instructor releases lesson 06;
-the students fetch it (the Assignments tab's API), fill the exercises (the instructor's
+the students (or the first K of them: --submitting) fetch it (the Assignments tab's API), fill the exercises (the instructor's
 answers, or for every third student a slip in one of them), save (the contents API) and
 submit; the TA collects, grades (`snakekit grade`, which the hub's grading service runs in the
 grader's container on the course volume) and returns the feedback; every student fetches it.
@@ -179,6 +179,9 @@ def main() -> int:
     p = argparse.ArgumentParser()
     p.add_argument("hub")
     p.add_argument("--students", type=int, default=20)
+    p.add_argument("--submitting", type=int, default=0, metavar="K",
+                   help="how many of them fetch, fill and submit the lesson, the TA grades and returns (default: all); "
+                        "every student still logs in at once, and the refusals are tried between two of them")
     p.add_argument("--passwords", required=True, metavar="CSV",
                    help="username,password for everyone (docker/hub/accounts' output, the instructors' from docker/hub/up)")
     p.add_argument("--old-shared-password", default="", help="the old dummy log-in's shared password, to be refused")
@@ -244,6 +247,8 @@ def main() -> int:
         f"({len(commands)} commands in the teacher's terminal, in {folder})")
 
     # --- the students: fetch, fill, save, submit ---------------------------------------------------
+    class_ = students
+    students = class_[:args.submitting or len(class_)]
     sol = solutions()
     slip = {**sol, "ex06_1_sweep_times": "def sweep_times(points, rate):\n    return np.arange(points) / 10.0"}
     plan = {s.name: ("wrong" if i % 3 == 2 else "right") for i, s in enumerate(students)}
@@ -274,8 +279,8 @@ def main() -> int:
         fail(f"docker/hub/README.md's TA commands are not collect, grade, return: {commands}")
     out = ta.terminal(commands[0] + " 2>&1", folder).stdout
     collected = sorted(d for d in ta.sh("ls ~/course/submitted").stdout.split())
-    if collected != sorted(names):
-        fail(f"collected {collected}, expected {names}\n{out[-800:]}")
+    if collected != sorted(s.name for s in students):
+        fail(f"collected {collected}, expected {[s.name for s in students]}\n{out[-800:]}")
     say(f"ta: collected {len(collected)} submissions from the exchange")
     t = time.monotonic()
     r = ta.terminal(commands[1], folder, check=False)
@@ -446,9 +451,10 @@ def main() -> int:
         print(f"figure: memory: {a.name}'s server with lesson 00 run and its 3D view open in Chromium: usage "
               f"{mem['usage']:.0f} MiB, peak {mem['peak']:.0f} MiB (its container's cgroup)", flush=True)
         view_is_the_owners(args.hub, a, b)
-    print(f"figure: the whole loop on the hub ({len(students)} students): {time.monotonic() - t0:.0f} s", flush=True)
+    print(f"figure: the whole loop on the hub ({len(class_)} students, {len(students)} submitting): "
+          f"{time.monotonic() - t0:.0f} s", flush=True)
     if args.bench:
-        bench(args.hub, students)
+        bench(args.hub, class_)
     return 0
 
 

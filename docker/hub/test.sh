@@ -26,6 +26,9 @@ ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$ROOT"
 VENV_BIN="$ROOT/${SNAKEKIT_VENV:-.venv}/bin"
 STUDENTS=${SNAKEKIT_HUB_STUDENTS:-25}
+# of them, how many submit lesson 06 for the TA to grade and return: grading is the grader's own
+# suite's (tests/grader/), here the route through the hub (bench/hub.py: the whole class)
+SUBMITTING=${SNAKEKIT_HUB_SUBMITTING:-6}  # 0: all
 say() { echo "hub-test: $*"; }
 figure() { echo "figure: $*"; }
 die() { echo "hub-test: FAILED: $*" >&2; exit 1; }
@@ -44,6 +47,7 @@ finish() {
   exit $rc
 }
 trap finish EXIT
+trap 'exit 143' INT TERM
 engine_on_stop() {
   $DOCKER rm -f snakekit-hub >/dev/null 2>&1
   local s; s=$($DOCKER service ls -q 2>/dev/null); [ -z "$s" ] || $DOCKER service rm $s >/dev/null 2>&1
@@ -115,7 +119,7 @@ tail -n +2 "$RUN/students.csv" >> "$RUN/passwords.csv"
 say "accounts: teacher and ta made by docker/hub/up, $STUDENTS students' by docker/hub/accounts from the roster, a first password each"
 # Lesson 00 in headless Chromium through the hub's proxy (docker/browser-check --hub-user: the
 # student logs in on the hub's page), the 3D view drawn and moved; screenshots in artifacts/hub.
-DOCKER=$DOCKER "$VENV_BIN/python" docker/hub/loop.py http://127.0.0.1:18000 --students "$STUDENTS" --browser "$ROOT/artifacts/hub" \
+DOCKER=$DOCKER "$VENV_BIN/python" docker/hub/loop.py http://127.0.0.1:18000 --students "$STUDENTS" --submitting "$SUBMITTING" --browser "$ROOT/artifacts/hub" \
   --passwords "$RUN/passwords.csv" --old-shared-password "$OLD_SHARED" \
   --submit-limit-mb "$SNAKEKIT_SUBMIT_LIMIT_MB" ${SNAKEKIT_HUB_BENCH:+--bench} || die "the week on the hub failed"
 figure "hub memory after the week: $($DOCKER stats --no-stream --format '{{.MemUsage}}' snakekit-hub)"

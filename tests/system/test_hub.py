@@ -31,7 +31,7 @@ def test_the_hub_and_the_image_pin_one_jupyterhub_of_the_same_major_version():
 @on_engine
 def test_hub_week_of_a_class(capsys):
     """docker/hub/test.sh: the hub starts; 20 students fetch, submit and get feedback; refusals."""
-    out = run_on_engine("docker/hub/test.sh", capsys, what="the hub test", timeout_min=30,
+    out = run_on_engine("docker/hub/test.sh", capsys, what="the hub test", timeout_min=45,
                         show=("figure:", "hub-test:", "hub:", "check-config:"))
     assert "hub-test: passed" in out
     # identity: accounts made by the teacher, a password each; what a student could try is refused
