@@ -13,9 +13,13 @@ machine hits all alike:
   ``Viewer()`` takes to return;
 * a real-time run steps controls computed once for the whole run, paced from its own start
   (before, each goal was planned as it was sent, and a run after an idle spell raced through
-  the time that had passed): ``--thread-rev`` against this tree, in Task 1's CPU and length.
+  the time that had passed): ``--thread-rev`` against this tree, in Task 1's CPU and length;
+* ``Viewer.play`` writes the animation's tracks whole, every link pose's quaternion in one call,
+  instead of meshcat's ``set_transform`` per frame and link: ``--play-rev`` against this tree, in
+  the CPU time of replaying Task 2's run (what a lesson 06 notebook does, each graded one too).
 
-Run: ``.venv/bin/python bench/before_after.py [--rev C] [--mid-rev C] [--thread-rev C] [--repeats 3] [--json PATH]``
+Run: ``.venv/bin/python bench/before_after.py [--rev C] [--mid-rev C] [--thread-rev C] [--play-rev C] [--repeats 3]
+[--only-play] [--json PATH]``
 """
 
 from __future__ import annotations
@@ -39,6 +43,8 @@ BEFORE_REV = "989a46192ec7189aea356c9d6913e93d8058e4f1"
 MID_REV = "23725f5ef16d476070068146032fc3f07444b61c"
 #: main with the viewer's server in a thread, before the real-time runs' change
 THREAD_REV = "37fa09114e87c0819fd514ae1d6affa41e0508a7"
+#: main before Viewer.play wrote the animation's tracks whole
+PLAY_REV = "ce1a4df52318c0a541e71839d388928d8f84274b"
 
 VIEWER_START = r"""
 import os, sys, time
@@ -48,6 +54,24 @@ v = Viewer()
 print(time.perf_counter() - t0)
 v.close()
 """
+
+#: CPU time [s] of replaying Task 2's run in the view (the median of 3 plays, after one that warms up)
+PLAY = r"""
+import statistics, time
+import snakekit
+from snakekit.viewer import Viewer
+with snakekit.make_robot("sim") as robot:
+    run = robot.run(snakekit.side_sweep())
+with Viewer() as v:
+    v.play(run)
+    cpu = []
+    for _ in range(3):
+        t0 = time.process_time()
+        v.play(run)
+        cpu.append(time.process_time() - t0)
+print(statistics.median(cpu))
+"""
+
 
 def export(rev: str, dest: Path) -> None:
     """snakekit/ and the Makefile at ``rev`` into ``dest``."""
@@ -70,6 +94,27 @@ def viewer_start(env: dict) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
+def play_cpu(env: dict) -> float:
+    out = subprocess.run([sys.executable, "-P", "-c", PLAY], env=env, capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def measure_play(args) -> tuple[dict, list]:
+    """``Viewer.play`` of Task 2's run at ``--play-rev`` and in this tree, alternating: ({variant: CPU seconds
+    of each repeat}, the table's row)."""
+    with tempfile.TemporaryDirectory(prefix="snakekit-before-") as tmp:
+        export(args.play_rev, Path(tmp))
+        envs = {"before": env_with(Path(tmp)), "after": env_with(None)}
+        cpu = {k: [] for k in envs}
+        for _ in range(args.repeats):
+            for k, e in envs.items():
+                cpu[k].append(play_cpu(e))
+    before, after = statistics.median(cpu["before"]), statistics.median(cpu["after"])
+    return cpu, {"change": "`Viewer.play` writes the animation's tracks whole (the poses' quaternions in one call)",
+                 "figure": "replaying Task 2's run in the view, CPU time", "before": f"{before:.2f} s",
+                 "after": f"{after:.2f} s", "effect": effect(before, after, " s")}
+
+
 def effect(before: float, after: float, unit: str, f: str = "{:.2f}") -> str:
     change = after - before
     return f"{f.format(change)}{unit} ({100 * change / before:+.0f} %)"
@@ -80,7 +125,9 @@ def main(argv=None) -> int:
     parser.add_argument("--rev", default=BEFORE_REV)
     parser.add_argument("--mid-rev", default=MID_REV)
     parser.add_argument("--thread-rev", default=THREAD_REV)
+    parser.add_argument("--play-rev", default=PLAY_REV)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--only-play", action="store_true", help="measure the Viewer.play change alone")
     parser.add_argument("--no-browser", action="store_true")
     add_json_argument(parser)
     args = parser.parse_args(argv)
@@ -95,6 +142,14 @@ def main(argv=None) -> int:
 
 def measure_all(args) -> int:
     import interactive
+
+    play_cpu_s, play_row = measure_play(args)
+    if args.only_play:
+        print(f"before = {args.play_rev[:10]} (snakekit/), after = this tree; medians of {args.repeats}, alternating")
+        print(f"{play_row['change']}: {play_row['figure']} {play_row['before']} -> {play_row['after']}  {play_row['effect']}")
+        write_json(args.json, {"before_rev": args.play_rev[:10], "repeats": args.repeats, "rows": [play_row],
+                               "play_cpu_s": {k: spread(v) for k, v in play_cpu_s.items()}})
+        return 0
 
     with tempfile.TemporaryDirectory(prefix="snakekit-before-") as tmp:
         old, mid, thread = Path(tmp) / "before", Path(tmp) / "mid", Path(tmp) / "thread"
@@ -148,6 +203,7 @@ def measure_all(args) -> int:
         row("(the same, whatever the length)", "Task 1 CPU time, kernel", "thread", "after", "cpu_s", " s", "{:.3f}"),
         row("all three changes", "Task 1 peak RSS, kernel + server", "before", "after", "rss", " MB", "{:.0f}"),
         row("(the same)", "Task 1 CPU, kernel + server", "before", "after", "cpu", " %", "{:.2f}"),
+        {**play_row, "change": play_row["change"] + f" (before: commit `{args.play_rev[:10]}`)"},
     ]
     print(f"before = {args.rev[:10]}, mid = {args.mid_rev[:10]}, thread = {args.thread_rev[:10]} (snakekit/), after = this tree; "
           f"medians of {args.repeats}, alternating")
@@ -155,7 +211,7 @@ def measure_all(args) -> int:
         print(f"{r['change']:62s} {r['figure']:34s} {r['before']:>10s} -> {r['after']:>10s}  {r['effect']}")
     write_json(args.json, {
         "before_rev": args.rev[:10], "mid_rev": args.mid_rev[:10], "thread_rev": args.thread_rev[:10],
-        "repeats": args.repeats, "rows": rows,
+        "repeats": args.repeats, "rows": rows, "play_cpu_s": {k: spread(v) for k, v in play_cpu_s.items()},
         "viewer_start_s": {k: spread(v) for k, v in start.items()},
         "task1": {**{k: {x: spread(r[x] for r in v) for x in ("cpu", "rss", "pss", "wall")} for k, v in task1.items()},
                   "before_series": sorted(task1["before"], key=lambda r: r["cpu"])[len(task1["before"]) // 2]["series"]}})

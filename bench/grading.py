@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import statistics
 import subprocess
 import sys
@@ -42,6 +41,7 @@ from _common import table  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from grader.batch import default_jobs  # noqa: E402
 from grader.scoring.cases import CaseServer, draw  # noqa: E402
+from tests.conftest import copy_course  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 LESSON = "06_coded_sweep"
@@ -85,8 +85,7 @@ def make_submissions(course: Path, n: int) -> dict[str, str]:
 
 def fresh_course(tmp: Path, n: int) -> Path:
     course = tmp / "course"
-    shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
-        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log", "__pycache__"))
+    copy_course(course)  # with its references: `snakekit grade` reads them from the course
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}
     subprocess.run([sys.executable, "-m", "nbgrader", "generate_assignment", LESSON, "--force"], cwd=course,
                    env=env, check=True, capture_output=True)

@@ -12,7 +12,7 @@
 # the work volume and the 3D viewer through the lab's port; open it in headless Chromium from the host
 # (docker/browser-check: the lessons listed, lesson 0 run, the arm drawn and moving in the 3D
 # view); build the grader's image (--target grader) and read every file of both images' layers:
-# nothing of the instructor's course (course/source, course/cases, grader/references, a solution
+# nothing of the instructor's course (course/source, course/cases, course/references, a solution
 # line) in the students', all of it in the grader's (docker/check-no-course); execute a lesson
 # inside (instructor and student versions); run `grader` with networking off on sample
 # submissions and check its CSV, gradebook and feedback.

@@ -46,7 +46,7 @@ from grader.files import uninterrupted
 from grader.hooks import NO_HOOKS, BatchHooks
 from grader.course.gradebook import keep_release_files, late_penalties, write_grade
 from grader.feedback import scores
-from grader.scoring.references import REFERENCES, expected
+from grader.scoring.references import course_references, expected
 from grader.sandbox.runner import Runner
 from grader.scoring.verdict import SubmissionResult, Verdicts
 from grader.scoring.score import read_handin
@@ -76,11 +76,12 @@ class Grader:
     """Grades every submission of ``assignment`` in ``course``; see :func:`grade`."""
 
     def __init__(self, course: Path, assignment: str, *, jobs: int | None = None, timeout: float = 120.0,
-                 references: Path | None = REFERENCES, memory: int = 4 << 30, progress=None,
+                 references: Path | None = None, memory: int = 4 << 30, progress=None,
                  workroot: Path | None = None, use_sandbox: bool = True, cell_timeout: float | None = None,
                  seed: int | None = None, retry_timeouts: bool = True, hooks: BatchHooks = NO_HOOKS):
         """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: a third of
         ``timeout``, :data:`CELL_SHARE`: a runaway cell is interrupted and the exercises after it still run);
+        ``references``: the folder of the instructor's references (default: the course's, ``<course>/references/``);
         ``seed``: the batch's hidden cases (default: drawn from ``os.urandom``, printed);
         ``retry_timeouts``: a submission stopped by a clock runs once more before the timeout counts;
         ``hooks``: what an optional part adds (the arm's lab: :data:`grader.arm.keep.HOOKS`, given by the command)."""
@@ -90,7 +91,7 @@ class Grader:
         self.jobs = jobs or default_jobs()
         self.timeout = float(timeout)
         self.cell_timeout = min(float(cell_timeout or timeout * CELL_SHARE), self.timeout)
-        self.references = references
+        self.references = references or course_references(self.course)
         self.memory = memory
         self.limits = sandbox.Limits(wall=self.timeout + 30, cpu=self.timeout * 2 + 30, memory=memory)
         self.progress = progress
@@ -328,7 +329,8 @@ class Grader:
             keep = False
             try:
                 again = {} if second is not None or self.draw is None or tampered else rerun.needed(
-                    self.draw.depends, self.verdicts.handin_scores(work, tampered), self._written(nbs))
+                    self.draw.depends, self.verdicts.handin_scores(work, tampered), self._written(nbs),
+                    self.verdicts.unreached(work, student))
                 if again:  # run once more with the lesson's own parts, in the pool; score both then
                     keep = True
                     return Again(lambda: self._run_again(student, src, nbs, tampered, again, finish))

@@ -8,6 +8,7 @@
     snakekit progress [FOLDER]       (your exercises passed and points across the lessons, and what is next)
     snakekit start [...]             (check this system, then JupyterLab on the lessons: `make lab`)
     snakekit release ASSIGNMENT [--due TIME] [--late-penalty RULE]  (nbgrader's release, due date, penalty)
+    snakekit release ASSIGNMENT --solutions  (after the due date: the worked solution, for the students)
     snakekit collect ASSIGNMENT --from DOWNLOAD  (an LMS's download into the course; grader/README.md)
     snakekit grade ASSIGNMENT [...]  (grade a class's submissions; see grader/README.md)
     snakekit return ASSIGNMENT       (the feedback pages back: hub exchange or an LMS zip)

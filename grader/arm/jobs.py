@@ -29,12 +29,6 @@ STATES = ("queued", "refused", "running", "graded", "lab fault")
 #: ``lab fault`` one too, unless it faulted ``max_faults`` times: it is then left for the TA).
 RUNNABLE = ("queued", "running", "lab fault")
 
-#: The course's trajectory exercises the lab knows without a ``lab.json``: the grade id whose
-#: hand-in is the trajectory, and the spec's own values (the study's Task 2).
-DEFAULTS = {"06_coded_sweep": {"exercise": "ex06_3_task2_test",
-                               "case": {"points": 500, "rate": 10.0, "sweeps": 50, "amplitude": 0.2}}}
-
-
 #: Each number of the settings: its unit and range (:func:`snakekit.validate.number`'s keywords).
 #: The ranges keep every check on: no value lets a trajectory through that the defaults would
 #: refuse by a wide margin, or runs the arm unattended for long.
@@ -145,7 +139,8 @@ def lab_dir(course: Path, assignment: str) -> Path:
 
 
 def settings(course: Path, assignment: str) -> LabSettings:
-    """The lab settings: ``<course>/lab/<a>/lab.json`` over :data:`DEFAULTS`.
+    """The lab settings: ``<course>/lab/<a>/lab.json`` (the course's: which exercise the lab runs, at which
+    case), over :class:`LabSettings`' defaults (the lab's own checks).
 
     Raises:
         NoLab: the assignment is unknown, or not one whose hand-in is a trajectory.
@@ -156,7 +151,7 @@ def settings(course: Path, assignment: str) -> LabSettings:
     if assignment not in known:
         raise NoLab(f"unknown assignment '{assignment}': the course {course} has "
                        f"{', '.join(known) or 'no assignments in source/'}")
-    values = dict(DEFAULTS.get(assignment, {}))
+    values = {}
     path = lab_dir(course, assignment) / "lab.json"
     if path.is_file():
         try:

@@ -22,7 +22,7 @@ from snakekit.errors import SnakekitError
 
 from grader.course.folder import default_course
 from grader.files import CommandParser
-from grader.scoring.references import REFERENCES
+from grader.scoring import references as recorded_references
 from grader.scoring import draws
 
 
@@ -45,7 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "of --timeout, 40 s at the default 120: the slowest cell of the course takes about 15 s)")
     p.add_argument("--memory", type=int, default=4096, help="memory limit per process [MB] (default: 4096)")
     p.add_argument("--csv", type=Path, default=None, help="write the grades here (default: <course>/grades-<assignment>.csv)")
-    p.add_argument("--references", type=Path, default=REFERENCES, help="reference runs folder (default: grader/references/)")
+    p.add_argument("--references", type=Path, default=None,
+                   help="reference runs folder (default: <course>/references/)")
     p.add_argument("--student", action="append", default=None,
                    help="grade only this student (repeatable); the other rows of the CSV are kept")
     p.add_argument("--seed", type=int, default=None, help="grade every student at the hidden cases of this seed "
@@ -58,9 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _refs_command(args, assignment: str) -> str:
     extra = ""
-    if args.course.resolve() != (REFERENCES.parent.parent / "course").resolve():
+    if args.course.resolve() != recorded_references.COURSE.resolve():
         extra += f" --course {args.course}"
-    if args.references.resolve() != REFERENCES.resolve():
+    if args.references.resolve() != recorded_references.course_references(args.course).resolve():
         extra += f" --out {args.references}"
     return f"python -m grader.scoring.references {assignment}{extra}"
 
@@ -141,6 +142,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
 
         return grade_on_hub(args, out)
     course = args.course
+    args.references = args.references or recorded_references.course_references(course)
     problems = []
     from grader.course.folder import check_assignment
     from grader.errors import CourseError
@@ -163,10 +165,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
         problems.append(f"--memory must be at least 256 MB, got {args.memory}")
     if not args.references.is_dir():
         problems.append(f"no references folder {args.references}; give --references DIR, or record them with "
-                        f"`python -m grader.scoring.references {args.assignment}`")
+                        f"`{_refs_command(args, args.assignment)}`")
     elif not (args.references / f"{args.assignment}.npz").is_file():
         problems.append(f"no reference {args.references}/{args.assignment}.npz: every test cell would keep the "
-                        f"kernel's own verdict. Record it: `python -m grader.scoring.references {args.assignment}`")
+                        f"kernel's own verdict. Record it: `{_refs_command(args, args.assignment)}`")
     csv_path = args.csv or course / f"grades-{args.assignment}.csv"
     if course.is_dir():
         try:

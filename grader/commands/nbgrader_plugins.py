@@ -4,12 +4,12 @@ A course's ``nbgrader_config.py`` calls :func:`use_safe_grading` (``course/nbgra
 does). Then:
 
 * ``nbgrader generate_feedback``, and formgrader's Generate Feedback buttons, write the
-  grader's safe pages (:mod:`grader.feedback.report`: no hidden tests, nothing loaded from the
-  network), never nbgrader's own (which keep the hidden tests, its issue #917). The pages are
-  built from the gradebook's scores (:mod:`grader.feedback.scores`), so a score or comment a TA
-  entered in formgrader and the late penalty are on the page, beside the grader's verdict (kept
-  in the autograded notebook by the grader), and the lab's result when ``snakekit lab`` ran the
-  student's sweep (docs/lab.md).
+  grader's safe pages (:mod:`grader.feedback.notebook`, :mod:`grader.feedback.exporter`: no hidden
+  tests, nothing loaded from the network), never nbgrader's own (which keep the hidden tests, its
+  issue #917). The pages are built from the gradebook's scores (:mod:`grader.feedback.scores`),
+  so a score or comment a TA entered in formgrader and the late penalty are on the page, beside
+  the grader's verdict (kept in the autograded notebook by the grader), and the lab's result
+  when ``snakekit lab`` ran the student's sweep (docs/lab.md).
 * saving a score, extra credit or comment in formgrader writes that student's pages and the
   class CSV again from the gradebook at once: the page, the CSV, ``snakekit export`` and
   formgrader show the same score.
@@ -17,6 +17,9 @@ does). Then:
   --student STUDENT`` (the sandbox, the out-of-kernel scoring, the feedback), not with
   nbgrader's in-kernel autograde. Its options come from the config's ``SnakekitGrade``
   section (``references``, ``timeout``, ``cell_timeout``, ``memory``).
+* formgrader's grading page loads MathJax from the Jupyter server (``jupyter_server_mathjax``)
+  instead of a CDN (template ``grader/templates/snakekit_formgrade``), so every formgrader page
+  works with no network beyond the server.
 
 formgrader reads the config again for each request, so the button is replaced whenever the
 course's config is in force; plain ``nbgrader autograde`` on the command line is left as it is.
@@ -32,7 +35,7 @@ from pathlib import Path
 
 from nbconvert.exporters import HTMLExporter
 
-from grader.feedback import scores
+from grader.feedback import exporter, scores
 from grader.arm import feedback as lab_feedback
 
 #: where formgrader's request handlers live (imported only by a server that runs formgrader)
@@ -47,6 +50,16 @@ def use_safe_grading(c) -> None:
     if handlers is not None:
         handlers.AutogradeHandler.post = _autograde_post(handlers)
         saved_in_formgrader(handlers)
+        math_from_the_server(c)
+
+
+def math_from_the_server(c) -> None:
+    """formgrader's grading page ("formgrade") with MathJax from the Jupyter server, not a CDN: nbgrader's
+    template, whose MathJax macro ``grader/templates/snakekit_formgrade`` replaces."""
+    from nbgrader.server_extensions.formgrader.handlers import template_path
+
+    c.HTMLExporter.template_name = "snakekit_formgrade"
+    c.HTMLExporter.extra_template_basedirs = [str(exporter.TEMPLATES), template_path]
 
 
 class SafeFeedbackExporter(HTMLExporter):

@@ -2,12 +2,15 @@
 
     snakekit release 06_coded_sweep [--due "2026-03-02 23:59"] [--timezone Europe/Zurich]
                                     [--late-penalty per-hour:1] [--exchange [DIR]] [--course course/]
+    snakekit release 06_coded_sweep --solutions [--force] [--exchange [DIR]]   (after the due date)
 
 nbgrader's ``generate_assignment`` (``release/<a>/``, the gradebook's cells), the due date into
 the gradebook (what nbgrader's late penalty counts from), the late-penalty rule into the
 course's ``nbgrader_config.py`` with the plug-in that applies it (:mod:`grader.late`), and, with
-``--exchange``, nbgrader's ``release_assignment`` to the hub's exchange. Every argument is
-checked before anything is written: a bad one exits 2 with one line saying what to give.
+``--exchange``, nbgrader's ``release_assignment`` to the hub's exchange. With ``--solutions``,
+after the due date, the worked solution instead (:mod:`grader.course.solutions`), released as
+the assignment ``06_coded_sweep-solutions``. Every argument is checked before anything is
+written: a bad one exits 2 with one line saying what to give.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from pathlib import Path
 from snakekit.errors import SnakekitError
 
 from grader.commands.late import EXAMPLES, LatePenalty, LateRule, parse
+from grader.course import solutions
 from grader.course.folder import backup_gradebook, config, default_course, generate, gradebook
 from grader.errors import CourseError
 from grader.files import CommandParser, excerpt, one_line
@@ -113,14 +117,36 @@ def release(course: Path, assignment: str, *, due: dt.datetime | None = None, ru
         os.replace(tmp, path)
         print(f"{assignment}: late penalty {rule}: {parse(rule).describe()} ({path})", file=out)
     if exchange is not None:
-        from grader.lms.export import nbgrader_api
+        to_exchange(course, assignment, exchange, out)
 
-        result = nbgrader_api(course, None if exchange is True else exchange).release_assignment(assignment)
-        if not result.get("success"):
-            raise CourseError(f"nbgrader release_assignment {assignment} failed: "
-                              f"{(result.get('error') or result.get('log') or '').strip()[-500:]}")
-        print(f"{assignment}: released to the exchange (students fetch it with the Assignments tab or "
-              f"`nbgrader fetch_assignment {assignment}`)", file=out)
+
+def to_exchange(course: Path, name: str, exchange, out, *, again: bool = False) -> None:
+    """nbgrader's ``release_assignment`` of ``release/<name>/`` to the exchange (the hub's if
+    ``exchange`` is True, else that folder); ``again`` replaces a release already there."""
+    from grader.lms.export import nbgrader_api
+
+    api = nbgrader_api(course, None if exchange is True else exchange)
+    api.config.ExchangeReleaseAssignment.force = again
+    result = api.release_assignment(name)
+    if not result.get("success"):
+        raise CourseError(f"nbgrader release_assignment {name} failed: "
+                          f"{(result.get('error') or result.get('log') or '').strip()[-500:]}")
+    print(f"{name}: released to the exchange (students fetch it with the Assignments tab or "
+          f"`nbgrader fetch_assignment {name}`)", file=out)
+
+
+def release_solutions(course: Path, assignment: str, *, force: bool = False, exchange=None, out=None) -> None:
+    """The worked solution as the assignment ``<assignment>-solutions`` (:mod:`grader.course.solutions`),
+    once the due date has passed (or with ``force``); with ``exchange``, into the exchange."""
+    out = out or sys.stdout
+    due = solutions.check(course, assignment, force=force)
+    folder = solutions.write(course, assignment, due)
+    names = ", ".join(sorted(p.name for p in folder.glob("*.ipynb")))
+    print(f"{assignment}: its worked solution {names} is in {folder}/ (no hidden test, outputs cleared)", file=out)
+    if exchange is not None:
+        to_exchange(course, solutions.name(assignment), exchange, out, again=True)
+    else:
+        print(f"{assignment}: upload it to the LMS, or add --exchange to release it to the hub's exchange", file=out)
 
 
 def main(argv: list[str] | None = None, out=None) -> int:
@@ -137,6 +163,9 @@ def main(argv: list[str] | None = None, out=None) -> int:
                    "(per-UNIT:N is N points per started minute/hour/day/week late, per-UNIT:N%% N %% of its score)")
     p.add_argument("--exchange", nargs="?", const=True, default=None, type=Path, metavar="DIR",
                    help="also release to nbgrader's exchange (the hub's, or DIR): nbgrader release_assignment")
+    p.add_argument("--solutions", action="store_true", help="after the due date: the worked solution (no hidden "
+                   "test) as the assignment ASSIGNMENT-solutions, for students to fetch (with --exchange)")
+    p.add_argument("--force", action="store_true", help="with --solutions: release it before the due date")
     args = p.parse_args(argv)
     course = args.course
     try:
@@ -152,6 +181,14 @@ def main(argv: list[str] | None = None, out=None) -> int:
             parse(args.late_penalty)
         if isinstance(args.exchange, Path) and not args.exchange.is_dir():
             raise CourseError(f"--exchange {args.exchange} is not a folder")
+        if args.solutions:
+            if args.due is not None or args.late_penalty is not None:
+                raise CourseError("--solutions releases only the worked solution: give --due and --late-penalty "
+                                  "in a release without it")
+            release_solutions(course.resolve(), args.assignment, force=args.force, exchange=args.exchange, out=out)
+            return 0
+        if args.force:
+            raise CourseError("--force goes with --solutions (the worked solution before the due date)")
         release(course.resolve(), args.assignment, due=due, rule=args.late_penalty, exchange=args.exchange, out=out)
     except (SnakekitError, OSError) as e:
         print(f"snakekit release: {one_line(e)}", file=sys.stderr)
@@ -163,4 +200,4 @@ if __name__ == "__main__":
     sys.exit(main())
 
 
-__all__ = ["LateRule", "main", "parse_due", "release"]
+__all__ = ["LateRule", "main", "parse_due", "release", "release_solutions", "to_exchange"]

@@ -7,7 +7,7 @@ pages are written from it here, after every action that changes a score: a batch
 student's scores are in the gradebook), a score or comment saved in formgrader
 (:mod:`grader.commands.nbgrader_plugins`), and ``snakekit return`` (any page whose numbers are no
 longer the gradebook's). The grader's messages, checks and plots come from what the batch kept in
-the autograded notebook (:func:`grader.feedback.report.recorded`); only the numbers are the
+the autograded notebook (:func:`grader.feedback.notebook.recorded`); only the numbers are the
 gradebook's. A page carries a stamp of the numbers it shows (:func:`stamp`), so a stale page is
 found without reading the gradebook twice.
 """
@@ -24,7 +24,8 @@ from pathlib import Path
 import nbformat
 
 from grader.course.gradebook import SubmissionScores, class_rows, read_class_csv, scores_of, write_csv
-from grader.feedback import report
+from grader.feedback.notebook import build, recorded
+from grader.feedback.exporter import page_exporter
 
 #: The page's ``<meta>`` that holds the stamp of the gradebook's numbers it shows.
 STAMP = "snakekit-gradebook"
@@ -95,13 +96,13 @@ def test_sources(gb, assignment: str, notebook: str) -> dict[str, str]:
 def page(nb, numbers: SubmissionScores, notebook: str, tests: dict[str, str], *, kept=None,
          hide_paths: dict[str, str] | None = None):
     """The feedback notebook of ``notebook``: ``nb`` (the autograded notebook, or what stands for it) with
-    the grader's verdicts (kept in ``nb`` by :func:`grader.feedback.report.annotate_notebook`, else
-    ``kept``, as :func:`grader.feedback.report.recorded` gives them) and the gradebook's ``numbers``. A score the teacher set replaces the grader's and the
+    the grader's verdicts (kept in ``nb`` by :func:`grader.feedback.notebook.annotate_notebook`, else
+    ``kept``, as :func:`grader.feedback.notebook.recorded` gives them) and the gradebook's ``numbers``. A score the teacher set replaces the grader's and the
     verdict says so; a notebook with no verdicts kept gets the gradebook's points with no messages."""
     from grader.scoring.score import ExerciseScore
     from grader.scoring.verdict import SubmissionResult
 
-    kept = report.recorded(nb) or kept
+    kept = recorded(nb) or kept
     status, detail, stopped, timeout, exercises, plots = kept or ("graded", "", None, None, [], {})
     by_id = {e.grade_id: e for e in exercises}
     final = []
@@ -118,14 +119,14 @@ def page(nb, numbers: SubmissionScores, notebook: str, tests: dict[str, str], *,
     result = SubmissionResult(numbers.student, numbers.assignment, numbers.score, numbers.max_score, status, detail,
                               tuple(final))
     comments = {cell: text for where, cell, text in numbers.comments if where == notebook}
-    return report.build(nb, student=numbers.student, assignment=numbers.assignment, result=result,
-                        test_sources=tests, stopped=stopped, timeout=timeout, plots=plots, comments=comments,
-                        hide_paths=hide_paths, head=head(numbers, status, detail))
+    return build(nb, student=numbers.student, assignment=numbers.assignment, result=result,
+                 test_sources=tests, stopped=stopped, timeout=timeout, plots=plots, comments=comments,
+                 hide_paths=hide_paths, head=head(numbers, status, detail))
 
 
 def html(feedback_nb, numbers: SubmissionScores) -> str:
     """The page's HTML, stamped with the numbers it shows."""
-    body, _ = report.page_exporter().from_notebook_node(feedback_nb)
+    body, _ = page_exporter().from_notebook_node(feedback_nb)
     return re.sub(r"<head([^>]*)>", lambda m: f'{m.group(0)}\n<meta name="{STAMP}" content="{stamp(numbers)}">',
                   body, count=1)
 

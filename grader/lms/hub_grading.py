@@ -25,7 +25,7 @@ MARK = "grading-service: exit"
 
 def problems(args) -> list[str]:
     """What `snakekit grade` on the hub cannot do: another course folder, a CSV or references elsewhere."""
-    from grader.scoring.references import REFERENCES
+    from grader.scoring.references import course_references
 
     course = Path(os.environ.get("SNAKEKIT_HUB_COURSE", "~/course")).expanduser()
     out = []
@@ -34,8 +34,9 @@ def problems(args) -> list[str]:
                    f"`cd {course}` and run the command again")
     if args.csv is not None:
         out.append(f"on the hub the grades go to {course}/grades-{args.assignment}.csv: leave out --csv")
-    if args.references.resolve() != REFERENCES.resolve():
-        out.append("on the hub the grader's image holds the references: leave out --references")
+    if args.references is not None and args.references.resolve() != course_references(course).resolve():
+        out.append(f"on the hub grading reads the course's own references ({course_references(course)}): "
+                   f"leave out --references")
     return out
 
 

@@ -4,9 +4,10 @@ Linux namespaces (``unshare`` from util-linux) give each submission:
 
 * a private root file system built from read-only binds of only what Python needs (the
   system's ``/usr``, ``/etc``, the interpreter, the virtual environment, the ``snakekit`` and
-  ``grader`` packages) plus one writable folder, the submission's own copy. The course, the
-  gradebook, the references (hidden under an empty mount), the other submissions and the
-  home folders do not exist in it. ``/tmp`` and ``/dev/shm`` are small private tmpfs.
+  ``grader`` packages) plus one writable folder, the submission's own copy. The course (with
+  its references; the course beside the packages, and the one graded, hidden under an empty
+  mount where a bind would show it), the gradebook, the other submissions and the home
+  folders do not exist in it. ``/tmp`` and ``/dev/shm`` are small private tmpfs.
 * a network namespace with only a loopback interface (the kernel talks to nbgrader over it);
 * a PID namespace: when the sandbox's first process ends or is killed, every process the
   submission started dies with it, even those that escaped to a new session;
@@ -178,7 +179,7 @@ def _config(argv, workdir: Path, env: dict, limits: Limits, hide, user, gate=Non
     return {
         "root": str(workdir / ".root"),
         "binds": default_binds(),
-        "hide": [str(PACKAGE_ROOT / "grader" / "references"), *map(str, hide)],
+        "hide": [str(PACKAGE_ROOT / "course"), *map(str, hide)],
         "workdir": str(workdir),
         "uid": uid, "gid": gid,
         "limits": {"as": limits.memory, "cpu": int(limits.cpu), "fsize": limits.file_size,

@@ -2,7 +2,7 @@
 
 The expected results themselves are not stored: every grading batch draws its hidden cases anew
 (:mod:`grader.scoring.cases`) and runs the instructor notebook ``<course>/source/<a>/<a>.ipynb`` at them
-first (:func:`expected`). What ``grader/references/<assignment>.npz`` keeps is how to judge them,
+first (:func:`expected`). What ``<course>/references/<assignment>.npz`` keeps is how to judge them,
 in a header ``__meta__`` (a JSON string): per exercise its kind (``values``, ``trajectory``,
 ``run``), the names its results carry, its tolerances and, for runs, the spread of repeated
 recordings; and what it was recorded from (the kit version, a hash of the robot spec, of the
@@ -33,8 +33,16 @@ from grader.scoring.score import DEFAULT_TOLERANCES, Expected, handed_in_functio
 
 FORMAT = 2
 GRADER = Path(__file__).resolve().parents[1]
-REFERENCES = GRADER / "references"
 COURSE = GRADER.parent / "course"
+
+
+def course_references(course: Path) -> Path:
+    """Where a course keeps its references: ``<course>/references/``, beside its cases (``<course>/cases/``)."""
+    return Path(course) / "references"
+
+
+#: The course's references (``course/references/``).
+REFERENCES = course_references(COURSE)
 
 #: One encoder tick of the MX-28 [rad]: 2 pi / 4096. Differences below it cannot be seen on
 #: the real arm, so no tolerance on a measured angle is tighter than this.
@@ -329,13 +337,14 @@ def main(argv: list[str] | None = None) -> int:
                                 description="Record the reference runs from the instructor notebooks.")
     p.add_argument("assignments", nargs="*", help="assignment names (default: every one with a reference)")
     p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
-    p.add_argument("--out", type=Path, default=REFERENCES, help="where references live (default: grader/references/)")
+    p.add_argument("--out", type=Path, default=None, help="where references live (default: <course>/references/)")
     p.add_argument("--check", action="store_true", help="only check that the stored references are current")
     p.add_argument("--repeats", type=int, default=None,
                    help="runs of each instructor notebook (default: 3 when recording; with --check, 3 for a "
                         "reference with a run exercise and 1 for one of values and trajectories only, whose "
                         "tolerances do not depend on the repeats)")
     args = p.parse_args(argv)
+    args.out = args.out or course_references(args.course)
     if args.repeats is not None and args.repeats < 1:
         print(f"--repeats must be at least 1, got {args.repeats}", file=sys.stderr)
         return 2

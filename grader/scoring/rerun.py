@@ -9,6 +9,10 @@ the instructor's (from the source notebook), and scores the dependent exercise f
 the exercise keeps the better of the two. The second run's outputs are never shown (the
 instructor's code ran in its kernel): only its hand-in of the dependent exercise is read, and
 the feedback says in one line which parts were replaced and what that scored.
+
+A test cell the notebook's clock stopped before it had run (earlier cells, each stopped at the
+cell limit by a part's endless loop, used up the notebook's time) is run again the same way,
+whatever it builds on, with every other part that lost points replaced: a loop costs only its part.
 """
 
 from __future__ import annotations
@@ -37,27 +41,38 @@ def _grade_id(cell) -> str | None:
     return cell.get("metadata", {}).get("nbgrader", {}).get("grade_id")
 
 
-def needed(depends: dict, scores: dict, written: dict) -> dict[str, list[str]]:
-    """The dependent test cells worth a second run, each with the answer cells to replace.
+def needed(depends: dict, scores: dict, written: dict, unreached=frozenset()) -> dict[str, list[str]]:
+    """The test cells worth a second run, each with the answer cells to replace.
 
     ``scores``: test cell grade id -> :class:`ExerciseScore` of the first run; ``written``: answer
     cell grade id -> whether the student changed it from the release (an exercise left
     unwritten has nothing to grade, whatever it builds on). A dependency is replaced when a
     test cell of its exercise scored less than full. A written dependent exercise that handed in
     nothing (``missing``: its test cell was stopped, as when a part loops endlessly) is run again too.
+
+    ``unreached``: the test cells the notebook's clock stopped before they ran to their end (the
+    cell it stopped in and every test cell after it: earlier cells, a part's endless loop among
+    them, used up the notebook's time). Each that scored less than full is run again, with every
+    other exercise's answer that scored less than full replaced, so that a part that loops costs
+    only itself. An exercise whose test cell the second run reads is never replaced in it.
     """
+    def lost(cell):
+        return any(s.score < s.max_score for g, s in scores.items() if exercise(g) == exercise(cell))
+
     out = {}
-    for gid, cells in depends.items():
+    for gid in [*depends, *sorted(set(unreached) - set(depends))]:
         sc = scores.get(gid)
         if sc is None or sc.status not in ("scored", "missing") or sc.score >= sc.max_score:
             continue
         own = [c for c in written if exercise(c) == exercise(gid)]
         if own and not any(written[c] for c in own):
             continue
-        weak = [c for c in cells if any(s.score < s.max_score for g, s in scores.items() if exercise(g) == exercise(c))]
-        if weak:
-            out[gid] = weak
-    return out
+        parts = sorted(c for c in written if c not in own and lost(c)) if gid in unreached else \
+            [c for c in depends[gid] if lost(c)]
+        if parts or gid in unreached:
+            out[gid] = parts
+    read = {exercise(g) for g in out}
+    return {g: [c for c in parts if exercise(c) not in read] for g, parts in out.items()}
 
 
 def with_answers(nbs: dict, source: dict, cells: set) -> dict:
@@ -87,5 +102,7 @@ def better(first: ExerciseScore, second: ExerciseScore | None, replaced: list[st
     parts = sorted({exercise(c) for c in replaced})
     names = " and ".join(parts)
     line = (f"graded with the lesson's own {names} in place of yours: {second.score:g} of {second.max_score:g} "
-            f"(with yours: {first.score:g}, the run below).")
+            f"(with yours: {first.score:g}, the run below)." if parts else
+            f"graded in a run of its own, as your notebook's time ran out before this cell had run: {second.score:g} "
+            f"of {second.max_score:g} (in your notebook's run: {first.score:g}, the run below).")
     return dataclasses.replace(first, score=second.score, message=f"{line} {first.message}")

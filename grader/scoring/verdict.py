@@ -15,7 +15,8 @@ import nbformat
 
 from snakekit.errors import CheckFailed
 
-from grader.feedback import report as feedback
+from grader.feedback import scrub
+from grader.feedback import notebook as feedback
 from grader.scoring import rerun
 from grader.course.assignment import read_inside
 from grader.hooks import NO_HOOKS, BatchHooks
@@ -65,6 +66,34 @@ class Verdicts:
                 out[gid] = score_exercise(gid, handin, e, self.a.tests[gid].max_score)
         return out
 
+    def ran(self, work, student) -> tuple[dict, dict]:
+        """What the worker reported (``result.json``), and the executed notebooks (name -> notebook) in ``work``."""
+        raw = read_inside(work, "result.json", limit=1 << 20)
+        try:
+            worker = json.loads(raw) if raw else {}
+            worker = worker if isinstance(worker, dict) else {}
+        except ValueError:
+            worker = {}
+        executed = {}
+        for name in self.a.notebooks:
+            raw = read_inside(work, f"course/autograded/{student}/{self.a.name}/{name}.ipynb")
+            if raw:
+                try:
+                    executed[name] = nbformat.reads(raw.decode("utf-8"), as_version=4)
+                except Exception:  # noqa: BLE001 - a notebook the submission mangled: not used
+                    pass
+        return worker, executed
+
+    def unreached(self, work, student) -> set[str]:
+        """The test cells the notebook's clock stopped before they ran to their end: the cell the
+        worker stopped in and every test cell after it (:func:`grader.scoring.rerun.needed`)."""
+        worker, executed = self.ran(work, student)
+        out = set()
+        for name, index in stopped_cells(worker.get("stopped"), executed).items():
+            out |= {gid for c in executed[name].cells[index:]
+                    if (gid := c.get("metadata", {}).get("nbgrader", {}).get("grade_id")) in self.a.tests}
+        return out
+
     def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None, runs=1,
                 restored=None) -> SubmissionResult:
         """``second``: grade id -> (its hand-in, the answer cells replaced) from a second run with the
@@ -73,20 +102,7 @@ class Verdicts:
         ``restored``: test cells put back as released before the run (:mod:`grader.course.restore`): no
         points lost, the status says so for the TA."""
         a = self.a
-        raw = read_inside(work, "result.json", limit=1 << 20)
-        try:
-            worker = json.loads(raw) if raw else {}
-            worker = worker if isinstance(worker, dict) else {}
-        except ValueError:
-            worker = {}
-        executed = {}
-        for name in a.notebooks:
-            raw = read_inside(work, f"course/autograded/{student}/{a.name}/{name}.ipynb")
-            if raw:
-                try:
-                    executed[name] = nbformat.reads(raw.decode("utf-8"), as_version=4)
-                except Exception:  # noqa: BLE001 - a notebook the submission mangled: not used
-                    pass
+        worker, executed = self.ran(work, student)
         errors = set()
         for nb in executed.values():
             for cell in nb.cells:
@@ -108,14 +124,14 @@ class Verdicts:
                     scores.append(ExerciseScore(gid, 0.0, cell.max_score, "inconsistent", f"hand-in unreadable: {e}."))
                     continue
                 sc = score_exercise(gid, handin, self.expected[gid], cell.max_score)
-                if second and gid in second:
-                    again, replaced = second[gid]
-                    sc = rerun.better(sc, score_exercise(gid, again, self.expected[gid], cell.max_score), replaced)
                 if sc.status == "missing":
                     sc = dataclasses.replace(sc, message=why_missing(find_cell(executed.get(cell.notebook), gid),
                                                                      sc.message))
                 elif sc.score < sc.max_score:
                     sc = with_local_hint(sc, find_cell(executed.get(cell.notebook), gid))
+                if second and gid in second:   # after the first run's message is made: the line goes before it
+                    again, replaced = second[gid]
+                    sc = rerun.better(sc, score_exercise(gid, again, self.expected[gid], cell.max_score), replaced)
                 scores.append(sc)
             else:
                 scores.append(kernel_score(gid, cell, executed.get(cell.notebook)))
@@ -205,7 +221,7 @@ def kernel_score(gid, cell, nb) -> ExerciseScore:
     if c.get("execution_count") is None and not c.get("outputs"):
         return ExerciseScore(gid, 0.0, cell.max_score, "missing",
                              "the test cell did not run: the notebook was stopped before it.")
-    err = feedback.cell_error(c)
+    err = scrub.cell_error(c)
     if err is None:
         return ExerciseScore(gid, cell.max_score, cell.max_score, "scored", "the test cell passed.")
     ename, evalue, where = err
@@ -231,7 +247,7 @@ def with_local_hint(sc: ExerciseScore, cell) -> ExerciseScore:
     err = next((o for o in (cell or {}).get("outputs", []) if o.get("output_type") == "error"), None)
     if err is None or err.get("ename") not in ("CheckFailed", "ShortcutError"):
         return sc
-    hint = CheckFailed.hint_of(feedback.neutral(str(err.get("evalue", "")), feedback.machine_paths()))
+    hint = CheckFailed.hint_of(scrub.neutral(str(err.get("evalue", "")), scrub.machine_paths()))
     if not hint or hint in sc.message:
         return sc
     return dataclasses.replace(sc, message=f"{sc.message} The check in your notebook adds: {hint}")
@@ -267,7 +283,7 @@ def why_missing(cell, message: str) -> str:
     (the function it hands in is not defined: an error in the answer cell, or it was never
     run) or the notebook stopped before the cell. The cell's error is the student's own to see.
     """
-    err = feedback.cell_error(cell) if cell is not None else None
+    err = scrub.cell_error(cell) if cell is not None else None
     if err is None:
         return message
     ename, evalue, _ = err

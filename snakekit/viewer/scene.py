@@ -56,6 +56,7 @@ from .client import load as _load_meshcat
 meshcat = _load_meshcat()  # meshcat's kernel side, without its (unused) server: see client.py
 mg = meshcat.geometry
 Animation = meshcat.animation.Animation
+AnimationClip, AnimationTrack = meshcat.animation.AnimationClip, meshcat.animation.AnimationTrack
 
 
 def _translation(x: float, y: float, z: float = 0.0) -> np.ndarray:
@@ -69,6 +70,28 @@ def _rot_z(a: float) -> np.ndarray:
     c, s = np.cos(a), np.sin(a)
     T[:2, :2] = [[c, -s], [s, c]]
     return T
+
+
+def _quaternions_xyzw(T: np.ndarray) -> np.ndarray:
+    """The rotations of the poses ``T`` (N, 4, 4) as three.js quaternions (x, y, z, w), shape (N, 4):
+    meshcat's ``quaternion_from_matrix`` (the eigenvector of the largest eigenvalue, w >= 0) for
+    all the poses in one call, instead of one call per pose."""
+    m = T[:, :3, :3]
+    K = np.zeros((len(T), 4, 4))
+    K[:, 0, 0] = m[:, 0, 0] - m[:, 1, 1] - m[:, 2, 2]
+    K[:, 1, 0] = m[:, 0, 1] + m[:, 1, 0]
+    K[:, 1, 1] = m[:, 1, 1] - m[:, 0, 0] - m[:, 2, 2]
+    K[:, 2, 0] = m[:, 0, 2] + m[:, 2, 0]
+    K[:, 2, 1] = m[:, 1, 2] + m[:, 2, 1]
+    K[:, 2, 2] = m[:, 2, 2] - m[:, 0, 0] - m[:, 1, 1]
+    K[:, 3, 0] = m[:, 2, 1] - m[:, 1, 2]
+    K[:, 3, 1] = m[:, 0, 2] - m[:, 2, 0]
+    K[:, 3, 2] = m[:, 1, 0] - m[:, 0, 1]
+    K[:, 3, 3] = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    K /= 3.0
+    w, V = np.linalg.eigh(K)   # the lower triangle, as meshcat's
+    q = np.take_along_axis(V, np.argmax(w, axis=1)[:, None, None], axis=2)[:, :, 0]  # (x, y, z, w)
+    return np.where(q[:, 3:] < 0.0, -q, q)
 
 
 def _points3(points) -> np.ndarray:
@@ -363,12 +386,15 @@ class Viewer:
         count = int(np.ceil(traj.duration * fps - 1e-9)) + 1  # the last frame holds the end pose
         times = traj.times[0] + np.arange(count) / fps
         qs = traj.sample(times)
+        poses = np.stack([joint_frames(q, spec=self.spec) for q in qs])  # (frame, link, 4, 4)
         anim = Animation(default_framerate=fps)
-        for frame, q in enumerate(qs):
-            frames = joint_frames(q, spec=self.spec)
-            with anim.at_frame(self.vis, frame) as f:
-                for i, link in enumerate(self._links[1:]):
-                    f[f"{ROBOT}/{link}"].set_transform(frames[i])
+        keys = list(range(count))
+        for i, link in enumerate(self._links[1:]):
+            # the tracks meshcat's set_transform writes frame by frame, written whole
+            anim.clips[self.vis.path.append(f"{ROBOT}/{link}")] = AnimationClip(tracks={
+                "position": AnimationTrack("position", "vector3", list(keys), poses[:, i, :3, 3].tolist()),
+                "quaternion": AnimationTrack("quaternion", "quaternion", list(keys),
+                                             _quaternions_xyzw(poses[:, i]).tolist())}, fps=fps)
         self.vis.set_animation(anim, play=play, repetitions=repetitions)
         if path:
             self.draw_path(traj)

@@ -53,6 +53,14 @@ def make_course(tmp: Path) -> Path:
     return course
 
 
+def use_safe_grading(course: Path, timeout: float) -> None:
+    """The course's nbgrader config, as course/nbgrader_config.py does it, with the test course's references
+    and ``timeout`` [s] for each notebook of formgrader's Autograde button."""
+    with open(course / "nbgrader_config.py", "a") as f:
+        f.write("\nfrom grader.commands.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n"
+                f"c.SnakekitGrade.references = {str(REFERENCES)!r}\nc.SnakekitGrade.timeout = {timeout}\n")
+
+
 def release_notebook(course: Path):
     return nbformat.read(course / "release" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
 

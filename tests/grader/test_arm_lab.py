@@ -12,6 +12,7 @@ import json
 import re
 import shutil
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,6 +26,14 @@ from snakekit.hardware.registers import GOAL_POSITION, TORQUE_ENABLE
 
 A = "06_coded_sweep"
 CASE = {"points": 30, "rate": 10.0, "sweeps": 2, "amplitude": 0.2}  # 2.9 s, peak 0.87 rad/s
+COURSE = Path(__file__).resolve().parents[2] / "course"
+
+
+def with_the_course_s_lab(course):
+    """``course`` with the repository course's lab settings for 06 (its exercise, at Task 2's case)."""
+    (course / "lab" / A).mkdir(parents=True, exist_ok=True)
+    shutil.copy(COURSE / "lab" / A / "lab.json", course / "lab" / A / "lab.json")
+    return course
 FOLD = [1.57, 1.57, 1.57, 1.57, 0.0]
 
 
@@ -64,13 +73,13 @@ def feedback_pages(course, students):
     """Each student's feedback page as the grader writes them (a heading cell, then the lesson's cells)."""
     import nbformat
 
-    from grader.feedback import report as feedback
+    from grader.feedback.exporter import write_html
 
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(f"# Feedback: {A}\n\nScore: **9 / 10**"),
                                          nbformat.v4.new_markdown_cell("Grader: ex06_3_task2_test: 3 / 3 points")])
     for i, c in enumerate(nb.cells):
         c["id"] = f"cell-{i}"
-    page = feedback.write_html(nb, course / "feedback" / students[0] / A / f"{A}.html")
+    page = write_html(nb, course / "feedback" / students[0] / A / f"{A}.html")
     for st in students[1:]:
         (course / "feedback" / st / A).mkdir(parents=True)
         shutil.copyfile(page, course / "feedback" / st / A / f"{A}.html")
@@ -95,7 +104,8 @@ def make_course(root):
     (course / "lab" / A).mkdir(parents=True)
     # short sweeps; a band floor of 1.4 deg: on a loaded test machine the emulated servos' timing
     # alone moves a run by up to 0.6 deg, while erin's near-miss is 3.4 deg from the reference
-    (course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE, "stall_delay": 0.03, "band_floor": 0.025}))
+    (course / "lab" / A / "lab.json").write_text(json.dumps({"exercise": "ex06_3_task2_test", "case": CASE, "stall_delay": 0.03,
+                                                              "band_floor": 0.025}))
     for student, (tr, _) in CLASS.items():
         hand_in(course, student, tr)
     feedback_pages(course, list(CLASS))
@@ -310,6 +320,7 @@ def test_bad_input_is_refused_with_exit_2(calibrated, argv, message, capsys):
 
 def test_no_graded_submissions_is_exit_2(tmp_path, capsys):
     (tmp_path / "source" / A).mkdir(parents=True)
+    with_the_course_s_lab(tmp_path)
     assert lab_cli.main([A, "--course", str(tmp_path), "--emulator"]) == 2
     assert "no graded submissions of 06_coded_sweep" in capsys.readouterr().err
 
@@ -324,19 +335,17 @@ def test_grading_keeps_each_trajectory_at_the_spec_values_for_the_lab(tmp_path):
     """The grader keeps the lab's exercise's result at Task 2 itself (its call with no arguments,
     a case of every batch), as arrays (the instructor notebook stands in for a student's: it runs
     unsandboxed here)."""
-    from pathlib import Path
-
     from grader.scoring.cases import draw, execute
     from grader.arm.keep import keep, with_lab_case
 
-    root = Path(__file__).resolve().parents[2] / "course"
+    root = COURSE
     batch = with_lab_case(draw(root, A, seed=7), root)
     plain = draw(root, A, seed=7)
     gid = "ex06_3_task2_test"
     # Task 2 itself, task2_sweep() at its defaults, is one of 6.3's cases already: no extra run
     assert () in plain.cases[gid] and batch.cases[gid] == plain.cases[gid]
     handins = execute(root / "source" / A / f"{A}.ipynb", batch)
-    course = tmp_path / "course"
+    course = with_the_course_s_lab(tmp_path / "course")
     (course / "source" / A).mkdir(parents=True)
     path = keep(course, A, "alice", handins[gid], batch)
     assert path == course / "autograded" / "alice" / A / "lab" / f"{gid}.npz"

@@ -22,7 +22,6 @@ from __future__ import annotations
 import csv
 import os
 import re
-import shutil
 import subprocess
 import sys
 import time
@@ -37,6 +36,7 @@ sys.path.insert(0, str(HERE))
 
 from class_submissions import exercise_of, hand_in, points, score_range  # noqa: E402
 from class_submissions import lesson02, lesson03, lesson04, lesson06  # noqa: E402
+from conftest import copy_course  # noqa: E402
 
 #: the grader of issue 20 (partial credit that follows the work) grades the classes in the suite
 NEW_GRADER = True
@@ -57,8 +57,7 @@ def grade_class(lesson: str, tmp: Path) -> dict:
 
     module = CLASSES[lesson]
     course = tmp / "course"
-    shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
-        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log"))
+    copy_course(course)
     for student in module.STUDENTS:
         hand_in(course, lesson, student)
     # a loaded machine must not turn a right notebook into a timeout: 300 s a notebook, not 120

@@ -103,8 +103,9 @@ def test_reference_file_holds_how_to_judge_not_the_expected_results(tmp_path):
         assert z.files == ["__meta__"]
 
 
-def test_fixture_reference_is_current():
-    assert references_main([ASSIGNMENT, "--course", str(FIXTURE), "--out", str(REFERENCES), "--check"]) == 0
+def test_fixture_reference_is_current_where_its_course_keeps_it():
+    assert REFERENCES == FIXTURE / "references"  # no --out: a course's references are its own references/
+    assert references_main([ASSIGNMENT, "--course", str(FIXTURE), "--check"]) == 0
 
 
 @pytest.mark.parametrize("path", sorted(COURSE_REFERENCES.glob("*.npz")), ids=lambda p: p.stem)
@@ -314,7 +315,7 @@ def test_progress_shows_done_left_failed(graded):
 def test_feedback_has_verdicts_and_plots_but_no_hidden_tests(graded):
     import nbformat
 
-    from grader.feedback.report import hidden_lines
+    from grader.feedback.scrub import hidden_lines
 
     html = (graded["course"] / "feedback" / "bob" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
     assert "Grader: ex1_tool_xy_test: 0 / 2 points" in html
@@ -356,7 +357,8 @@ def test_exit_code_1_when_the_grader_fails(tmp_path):
 
 
 def test_grader_depends_only_on_trajectory_model_and_run():
-    code = ("import sys, grader.batch, grader.commands.grade, grader.scoring.score, grader.feedback.report, grader.scoring.references; "
+    code = ("import sys, grader.batch, grader.commands.grade, grader.scoring.score, grader.scoring.references, "
+            "grader.feedback.notebook, grader.feedback.exporter; "
             "print(sorted(m for m in sys.modules if m.startswith('snakekit')))")
     mods = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True).stdout
     for banned in ("snakekit.viewer", "snakekit.sim", "snakekit.hardware", "snakekit.emulator", "snakekit.widgets",
@@ -364,8 +366,8 @@ def test_grader_depends_only_on_trajectory_model_and_run():
         assert f"'{banned}'" not in mods
 
 
-@pytest.mark.parametrize("name", ["grader.scoring.compare", "grader.feedback.report", "grader.scoring.score",
-                                  "grader.feedback.scores"])
+@pytest.mark.parametrize("name", ["grader.scoring.compare", "grader.feedback.scrub", "grader.feedback.mathml",
+                                  "grader.markup", "grader.scoring.score", "grader.feedback.scores"])
 def test_docstring_examples(name):
     import doctest
     import importlib
@@ -413,27 +415,27 @@ def test_only_the_sandboxs_own_gradebook_copy_skips_waiting_for_the_disk(tmp_pat
 def test_feedback_plot_drawn_once_for_the_same_run_and_again_for_any_other(monkeypatch):
     from collections import OrderedDict
 
-    from grader.feedback import report as feedback
+    from grader.feedback import plot
 
     drawn = []
-    draw = feedback._draw
-    monkeypatch.setattr(feedback, "_draw", lambda curves, title: drawn.append(title) or draw(curves, title))
-    monkeypatch.setattr(feedback, "_plots", OrderedDict())
-    monkeypatch.setattr(feedback, "PLOT_CACHE", 2)
+    draw = plot._draw
+    monkeypatch.setattr(plot, "_draw", lambda curves, title: drawn.append(title) or draw(curves, title))
+    monkeypatch.setattr(plot, "_plots", OrderedDict())
+    monkeypatch.setattr(plot, "PLOT_CACHE", 2)
     t = np.arange(60) / 10.0
     q = 0.2 * np.sin(t)[:, None] * np.ones((1, 5))
-    first = feedback.plot_png({"measured": (t, q), "reference measured": (t, q.copy())}, "ex")
-    again = feedback.plot_png({"measured": (t.copy(), q.copy()), "reference measured": (t, q)}, "ex")
+    first = plot.plot_png({"measured": (t, q), "reference measured": (t, q.copy())}, "ex")
+    again = plot.plot_png({"measured": (t.copy(), q.copy()), "reference measured": (t, q)}, "ex")
     assert first[:8] == b"\x89PNG\r\n\x1a\n" and again == first and drawn == ["ex"]
     moved = q.copy()
     moved[40, 3] = np.nextafter(moved[40, 3], 1.0)  # one joint, one sample, one bit
-    feedback.plot_png({"measured": (t, moved), "reference measured": (t, q)}, "ex")
+    plot.plot_png({"measured": (t, moved), "reference measured": (t, q)}, "ex")
     assert drawn == ["ex", "ex"]
     moved[40, 3] += 0.05
-    other = feedback.plot_png({"measured": (t, moved), "reference measured": (t, q)}, "ex")
+    other = plot.plot_png({"measured": (t, moved), "reference measured": (t, q)}, "ex")
     assert drawn == ["ex", "ex", "ex"] and other != first  # its zoom now points at joint 4
-    assert len(feedback._plots) == 2  # the oldest plot let go: drawing it again below draws it anew
-    assert feedback.plot_png({"measured": (t, q), "reference measured": (t, q)}, "ex") == first
+    assert len(plot._plots) == 2  # the oldest plot let go: drawing it again below draws it anew
+    assert plot.plot_png({"measured": (t, q), "reference measured": (t, q)}, "ex") == first
     assert drawn == ["ex", "ex", "ex", "ex"]
 
 
@@ -442,7 +444,7 @@ def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
     without them (nbconvert's, with math as MathML)."""
     from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
 
-    from grader.feedback import report as feedback
+    from grader.feedback import exporter
 
     def page(student):
         code = new_code_cell(f"x = np.arange(3)  # {student}\nprint(x)", execution_count=1)
@@ -453,10 +455,10 @@ def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
         nb.metadata = {"language_info": {"name": "python"}}
         return nb
 
-    plain = feedback.exporter_class()(config=feedback.exporter_config())  # with no results kept
+    plain = exporter.exporter_class()(config=exporter.exporter_config())  # with no results kept
     for student in ("ann", "ben", "ann"):
         nb = page(student)
-        written = feedback.write_html(nb, tmp_path / f"{student}.html").read_text()
+        written = exporter.write_html(nb, tmp_path / f"{student}.html").read_text()
         assert written == plain.from_notebook_node(nb)[0]
         assert f"<b>{student}</b>" in written and f"# {student}" in written
         assert "<math display=\"inline\"><mrow><msub><mi>q</mi><mn>1</mn></msub></mrow></math>" in written
@@ -472,7 +474,7 @@ def test_a_feedback_page_is_what_nbconvert_writes_with_its_alt_texts_and_tabinde
     from nbconvert import HTMLExporter
     from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
 
-    from grader.feedback import report as feedback
+    from grader.feedback import exporter as feedback
 
     png = ("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNk+M9QDwADhgGAWjR9awAAAABJRU5ErkJggg==")
     assert base64.b64decode(png).startswith(b"\x89PNG")

@@ -78,7 +78,7 @@ def batch(tmp_path_factory):
     listener = _Listener()
     ctx = {
         "secrets": [f"{course}/gradebook.db", f"{course}/source/**/*.ipynb", f"{course}/submitted/good/**/*.ipynb",
-                    f"{REFERENCES}/*.npz", f"{REPO}/grader/references/*.npz", f"{REPO}/tests/grader/grader_course/**/*.ipynb",
+                    f"{REFERENCES}/*.npz", f"{REPO}/course/references/*.npz", f"{REPO}/tests/grader/grader_course/**/*.ipynb",
                     f"{work}/*/*/course/autograded/good/**/*.ipynb", "/root/**/*.ipynb", f"{course}/cases/*.py",
                     f"{REPO}/tests/grader/grader_course/cases/*.py", f"{REPO}/course/cases/*.py", f"{work}/*/.*.gate"],
         "targets": [f"/tmp/{PWNED}", f"{course}/{PWNED}", f"{REPO}/{PWNED}", f"{work}/{PWNED}", f"{tmp}/{PWNED}"],

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -14,7 +13,7 @@ import pytest
 
 import snakekit
 
-from conftest import need_program
+from conftest import copy_course, need_program
 from grader_helpers import read_csv
 
 REPO = Path(__file__).resolve().parents[2]
@@ -43,8 +42,7 @@ def graded(tmp_path_factory):
     need_program("unshare")
     tmp = tmp_path_factory.mktemp("course06")
     course = tmp / "course"
-    shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
-        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log", "__pycache__"))
+    copy_course(course)
     sol = _solutions()
     _hand_in(course, "ana", sol)
     # right for the visible cases (10 Hz), wrong for the hidden rates
@@ -125,8 +123,7 @@ def graded01(tmp_path_factory):
     need_program("unshare")
     tmp = tmp_path_factory.mktemp("course01")
     course = tmp / "course"
-    shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
-        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log", "__pycache__"))
+    copy_course(course)
     sol = _solutions(LESSON01)
     _hand_in(course, "ana", sol, LESSON01)
     _hand_in(course, "mal", {**sol, "ex01_1_planar_fk": CHEAT}, LESSON01)

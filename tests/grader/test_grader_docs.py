@@ -6,7 +6,7 @@
   is given the test course's references), and each block's effect is checked: the release and
   its due date, the collected notebooks and times, the grades with the late penalty, formgrader
   answering with the students' names, a resubmission, the returned pages (a score set by hand
-  on them) and the export.
+  on them), the export and the worked solution after the due date.
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ def week_blocks() -> list[list[str]]:
 def test_the_week_is_one_block_per_step():
     firsts = [b[0].split()[:2] for b in week_blocks()]
     assert firsts == [["snakekit", "release"], ["snakekit", "collect"], ["snakekit", "grade"], ["cd", "course"],
-                      ["snakekit", "collect"], ["snakekit", "return"], ["snakekit", "export"]]
+                      ["snakekit", "collect"], ["snakekit", "return"], ["snakekit", "export"], ["snakekit", "release"]]
 
 
 def as_run(line: str) -> str:
@@ -217,4 +217,11 @@ def test_a_week_runs_block_by_block_as_written(tmp_path):
     assert r.returncode == 0, r.stderr
     lines = list(csv.reader(io.StringIO((course / "grades-canvas.csv").read_text())))
     assert lines[2:] == [["Alice Smith", "101", "", "as1", "A", "6", "6"], ["Bob Jones", "102", "", "bj2", "A", "2", "2"]]
+    # 7. after the due date, the worked solution: the instructor's answers, for the LMS
+    (line,) = steps[7]
+    r = shell(line, work, env)
+    assert r.returncode == 0, r.stderr
+    solution = course / "release" / f"{ASSIGNMENT}-solutions" / f"{ASSIGNMENT}-solutions.ipynb"
+    assert f"is in {solution.parent.resolve()}/" in r.stdout
+    assert "phi = np.cumsum(q)" in solution.read_text()  # ex1's answer, as the instructor wrote it
 

@@ -20,7 +20,7 @@ import pytest
 
 from conftest import need, need_program
 from grader_corpus import _edit
-from grader_helpers import ASSIGNMENT, FIXTURE, GOOD, REFERENCES, make_course, submit
+from grader_helpers import ASSIGNMENT, FIXTURE, GOOD, REFERENCES, make_course, submit, use_safe_grading
 from tests.system.test_browser import CHROMIUM_FLAGS, JupyterLab
 
 REPO = Path(__file__).resolve().parents[2]
@@ -30,13 +30,6 @@ LOOP = {"ex1_tool_xy": 'print("before the loop")\n' + GOOD["ex1_tool_xy"], "ex2_
 EXTRAS = {"ex1_tool_xy": "import ipywidgets\ndisplay(ipywidgets.VBox([ipywidgets.IntSlider(description='q1')]))\n"
                          + GOOD["ex1_tool_xy"],
           "ex3_peak_speed": "import numpy\nnumpy.linalg.inv(numpy.zeros((2, 2)))"}
-
-
-def _use_safe_grading(course: Path) -> None:
-    """The course's nbgrader config, as course/nbgrader_config.py does it, with the test course's references."""
-    with open(course / "nbgrader_config.py", "a") as f:
-        f.write("\nfrom grader.commands.nbgrader_plugins import use_safe_grading\nuse_safe_grading(c)\n"
-                f"c.SnakekitGrade.references = {str(REFERENCES)!r}\nc.SnakekitGrade.timeout = {TIMEOUT}\n")
 
 
 def _page(course: Path, student: str) -> str:
@@ -68,7 +61,7 @@ def graded(tmp_path_factory):
     from grader.sandbox.runner import Runner
 
     course = make_course(tmp_path_factory.mktemp("feedback"))
-    _use_safe_grading(course)
+    use_safe_grading(course, TIMEOUT)
     submit(course, "alice")
     submit(course, "edited", edit=_edit)
     submit(course, "loop", LOOP)
@@ -193,7 +186,8 @@ def test_nbgrader_generate_feedback_writes_the_graders_pages_with_the_tas_scores
 def test_a_page_opened_offline_in_chromium_shows_typeset_math():
     sync_api = need("playwright.sync_api")
     chromium = need_program("chromium")
-    from grader.feedback import report as feedback
+    from grader.feedback.exporter import write_html
+    from grader.feedback.notebook import build
     from grader.scoring.verdict import SubmissionResult
 
     ARTIFACTS.mkdir(exist_ok=True)
@@ -202,8 +196,8 @@ def test_a_page_opened_offline_in_chromium_shows_typeset_math():
     tex = [m for c in nb.cells if c.cell_type == "markdown" for m in re.findall(r"\$\$.+?\$\$|\$[^$\n]+\$", c.source)]
     assert len(tex) > 20
     result = SubmissionResult("ann", lesson, 8.0, 8.0, "graded")
-    path = feedback.write_html(feedback.build(nb, student="ann", assignment=lesson, result=result, test_sources={}),
-                               ARTIFACTS / "feedback_offline_math.html")
+    path = write_html(build(nb, student="ann", assignment=lesson, result=result, test_sources={}),
+                      ARTIFACTS / "feedback_offline_math.html")
     _loads_nothing(path.read_text())
     requested = []
     with sync_api.sync_playwright() as pw:
@@ -251,7 +245,7 @@ def test_formgraders_autograde_and_feedback_buttons_give_the_graders_results(tmp
     from nbgrader.api import Gradebook
 
     course = make_course(tmp_path)
-    _use_safe_grading(course)
+    use_safe_grading(course, TIMEOUT)
     submit(course, "edited", edit=_edit)  # ex2's test cell replaced: it runs as released, and the TA is told
     home = tmp_path / "home"
     home.mkdir()
@@ -261,11 +255,7 @@ def test_formgraders_autograde_and_feedback_buttons_give_the_graders_results(tmp
         with sync_api.sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_FLAGS)
             try:
-                context = browser.new_context(viewport={"width": 1400, "height": 900},
-                                              extra_http_headers={"Authorization": f"token {server.token}"})
-                context.route("**/*", lambda route: route.continue_() if route.request.url.startswith(server.url)
-                              else (blocked.append(route.request.url), route.abort()))
-                page = context.new_page()
+                page = server.browser_context(browser, blocked).new_page()
                 page.goto(f"{server.url}/formgrader/manage_submissions/{ASSIGNMENT}")
                 page.locator("td.student-id", has_text="edited").wait_for(timeout=60_000)
                 log = _press(page, "edited", "autograde", f"Successfully autograded '{ASSIGNMENT}' for student 'edited'")

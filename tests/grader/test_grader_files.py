@@ -519,6 +519,18 @@ def test_a_feedback_zip_entry_never_climbs_out_of_its_folder(lms_name, entry):
     assert feedback_entry(row, Path(f"/feedback/ann/{A}/{A}.html")) == entry
 
 
+def test_grade_reads_the_course_s_own_references_unless_told_otherwise(course, capsys):
+    """Without --references, `grade` judges by <course>/references/, beside the course's cases/."""
+    assert not (course / "references").exists()
+    one_line_error(run(capsys, "grade", A, "--course", course),
+                   f"no references folder {course}/references; give --references DIR, or record them with "
+                   f"`python -m grader.scoring.references {A} --course {course}`")
+    (course / "references").mkdir()
+    one_line_error(run(capsys, "grade", A, "--course", course),
+                   f"no reference {course}/references/{A}.npz: every test cell would keep the kernel's own verdict. "
+                   f"Record it: `python -m grader.scoring.references {A} --course {course}`")
+
+
 def test_grade_refuses_a_bad_lab_json_before_it_backs_up_or_grades(course, capsys):
     """A TA's slip in the lab's settings stops `grade` with exit 2 before anything is written,
     not as a failure of the grader after a backup (which would push an older one out)."""

@@ -48,6 +48,38 @@ def test_a_dependent_exercise_stopped_by_a_part_that_never_returns_is_run_again_
     assert rerun.needed(DEPENDS, got, WRITTEN) == {}
 
 
+def test_test_cells_the_notebooks_clock_stopped_before_are_run_again_with_every_part_that_lost_points():
+    """6.1 loops endlessly: its check, the lesson's demonstration that calls it and Task 2's run each use up the
+    cell limit, and the notebook's time runs out before 6.3's and 6.4's test cells. 6.4 does not build on 6.1,
+    yet it lost everything: both run again, with the lesson's 6.1, and neither one's own answer replaced."""
+    got = scores(ex06_1=0.0, ex06_2=1.0)
+    got["ex06_4_phase_lag_test"] = ExerciseScore("ex06_4_phase_lag_test", 0.0, 6.0, "missing", "nothing was handed in")
+    got["ex06_3_task2_test"] = ExerciseScore("ex06_3_task2_test", 0.0, 7.0, "missing", "nothing was handed in")
+    written = {**WRITTEN, "ex06_4_phase_lag": True}
+    unreached = {"ex06_3_task2_test", "ex06_4_phase_lag_test"}
+    assert rerun.needed(DEPENDS, got, written) == {"ex06_3_task2_test": ["ex06_1_sweep_times"]}   # before: 6.4 lost 6
+    assert rerun.needed(DEPENDS, got, written, unreached) == {"ex06_3_task2_test": ["ex06_1_sweep_times"],
+                                                              "ex06_4_phase_lag_test": ["ex06_1_sweep_times"]}
+    # the clock stopped the notebook in 6.2's check: 6.2 is graded again with its own answer, and 6.3 with the
+    # student's 6.2 (read from the same run), the lesson's 6.1
+    got["ex06_2_sweep_positions_test"] = ExerciseScore("ex06_2_sweep_positions_test", 0.0, 1.0, "missing", "")
+    assert rerun.needed(DEPENDS, got, written, unreached | {"ex06_2_sweep_positions_test"}) == {
+        "ex06_3_task2_test": ["ex06_1_sweep_times"], "ex06_2_sweep_positions_test": ["ex06_1_sweep_times"],
+        "ex06_4_phase_lag_test": ["ex06_1_sweep_times"]}
+    # nothing else lost points (a slow notebook): the cell runs again as it is; one never written does not
+    assert rerun.needed({}, {"ex06_4_phase_lag_test": got["ex06_4_phase_lag_test"]}, written,
+                        {"ex06_4_phase_lag_test"}) == {"ex06_4_phase_lag_test": []}
+    assert rerun.needed({}, got, {**written, "ex06_4_phase_lag": False}, {"ex06_4_phase_lag_test"}) == {}
+
+
+def test_a_cell_run_again_on_its_own_says_so_and_names_no_part():
+    first = ExerciseScore("ex06_4_phase_lag_test", 0.0, 6.0, "missing", "nothing was handed in.")
+    got = rerun.better(first, ExerciseScore("ex06_4_phase_lag_test", 6.0, 6.0, "scored", ""), [])
+    assert got.score == 6.0 and got.message == (
+        "graded in a run of its own, as your notebook's time ran out before this cell had run: 6 of 6 "
+        "(in your notebook's run: 0, the run below). nothing was handed in.")
+
+
 @pytest.mark.parametrize("got, written", [
     (dict(ex06_1=0.0, ex06_2=1.0, ex06_3=1.0), WRITTEN),                  # 6.3 full: nothing to gain
     (dict(ex06_1=1.0, ex06_2=1.0, ex06_3=0.3), WRITTEN),                  # 6.3's own slip

@@ -29,6 +29,7 @@ from grader.errors import LabError
 
 A = "06_coded_sweep"
 CASE = {"points": 30, "rate": 10.0, "sweeps": 2, "amplitude": 0.2}  # 2.9 s, peak 0.87 rad/s
+LAB = {"exercise": "ex06_3_task2_test", "case": CASE}  # a lab.json: the lab's exercise at a short case
 CMD = [sys.executable, "-m", "snakekit.cli", "lab"]
 HANG = 240  # [s] a bound for a hang: a session of two short jobs takes about 30 s on a loaded machine
 
@@ -37,7 +38,7 @@ def make_course(root: Path, students=("alice", "bob")) -> Path:
     course = root / "course"
     (course / "source" / A).mkdir(parents=True)
     (course / "lab" / A).mkdir(parents=True)
-    (course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE, "stall_delay": 0.03}))
+    (course / "lab" / A / "lab.json").write_text(json.dumps({**LAB, "stall_delay": 0.03}))
     for st in students:
         hand_in(course, st, snakekit.side_sweep(**CASE))
     return course
@@ -113,7 +114,7 @@ def bare_course(tmp_path_factory):
 def test_every_number_of_lab_json_refuses_a_bad_value_naming_file_key_value_and_range(
         bare_course, key, in_case, bounds, kind, value, shown, capsys):
     lab_json = bare_course / "lab" / A / "lab.json"
-    fields = {"case": {**CASE, key: value}} if in_case else {"case": CASE, key: value}
+    fields = {**LAB, "case": {**CASE, key: value}} if in_case else {**LAB, key: value}
     lab_json.write_text(json.dumps(fields))  # NaN and Infinity as Python's json writes (and reads) them
     name = f'"case.{key}"' if in_case else f'"{key}"'
     with pytest.raises(LabError) as e:
@@ -135,7 +136,7 @@ def test_each_end_of_a_setting_s_range_is_accepted(bare_course, key):
     bounds = NUMBERS[key]
     ends = [bounds.get("at_least"), bounds["at_most"]]
     for v in [e for e in ends if e is not None]:
-        (bare_course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE, key: v}))
+        (bare_course / "lab" / A / "lab.json").write_text(json.dumps({**LAB, key: v}))
         assert getattr(settings(bare_course, A), key) == v
 
 
@@ -146,12 +147,12 @@ def test_grading_stops_before_it_starts_on_a_bad_lab_json_and_goes_on_without_on
     from grader.arm.keep import with_lab_case
 
     batch = SimpleNamespace(assignment=A, cases={})
-    (bare_course / "lab" / A / "lab.json").write_text('{"max_duration_ratio": "abc"}')
+    (bare_course / "lab" / A / "lab.json").write_text(json.dumps({**LAB, "max_duration_ratio": "abc"}))
     with pytest.raises(LabError, match=r'lab.json: "max_duration_ratio" must be a finite number from 1 to 4, '
                                        r"got 'abc' \(str\)"):
         with_lab_case(batch, bare_course)
     (bare_course / "lab" / A / "lab.json").unlink()
-    assert with_lab_case(batch, bare_course) is batch  # the lab's exercise is not among this batch's
+    assert with_lab_case(batch, bare_course) is batch  # no lab.json: the assignment has no lab
     assert with_lab_case(SimpleNamespace(assignment="07_other", cases={}), bare_course).assignment == "07_other"
 
 
@@ -164,26 +165,62 @@ def test_sim_tolerance_nan_no_longer_lets_a_sweep_of_40_sweeps_onto_the_arm(bare
                                                       '"amplitude": 0.2}}')
     with pytest.raises(LabError, match=r'"sim_tolerance" must be a finite number > 0 and <= 0.5 \[rad\], got nan'):
         settings(bare_course, A)
-    (bare_course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE}))
+    (bare_course / "lab" / A / "lab.json").write_text(json.dumps(LAB))
     off = snakekit.side_sweep(**{**CASE, "sweeps": 1, "amplitude": 0.3})
     checked = gate.check({"times": off.times, "positions": off.positions}, settings(bare_course, A))
     assert "on the simulator your sweep is" in checked.reason
 
 
 @pytest.mark.parametrize("text, says", [
-    ('{"case": [1, 2]}', '"case" must be a JSON object of points, rate, sweeps, amplitude'),
-    ('{"case": {"points": 30, "rate": 10.0, "sweeps": 2}}', '"case" must hold exactly points, rate, sweeps, '
-                                                            'amplitude; missing amplitude'),
-    ('{"exercise": 7}', '"exercise" must be a grade id (text), got 7'),
+    ('{"exercise": "ex06_3_task2_test", "case": [1, 2]}', '"case" must be a JSON object of points, rate, sweeps, '
+                                                           'amplitude'),
+    ('{"exercise": "ex06_3_task2_test", "case": {"points": 30, "rate": 10.0, "sweeps": 2}}',
+     '"case" must hold exactly points, rate, sweeps, amplitude; missing amplitude'),
+    ('{"exercise": 7, "case": {"points": 30, "rate": 10.0, "sweeps": 2, "amplitude": 0.2}}',
+     '"exercise" must be a grade id (text), got 7'),
     ('[1, 2]', "must hold one JSON object of fields"),
-    ('{"case": {"points": 30, "rate": 10.0, "sweeps": 2, "amplitude": 1.5}}', "is not a sweep the arm may run"),
-    ('{"case": {"points": 30, "rate": 0.01, "sweeps": 2, "amplitude": 0.2}}', "is not a sweep the arm may run: "
-                                                                               "its duration is 2900 s"),
+    ('{"exercise": "ex06_3_task2_test", "case": {"points": 30, "rate": 10.0, "sweeps": 2, "amplitude": 1.5}}',
+     "is not a sweep the arm may run"),
+    ('{"exercise": "ex06_3_task2_test", "case": {"points": 30, "rate": 0.01, "sweeps": 2, "amplitude": 0.2}}',
+     "is not a sweep the arm may run: its duration is 2900 s"),
 ])
 def test_a_lab_json_that_is_not_the_lab_s_settings_is_refused(bare_course, text, says):
     (bare_course / "lab" / A / "lab.json").write_text(text)
     with pytest.raises(LabError, match=re.escape(says)):
         settings(bare_course, A)
+
+
+def test_the_course_names_the_lab_s_exercise_and_the_spec_s_own_case():
+    """course/lab/06_coded_sweep/lab.json (the course's, not the grader's): Task 2's test cell, at the
+    sweep ``snakekit.side_sweep()`` makes with no arguments (what Task 2 asks for)."""
+    import inspect
+
+    import nbformat
+
+    course = Path(__file__).resolve().parents[2] / "course"
+    s = settings(course, A)
+    spec_case = {k: p.default for k, p in inspect.signature(snakekit.side_sweep).parameters.items() if k != "spec"}
+    assert (s.exercise, s.case) == ("ex06_3_task2_test", spec_case)
+    source = nbformat.read(course / "source" / A / f"{A}.ipynb", as_version=4)
+    graded = {c.metadata.get("nbgrader", {}).get("grade_id") for c in source.cells
+              if c.metadata.get("nbgrader", {}).get("grade")}
+    assert s.exercise in graded
+
+
+def test_an_assignment_without_the_lab_s_exercise_has_no_lab_and_is_told_where_to_name_it(tmp_path):
+    from grader.errors import NoLab
+
+    course = tmp_path / "course"
+    (course / "source" / A).mkdir(parents=True)
+    lab_json = course / "lab" / A / "lab.json"
+    for text in (None, json.dumps({"case": CASE}), json.dumps({"exercise": "ex06_3_task2_test"})):
+        if text is not None:
+            lab_json.parent.mkdir(parents=True, exist_ok=True)
+            lab_json.write_text(text)
+        with pytest.raises(NoLab) as e:
+            settings(course, A)
+        assert str(e.value).startswith(f"{A} has no exercise the lab runs (its hand-in is not a trajectory); "
+                                       f"name one in {lab_json} as {{\"exercise\": GRADE_ID, \"case\": ")
 
 
 # --- the files the lab writes and reads back --------------------------------------------------
@@ -276,7 +313,7 @@ def test_a_session_with_bad_hand_ins_among_good_ones_runs_the_good_ones(calibrat
 
     import nbformat
 
-    from grader.feedback import report as feedback
+    from grader.feedback.exporter import write_html
 
     course = tmp_path / "course"
     shutil.copytree(calibrated, course)
@@ -289,7 +326,7 @@ def test_a_session_with_bad_hand_ins_among_good_ones_runs_the_good_ones(calibrat
             hand_in(course, st, raw=raw)
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(f"# Feedback: {A}")])
     nb.cells[0]["id"] = "cell-0"
-    feedback.write_html(nb, course / "feedback" / "carl" / A / f"{A}.html")
+    write_html(nb, course / "feedback" / "carl" / A / f"{A}.html")
     students = ["carl", "alice", "dora", "emil", "bob", "fay", "gus"]
     q = Queue.load(course, A)
     for st in students:
@@ -438,7 +475,7 @@ def test_a_calibration_whose_runs_differ_too_much_for_the_bands_to_mean_anything
     """Runs 0.2 rad apart at joint 3 (a slipping servo): bands of 10 x 0.2 rad would pass any sweep."""
     from types import SimpleNamespace
 
-    (bare_course / "lab" / A / "lab.json").write_text(json.dumps({"case": CASE, "band_factor": 10}))
+    (bare_course / "lab" / A / "lab.json").write_text(json.dumps({**LAB, "band_factor": 10}))
     s = settings(bare_course, A)
     offsets = iter([0.0, 0.2])
 

@@ -294,6 +294,32 @@ def test_the_grader_s_rooms_import_only_what_they_may(module):
             "the core never imports the arm's lab or a command (the arm comes in through grader.hooks)"
 
 
+def _reached(module: str) -> set[str]:
+    """``module`` and every grader module it imports, at any depth."""
+    seen, todo = set(), [module]
+    while todo:
+        m = todo.pop()
+        if m not in seen:
+            seen.add(m)
+            todo.extend(GRAPH[m])
+    return seen
+
+
+@pytest.mark.parametrize("module", sorted(m for m in GRADER_MODULES if _in(m, "grader.feedback")))
+def test_the_feedback_never_reaches_the_sandbox(module):
+    assert not [m for m in _reached(module) if _in(m, "grader.sandbox")], \
+        "the pages are made from results, never inside a sandbox (not even through another module)"
+
+
+def test_what_hides_the_hidden_tests_draws_nothing():
+    """grader.feedback.scrub, the code that keeps hidden tests and machine paths off the pages, stays small
+    enough to read whole: it reaches no plot and no plotting library."""
+    reached = _reached("grader.feedback.scrub")
+    assert "grader.feedback.plot" not in reached
+    libraries = set().union(*(_third_party(GRADER_MODULES[m]) for m in reached))
+    assert not libraries & {"matplotlib", "PIL"}, sorted(libraries)
+
+
 @pytest.mark.parametrize("module", sorted(m for m in GRADER_MODULES if _in(m, "grader.sandbox.inside")))
 def test_what_runs_inside_the_sandbox_imports_only_the_standard_library_and_nbgrader(module):
     assert {m for m in GRAPH[module] if not _in(m, "grader.sandbox.inside")} <= {"grader", "grader.sandbox"}

@@ -159,7 +159,10 @@ def test_animation_replays_the_motion_at_real_speed(viewer):
 
 def test_play_holds_every_frame_of_a_run_at_its_time_in_the_saved_page(viewer, tmp_path):
     """Each frame k of the animation is the run's measured pose at t0 + k / fps: every link where
-    forward kinematics puts it, read back from the page save_html writes."""
+    forward kinematics puts it, turned as meshcat's own ``quaternion_from_matrix`` turns it (what
+    its ``set_transform`` writes frame by frame), read back from the page save_html writes."""
+    from meshcat.transformations import quaternion_from_matrix
+
     with snakekit.make_robot("sim") as robot:
         run = robot.move_to([0.5, 0.2, -0.3, 0.0, 0.1], duration=1.0)
     fps = 20.0
@@ -178,8 +181,13 @@ def test_play_holds_every_frame_of_a_run_at_its_time_in_the_saved_page(viewer, t
         assert clip["fps"] == fps
         keys = next(t for t in clip["tracks"] if t["name"] == ".position")["keys"]
         assert [k["time"] for k in keys] == list(range(frames))
-        want = np.array([snakekit.joint_frames(qk)[i][:3, 3] for qk in q])
+        poses = [snakekit.joint_frames(qk)[i] for qk in q]
+        want = np.array([T[:3, 3] for T in poses])
         assert np.abs(np.array([k["value"] for k in keys]) - want).max() < 1e-9, f"link{i + 1}"
+        turns = next(t for t in clip["tracks"] if t["name"] == ".quaternion")["keys"]
+        assert [k["time"] for k in turns] == list(range(frames))
+        want = np.array([np.roll(quaternion_from_matrix(T), -1) for T in poses])   # (w, x, y, z) -> three.js's (x, y, z, w)
+        assert np.abs(np.array([k["value"] for k in turns]) - want).max() < 1e-9, f"link{i + 1}"
     assert viewer.q == pytest.approx(m.positions[-1])
 
 

@@ -14,14 +14,13 @@ from __future__ import annotations
 import ast
 import html
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import need, need_program
+from tests.conftest import copy_course, need, need_program
 
 REPO = Path(__file__).resolve().parents[2]
 LESSONS = sorted(p.name for p in (REPO / "course" / "source").iterdir() if (p / f"{p.name}.ipynb").exists())
@@ -91,8 +90,7 @@ def graded(tmp_path_factory):
     need_program("unshare")
     nbformat = need("nbformat")
     course = tmp_path_factory.mktemp("returnless") / "course"
-    shutil.copytree(REPO / "course", course, ignore=shutil.ignore_patterns(
-        "release", "submitted", "autograded", "feedback", "gradebook.db", "*.npz", ".nbgrader.log", "__pycache__"))
+    copy_course(course)
     done = {}
 
     def grade(lesson: str):

@@ -17,18 +17,17 @@ from __future__ import annotations
 
 import ast
 import os
-import re
 import shutil
 import sys
 from pathlib import Path
 
 import pytest
 
+from grader import markup
 from tests.conftest import need
 
 ROOT = Path(__file__).resolve().parents[2]
 HIDDEN = "### BEGIN HIDDEN TESTS"
-HIDDEN_BLOCK = re.compile(r"### BEGIN HIDDEN TESTS\n.*?### END HIDDEN TESTS\n?", re.S)
 LESSONS = sorted(p.stem for p in (ROOT / "course" / "source").glob("*/*.ipynb"))
 
 
@@ -88,12 +87,12 @@ def exercises(instructor, student) -> list[dict]:
         elif m.get("grade"):
             gid = m["grade_id"]
             visible = shown[gid]
-            assert visible.strip() == HIDDEN_BLOCK.sub("", cell.source).strip(), \
+            assert visible.strip() == markup.visible_part(cell.source).strip(), \
                 f"{gid}: the student's test cell is not the instructor's visible part (run `make student`)"
             a = answers[gid]
             function = answer_function(instructor.cells[a].source)
             out.append({"grade_id": gid, "answer": a, "name": function.name, "function": function,
-                        "test": i, "visible": visible, "hidden": "".join(HIDDEN_BLOCK.findall(cell.source))})
+                        "test": i, "visible": visible, "hidden": "".join(markup.HIDDEN.findall(cell.source))})
     return out
 
 

@@ -80,6 +80,15 @@ class JupyterLab:
                     raise RuntimeError(f"JupyterLab did not start; see {home / 'jupyterlab.log'}")
                 time.sleep(0.3)
 
+    def browser_context(self, browser, refused: list[str]):
+        """A Chromium context logged in to this server (its token) with the network beyond the server off:
+        a request to any other address is refused, and its URL added to ``refused``."""
+        context = browser.new_context(viewport={"width": 1400, "height": 900},
+                                      extra_http_headers={"Authorization": f"token {self.token}"})
+        context.route("**/*", lambda route: route.continue_() if route.request.url.startswith(self.url + "/")
+                      else (refused.append(route.request.url), route.abort()))
+        return context
+
     def track(self) -> dict[int, str]:
         """Remember every process JupyterLab has started so far (kernels and what they started)."""
         try:
