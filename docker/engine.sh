@@ -170,7 +170,9 @@ engine_start() {
   mkdir -p "$DATA"
   ENGINE_COLD=1
   [ -d "$DATA/image" ] && ENGINE_COLD=0
-  dockerd --data-root "$DATA" --exec-root "$RUN/exec" --pidfile "$RUN/dockerd.pid" \
+  # in a session of its own: a signal to the caller's process group (a test's time limit) stops the
+  # script, whose engine_stop then removes what ran before it stops dockerd
+  setsid dockerd --data-root "$DATA" --exec-root "$RUN/exec" --pidfile "$RUN/dockerd.pid" \
     --host "$DOCKER_HOST" --iptables=false --ip6tables=false --ip-forward=false --bridge=none \
     --default-address-pool base=10.213.0.0/16,size=24 >"$RUN/dockerd.log" 2>&1 &
   DOCKERD_PID=$!

@@ -23,9 +23,10 @@ def fail(msg: str) -> None:
 def log_in(hub: str, name: str, password: str) -> tuple[requests.Session, requests.Response]:
     """The hub's log-in form, as a browser posts it: the session and the form's answer."""
     s = requests.Session()
-    s.get(f"{hub}/hub/login", timeout=30)  # the form's page sets its _xsrf cookie
+    # (bounds for a hang: a class arriving at once on a busy machine keeps the hub busy for minutes)
+    s.get(f"{hub}/hub/login", timeout=300)  # the form's page sets its _xsrf cookie
     r = s.post(f"{hub}/hub/login", data={"username": name, "password": password, "_xsrf": s.cookies.get("_xsrf")},
-               allow_redirects=False, timeout=60)
+               allow_redirects=False, timeout=300)
     return s, r
 
 
@@ -108,3 +109,46 @@ def view_is_the_owners(hub: str, owner: User, other: User) -> None:
         f"{got[str(views[0])]} (its server listens on 127.0.0.1 only; {host}:8888 open), through the hub "
         f"{path.removeprefix(hub)} {token.status_code} with {other.name}'s token and {browser.status_code} with "
         f"{other.name}'s log-in; {owner.name}'s own: {mine.status_code}, the view's page")
+
+
+# --- what each role types, as docker/hub/README.md gives it -------------------------------------
+ROLES = {"the teacher": "teacher", "a TA": "ta", "a student": "student"}
+
+
+def role_commands(readme: str) -> dict[str, tuple[str, list[str]]]:
+    """{role: (folder, commands)} from the README's ```sh blocks headed ``# <role>'s terminal, in <folder>``.
+
+    Also checks the README's table "| <role> | <n> commands |" against the blocks: a count that
+    is not the number of commands the test runs stops the test.
+    """
+    import re
+
+    blocks = {}
+    for block in re.findall(r"^ *```sh\n(.*?)^ *```", readme, re.M | re.S):
+        lines = [ln.strip() for ln in block.splitlines()]
+        m = re.match(r"# (the teacher|a TA|a student)'s terminal, in (\S+)$", lines[0])
+        if m:
+            blocks[ROLES[m.group(1)]] = (m.group(2), [ln for ln in lines[1:] if ln.strip() and not ln.startswith("#")])
+    table = {ROLES[r]: int(n) for r, n in re.findall(r"^ *\| (the teacher|a TA|a student) \| (\d+) commands? \|", readme, re.M)}
+    counted = {role: len(cmds) for role, (_, cmds) in blocks.items()}
+    if set(table) != set(ROLES.values()) or any(table[r] != counted.get(r, 0) for r in table):
+        fail(f"docker/hub/README.md's commands per role {table} are not its blocks' {counted}")
+    return blocks
+
+
+def memory_of(container: str, docker: str = "docker") -> dict[str, float]:
+    """A server's container's memory cgroup, read on the host (v2 or v1): usage and peak [MiB]."""
+    import subprocess
+    from pathlib import Path
+
+    full = subprocess.run([docker, "inspect", "-f", "{{.Id}}", container], capture_output=True, text=True,
+                          check=True).stdout.strip()
+    for d in (Path(f"/sys/fs/cgroup/system.slice/docker-{full}.scope"), Path(f"/sys/fs/cgroup/docker/{full}")):
+        if (d / "memory.peak").exists():
+            return {"usage": int((d / "memory.current").read_text()) / 2**20,
+                    "peak": int((d / "memory.peak").read_text()) / 2**20}
+    d = Path(f"/sys/fs/cgroup/memory/docker/{full}")
+    if not (d / "memory.max_usage_in_bytes").exists():
+        fail(f"{container}'s memory cgroup is not under /sys/fs/cgroup (v2 or v1)")
+    return {"usage": int((d / "memory.usage_in_bytes").read_text()) / 2**20,
+            "peak": int((d / "memory.max_usage_in_bytes").read_text()) / 2**20}

@@ -35,6 +35,7 @@ NETWORK = env("SNAKEKIT_NETWORK", "snakekit-hub")
 HUB_HOST = env("SNAKEKIT_HUB_HOST", "hub")  # the hub container's name on that network
 INSTRUCTORS = [u for u in env("SNAKEKIT_INSTRUCTORS", "").split(",") if u]
 EXCHANGE_PORT = 10102
+GRADING_PORT = 10103
 
 # --- the hub and its proxy (Debian's configurable-http-proxy, started by the hub) -------------
 c.JupyterHub.ip = "0.0.0.0"
@@ -84,7 +85,7 @@ c.DockerSpawner.mem_limit = env("SNAKEKIT_MEM_LIMIT", "1G")
 c.DockerSpawner.cpu_limit = float(env("SNAKEKIT_CPU_LIMIT", "1"))
 # a class arriving at once on a small machine: JupyterLab starts slower when many start together
 c.DockerSpawner.start_timeout = int(env("SNAKEKIT_START_TIMEOUT", "300"))
-c.DockerSpawner.http_timeout = 180
+c.DockerSpawner.http_timeout = int(env("SNAKEKIT_HTTP_TIMEOUT", "180"))  # from the container's start to JupyterLab answering
 c.DockerSpawner.environment = {
     "SNAKEKIT_EXCHANGE_URL": f"http://{HUB_HOST}:{EXCHANGE_PORT}/services/exchange/",
     # the 3D view's servers on the container's loopback: reached only through the owner's Jupyter
@@ -93,8 +94,9 @@ c.DockerSpawner.environment = {
 }
 # What a server's own token ($JUPYTERHUB_API_TOKEN) may do: its activity, its own server, and
 # tell the exchange who it is (name and groups); nothing of anyone else.
+# (The grading service, too: it grades only for the instructors' group and refuses the rest.)
 c.Spawner.server_token_scopes = ["users:activity!user", "access:servers!server", "access:services!service=exchange",
-                                 "read:users:name!user", "read:users:groups!user"]
+                                 "access:services!service=grading", "read:users:name!user", "read:users:groups!user"]
 
 
 def course_for_instructors(spawner):
@@ -102,7 +104,10 @@ def course_for_instructors(spawner):
     if any(g.name == "instructors" for g in spawner.user.groups):
         spawner.image = GRADER_IMAGE
         spawner.volumes = {**spawner.volumes, "snakekit-course": "/home/student/course"}
-        spawner.environment = {**spawner.environment, "SNAKEKIT_ROLE": "instructor"}
+        # `snakekit grade` in their terminal asks the hub's grading service (grading_service.py)
+        spawner.environment = {**spawner.environment, "SNAKEKIT_ROLE": "instructor",
+                               "SNAKEKIT_GRADING_URL": f"http://{HUB_HOST}:{GRADING_PORT}/services/grading/",
+                               "SNAKEKIT_HUB_COURSE": "/home/student/course"}
 
 
 c.Spawner.pre_spawn_hook = course_for_instructors
@@ -131,7 +136,7 @@ else:
 c.Authenticator.admin_users = set(INSTRUCTORS[:1])  # the first instructor administers the hub
 c.JupyterHub.load_groups = {"instructors": {"users": INSTRUCTORS}}
 
-# --- services: the exchange and the idle culler ------------------------------------------------
+# --- services: the exchange, grading and the idle culler ---------------------------------------
 c.JupyterHub.services = [
     {
         "name": "exchange",
@@ -146,14 +151,28 @@ c.JupyterHub.services = [
         },
     },
     {
+        # grading for the instructors' group: the grader's container on the course volume (the
+        # engine's socket is the hub's, as for the spawner); a student gets 403
+        "name": "grading",
+        "url": f"http://{HUB_HOST}:{GRADING_PORT}",
+        "command": [sys.executable, os.path.join(os.path.dirname(__file__), "grading_service.py")],
+        "environment": {
+            "SNAKEKIT_GRADING_PORT": str(GRADING_PORT),
+            "SNAKEKIT_GRADER_IMAGE": GRADER_IMAGE,
+            "SNAKEKIT_COURSE_VOLUME": "snakekit-course",
+            "SNAKEKIT_INSTRUCTOR_GROUPS": "instructors",
+        },
+    },
+    {
         "name": "idle-culler",
         "command": [sys.executable, "-m", "jupyterhub_idle_culler", f"--timeout={env('SNAKEKIT_CULL_TIMEOUT', '3600')}",
                     f"--cull-every={env('SNAKEKIT_CULL_EVERY', '300')}"],
     },
 ]
 c.JupyterHub.load_roles = [
-    # every user may reach the exchange (it decides what each may do there)
-    {"name": "user", "scopes": ["self", "access:services!service=exchange"]},
+    # every user may reach the exchange (it decides what each may do there) and the grading
+    # service (it grades for the instructors' group only)
+    {"name": "user", "scopes": ["self", "access:services!service=exchange", "access:services!service=grading"]},
     {"name": "idle-culler", "services": ["idle-culler"],
      "scopes": ["list:users", "read:users:activity", "read:servers", "delete:servers"]},
 ]

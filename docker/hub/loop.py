@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """A week of the class on the hub, as its users do it (docker/hub/test.sh runs this).
 
-    loop.py HUB_URL --passwords CSV --students 20 [--old-shared-password PW] [--browser DIR]
+    loop.py HUB_URL --passwords CSV --students 20 [--submitting K] [--old-shared-password PW] [--browser DIR]
 
 First the log-ins the hub refuses: a student's name with another's password, the teacher's name
 with a student's password or none, the old shared password, a name without an account, and
@@ -9,10 +9,13 @@ the sign-up page. Then everyone logs in through the hub (its log-in form, with t
 password from CSV, ``username,password`` as docker/hub/accounts prints it, then a token from
 the hub's REST API) and
 works through their own server behind the hub's proxy: the instructor releases lesson 06;
-the students fetch it (the Assignments tab's API), fill the exercises (the instructor's
+the students (or the first K of them: --submitting) fetch it (the Assignments tab's API), fill the exercises (the instructor's
 answers, or for every third student a slip in one of them), save (the contents API) and
-submit; the TA collects, grades (`snakekit grade`, in the grader container on the course
-volume: docker/hub/grade) and returns the feedback; every student fetches it. Then the
+submit; the TA collects, grades (`snakekit grade`, which the hub's grading service runs in the
+grader's container on the course volume) and returns the feedback; every student fetches it.
+The instructor's and TA's commands are docker/hub/README.md's, run as typed in a terminal of
+their server (a login shell in ~/course). The class logs in at once: each student's log-in,
+token and server start together, timed to a ready server. Then the
 refusals: a student submitting as another, reading another's submission or feedback,
 collecting, reaching another's server or the hub's secrets; a submission over the size limit
 and a full exchange get their messages; a stopped (culled) server loses nothing saved. After
@@ -38,7 +41,7 @@ from pathlib import Path
 
 import nbformat
 import requests
-from checks import fail, log_in, refused_log_ins, say, view_is_the_owners
+from checks import fail, log_in, memory_of, refused_log_ins, role_commands, say, view_is_the_owners
 
 REPO = Path(__file__).resolve().parents[2]
 LESSON = "06_coded_sweep"
@@ -61,7 +64,7 @@ class User:
             fail(f"{name} could not log in with their own password: {r.status_code}")
         self.web = s  # the browser's session: the hub's log-in cookie
         r = s.post(f"{self.hub}/hub/api/users/{name}/tokens", json={"note": "class week", "expires_in": 7200},
-                   headers={"X-XSRFToken": s.cookies.get("_xsrf")}, timeout=30)
+                   headers={"X-XSRFToken": s.cookies.get("_xsrf")}, timeout=300)
         if r.status_code != 201:
             fail(f"{name}: no token from the REST API: {r.status_code} {r.text[:200]}")
         self.token = r.json()["token"]
@@ -72,19 +75,20 @@ class User:
         self.http.headers["Connection"] = "close"
 
     def api(self, method: str, path: str, **kw) -> requests.Response:
-        return self.http.request(method, f"{self.hub}/hub/api{path}", timeout=120, **kw)
+        return self.http.request(method, f"{self.hub}/hub/api{path}", timeout=300, **kw)
 
     def server(self, method: str, path: str, **kw) -> requests.Response:
         return self.http.request(method, f"{self.hub}/user/{self.name}/{path}", timeout=300, **kw)
 
-    def spawn(self) -> float:
-        t = time.monotonic()
+    def spawn(self, t: float | None = None) -> float:
+        """Starts the server and waits until it answers: seconds from ``t`` (default: now)."""
+        t = time.monotonic() if t is None else t
         r = self.api("POST", f"/users/{self.name}/server")
         if r.status_code not in (201, 202, 400):
             fail(f"{self.name}: spawn refused: {r.status_code} {r.text[:200]}")
         return self.wait_ready(t)
 
-    def wait_ready(self, t: float, limit: float = 300) -> float:
+    def wait_ready(self, t: float, limit: float = 900) -> float:
         while time.monotonic() - t < limit:
             model = self.api("GET", f"/users/{self.name}").json()
             srv = model.get("servers", {}).get("", {})
@@ -131,6 +135,15 @@ class User:
             fail(f"{self.name}: {len(ids)} containers")
         return ids[0]
 
+    def terminal(self, cmd: str, folder: str = "work", check: bool = True) -> subprocess.CompletedProcess:
+        """``cmd`` as typed in a terminal of the user's JupyterLab: a login shell (its /etc/profile
+        sets PATH afresh) in ~/folder, with the server's environment."""
+        r = subprocess.run([DOCKER, "exec", "-w", f"/home/student/{folder.rstrip('/')}", self.container(), "bash", "-lc",
+                            cmd], capture_output=True, text=True)
+        if check and r.returncode != 0:
+            fail(f"{self.name}'s terminal, in {folder}$ {cmd}: exit {r.returncode}\n{r.stdout[-1500:]}\n{r.stderr[-1500:]}")
+        return r
+
     def sh(self, cmd: str, check: bool = True) -> subprocess.CompletedProcess:
         r = subprocess.run([DOCKER, "exec", "-w", "/home/student/work", self.container(), "bash", "-c", cmd],
                            capture_output=True, text=True)
@@ -166,11 +179,13 @@ def main() -> int:
     p = argparse.ArgumentParser()
     p.add_argument("hub")
     p.add_argument("--students", type=int, default=20)
+    p.add_argument("--submitting", type=int, default=0, metavar="K",
+                   help="how many of them fetch, fill and submit the lesson, the TA grades and returns (default: all); "
+                        "every student still logs in at once, and the refusals are tried between two of them")
     p.add_argument("--passwords", required=True, metavar="CSV",
                    help="username,password for everyone (docker/hub/accounts' output, the instructors' from docker/hub/up)")
     p.add_argument("--old-shared-password", default="", help="the old dummy log-in's shared password, to be refused")
     p.add_argument("--submit-limit-mb", type=float, default=float(os.environ.get("SNAKEKIT_SUBMIT_LIMIT_MB", "20")))
-    p.add_argument("--grade", default=str(REPO / "docker/hub/grade"))
     p.add_argument("--browser", metavar="OUT_DIR", help="open lesson 00 in headless Chromium through the hub's "
                    "proxy with docker/browser-check (the 3D view through the Jupyter port), screenshots to OUT_DIR")
     p.add_argument("--bench", action="store_true", help="then the figures of bench/hub.py: warm spawns, "
@@ -184,26 +199,56 @@ def main() -> int:
         fail(f"no password in {args.passwords} for {', '.join(missing)}")
     refused_log_ins(args.hub, pw, args.old_shared_password)
     teacher, ta = User(args.hub, "teacher", pw["teacher"]), User(args.hub, "ta", pw["ta"])
-    with ThreadPoolExecutor(8) as pool:
-        students = list(pool.map(lambda n: User(args.hub, n, pw[n]), names))
-    say(f"{2 + len(students)} users logged in through the hub's form and REST API")
 
     # --- the servers: the instructor's and TA's first (they share the course volume) ------------
-    t = time.monotonic()
     spawn_teacher = teacher.spawn()
     print(f"figure: spawn to ready, first server (the engine's image cache warm): {spawn_teacher:.1f} s", flush=True)
     ta.spawn()
-    with ThreadPoolExecutor(5) as pool:  # students arriving five at a time
-        spawn_times = list(pool.map(User.spawn, students))
-    say(f"{len(students)} students' servers ready in {time.monotonic() - t:.1f} s "
-        f"(each: median {statistics.median(spawn_times):.1f} s, max {max(spawn_times):.1f} s, five started at a time)")
 
-    # --- the instructor releases lesson 06 ----------------------------------------------------------
-    teacher.sh(f"cd ~/course && nbgrader generate_assignment {LESSON} --force >/dev/null 2>&1 "
-               f"&& nbgrader release_assignment {LESSON} --force")
-    say(f"teacher: {LESSON} generated and released to the hub's exchange")
+    # --- the class logs in at once. With --bench first with no server running: each student's log-in
+    # form, token and server start together, until it answers; then (always) to the servers the
+    # teacher started before the lesson (Start All), as docker/hub/README.md advises.
+    if args.bench:
+        def arrive(name: str) -> tuple[User, float]:
+            t = time.monotonic()
+            u = User(args.hub, name, pw[name])
+            return u, u.spawn(t)
+
+        t = time.monotonic()
+        with ThreadPoolExecutor(len(names)) as pool:
+            arrived = list(pool.map(arrive, names))
+        students, ready = [u for u, _ in arrived], [r for _, r in arrived]
+        print(f"figure: {len(students)} students logging in at once, no server running, log-in to a ready server: "
+              f"median {statistics.median(ready):.1f} s, max {max(ready):.1f} s; each: "
+              + ", ".join(f"{u.name} {r:.1f}" for u, r in arrived), flush=True)
+        with ThreadPoolExecutor(8) as pool:
+            list(pool.map(User.stop, students))
+    students = prestarted(args.hub, teacher, names, pw)
+    say(f"{len(students)} students logged in at once, each with a ready server")
+    peaks = [memory_of(u.container(), DOCKER)["peak"] for u in students]
+    print(f"figure: memory: {len(students)} students' servers, started and logged in to, each container's peak: "
+          f"median {statistics.median(peaks):.0f} MiB, max {max(peaks):.0f} MiB", flush=True)
+
+    # --- every terminal has the kit's commands, login shells included -----------------------------
+    for u in (teacher, ta, students[0]):
+        for shell in ("bash -lc", "sh -lc"):
+            r = u.sh(f"env -i HOME=/home/student PATH=/usr/bin:/bin {shell} 'command -v snakekit && command -v nbgrader'")
+            if r.stdout.split() != ["/opt/venv/bin/snakekit", "/opt/venv/bin/nbgrader"]:
+                fail(f"{u.name}: {shell} 'command -v snakekit && command -v nbgrader' gave {r.stdout!r}")
+    say("every terminal has snakekit and nbgrader on its PATH: bash -l and sh -l, in the teacher's, "
+        "the TA's and a student's server")
+
+    # --- the instructor releases lesson 06 (their commands as docker/hub/README.md gives them) ------
+    roles = role_commands((REPO / "docker/hub/README.md").read_text())
+    folder, commands = roles["teacher"]
+    for cmd in commands:
+        teacher.terminal(cmd, folder)
+    say(f"teacher: {LESSON} generated and released to the hub's exchange "
+        f"({len(commands)} commands in the teacher's terminal, in {folder})")
 
     # --- the students: fetch, fill, save, submit ---------------------------------------------------
+    class_ = students
+    students = class_[:args.submitting or len(class_)]
     sol = solutions()
     slip = {**sol, "ex06_1_sweep_times": "def sweep_times(points, rate):\n    return np.arange(points) / 10.0"}
     plan = {s.name: ("wrong" if i % 3 == 2 else "right") for i, s in enumerate(students)}
@@ -228,19 +273,30 @@ def main() -> int:
         list(pool.map(work, students))
     say(f"{len(students)} students fetched, filled and submitted {LESSON} in {time.monotonic() - t:.1f} s")
 
-    # --- the TA: collect, grade, return -----------------------------------------------------------
-    out = ta.sh(f"cd ~/course && nbgrader collect {LESSON} 2>&1").stdout
+    # --- the TA: collect, grade, return, in their terminal (docker/hub/README.md's commands) --------
+    folder, commands = roles["ta"]
+    if [c.split()[:2] for c in commands] != [["nbgrader", "collect"], ["snakekit", "grade"], ["snakekit", "return"]]:
+        fail(f"docker/hub/README.md's TA commands are not collect, grade, return: {commands}")
+    out = ta.terminal(commands[0] + " 2>&1", folder).stdout
     collected = sorted(d for d in ta.sh("ls ~/course/submitted").stdout.split())
-    if collected != sorted(names):
-        fail(f"collected {collected}, expected {names}\n{out[-800:]}")
+    if collected != sorted(s.name for s in students):
+        fail(f"collected {collected}, expected {[s.name for s in students]}\n{out[-800:]}")
     say(f"ta: collected {len(collected)} submissions from the exchange")
     t = time.monotonic()
-    r = subprocess.run([args.grade, LESSON], capture_output=True, text=True)
+    r = ta.terminal(commands[1], folder, check=False)
     grade_s = time.monotonic() - t
-    if r.returncode != 0:
-        fail(f"grading: exit {r.returncode}\n{r.stdout[-1500:]}\n{r.stderr[-1500:]}")
-    print(f"figure: grading the {len(collected)} collected submissions (snakekit grade, grader container): {grade_s:.1f} s",
-          flush=True)
+    if r.returncode != 0 or "graded by the hub's grading service" not in r.stdout:
+        fail(f"grading from the TA's terminal: exit {r.returncode}\n{r.stdout[-1500:]}\n{r.stderr[-1500:]}")
+    print(f"figure: grading the {len(collected)} collected submissions (snakekit grade in the TA's terminal, the "
+          f"hub's grading service): {grade_s:.1f} s", flush=True)
+    r = students[0].http.post(f"{args.hub}/services/grading/api/grade/{LESSON}", json={}, timeout=60)
+    own = students[0].sh(f"cd ~/course && SNAKEKIT_GRADING_URL=http://hub:10103/services/grading/ "
+                         f"snakekit grade {LESSON} --course /home/student/course", check=False)
+    if r.status_code != 403 or own.returncode != 2 or "refused (403)" not in own.stderr:
+        fail(f"a student grading: the service answered {r.status_code}; snakekit grade in their server: exit "
+             f"{own.returncode} {own.stderr[-400:]}")
+    say(f"refused: grading for a student (the grading service 403 to {students[0].name}'s token; snakekit grade "
+        f"in their server: {own.stderr.strip().splitlines()[-1][:160]})")
     rows = {row["student"]: row for row in csv.DictReader(io.StringIO(ta.sh(f"cat ~/course/grades-{LESSON}.csv").stdout))}
     for s in students:
         row = rows.get(s.name) or fail(f"no grade for {s.name}: {sorted(rows)}")
@@ -249,7 +305,7 @@ def main() -> int:
             fail(f"{s.name} ({plan[s.name]}): {row}")
     say(f"grades: {sum(v == 'right' for v in plan.values())} right at full marks, "
         f"{sum(v == 'wrong' for v in plan.values())} with a slip below them")
-    out = ta.sh(f"cd ~ && snakekit return {LESSON} 2>&1").stdout
+    out = ta.terminal(commands[2] + " 2>&1", folder).stdout
     if f"released {len(students)} student(s)' feedback to the exchange" not in out:
         fail(f"snakekit return: {out[-800:]}")
     say(f"ta: feedback returned ({out.strip().splitlines()[-1][:120]})")
@@ -388,14 +444,58 @@ def main() -> int:
             if line.startswith("browser:"):
                 say(line)
         if r.returncode != 0:
-            fail(f"lesson 00 in Chromium through the hub: {r.stdout[-1500:]}\n{r.stderr[-1500:]}")
+            fail(f"lesson 00 in Chromium through the hub: exit {r.returncode}: {r.stdout[-1500:]}\n{r.stderr[-1500:]}")
         print(f"figure: lesson 00 in headless Chromium through the hub's proxy, the arm drawn and moved: "
               f"{time.monotonic() - t:.0f} s", flush=True)
+        mem = memory_of(a.container(), DOCKER)
+        print(f"figure: memory: {a.name}'s server with lesson 00 run and its 3D view open in Chromium: usage "
+              f"{mem['usage']:.0f} MiB, peak {mem['peak']:.0f} MiB (its container's cgroup)", flush=True)
         view_is_the_owners(args.hub, a, b)
-    print(f"figure: the whole loop on the hub ({len(students)} students): {time.monotonic() - t0:.0f} s", flush=True)
+    print(f"figure: the whole loop on the hub ({len(class_)} students, {len(students)} submitting): "
+          f"{time.monotonic() - t0:.0f} s", flush=True)
     if args.bench:
-        bench(args.hub, students)
+        bench(args.hub, class_)
     return 0
+
+
+def prestarted(hub: str, teacher: User, names: list[str], pw: dict[str, str]) -> list[User]:
+    """The class logging in at once to servers the teacher started before the lesson (the admin
+    page's Start All: the hub's API with the teacher's token): each student's log-in to a ready server."""
+    def start_for(name: str) -> None:
+        r = teacher.api("POST", f"/users/{name}/server")
+        if r.status_code not in (201, 202, 400):  # 400: running already
+            fail(f"the teacher starting {name}'s server: {r.status_code} {r.text[:200]}")
+        t = time.monotonic()
+        while not teacher.api("GET", f"/users/{name}").json().get("servers", {}).get("", {}).get("ready"):
+            if time.monotonic() - t > 900:
+                fail(f"{name}'s server, started by the teacher, was not ready within 900 s")
+            time.sleep(0.5)
+
+    # the class on the hub's user list (Admin > Add Users, once: an account alone is not a hub user
+    # until its first log-in); 409 when every name is there already
+    r = teacher.api("POST", "/users", json={"usernames": names})
+    if r.status_code not in (201, 409):
+        fail(f"the teacher adding the class to the hub's users: {r.status_code} {r.text[:200]}")
+    # five at a time: 25 servers started together on a busy 2-core machine starve the proxy, whose
+    # API then times out on the hub (it stops those servers: bench/hub.py's run at load 35)
+    t = time.monotonic()
+    with ThreadPoolExecutor(5) as pool:
+        list(pool.map(start_for, names))
+    print(f"figure: teacher: every student's server started before the lesson (five at a time) in "
+          f"{time.monotonic() - t:.1f} s", flush=True)
+
+    def arrive(name: str) -> tuple[User, float]:
+        t = time.monotonic()
+        u = User(hub, name, pw[name])
+        return u, u.spawn(t)  # running already: the hub says so (400), and it answers
+
+    with ThreadPoolExecutor(len(names)) as pool:
+        arrived = list(pool.map(arrive, names))
+    print(f"figure: {len(names)} students logging in at once to servers started before the lesson, log-in to "
+          f"a ready server: median {statistics.median([r for _, r in arrived]):.1f} s, max "
+          f"{max(r for _, r in arrived):.1f} s (target <= 30 s); each: "
+          + ", ".join(f"{u.name} {r:.1f}" for u, r in arrived), flush=True)
+    return [u for u, _ in arrived]
 
 
 def hub_memory() -> float:

@@ -11,7 +11,9 @@
 # (NativeAuthenticator) and for LTI 1.3 (check-config); the start command as docker/hub/README.md
 # writes it (a single-node swarm, SwarmSpawner; it makes the instructor's and TA's accounts);
 # the students' accounts from a roster (docker/hub/accounts); then loop.py: the refused log-ins,
-# 20 students, the instructor, the TA, the refusals and limits, one student's lesson 00 in
+# 25 students logging in at once (the time to a ready server for each), the kit's commands in
+# every terminal, the instructor's and TA's commands as docker/hub/README.md gives them (grading
+# through the hub's grading service; a student refused), the refusals and limits, one student's lesson 00 in
 # headless Chromium through the hub's proxy (docker/browser-check), and that student's 3D view
 # refused to another student (on the network and through the hub). On exit the engine stops and
 # the host is checked and restored (engine_stop), as after docker/test.sh.
@@ -23,7 +25,10 @@ set -uo pipefail
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$ROOT"
 VENV_BIN="$ROOT/${SNAKEKIT_VENV:-.venv}/bin"
-STUDENTS=${SNAKEKIT_HUB_STUDENTS:-20}
+STUDENTS=${SNAKEKIT_HUB_STUDENTS:-25}
+# of them, how many submit lesson 06 for the TA to grade and return: grading is the grader's own
+# suite's (tests/grader/), here the route through the hub (bench/hub.py: the whole class)
+SUBMITTING=${SNAKEKIT_HUB_SUBMITTING:-6}  # 0: all
 say() { echo "hub-test: $*"; }
 figure() { echo "figure: $*"; }
 die() { echo "hub-test: FAILED: $*" >&2; exit 1; }
@@ -42,6 +47,7 @@ finish() {
   exit $rc
 }
 trap finish EXIT
+trap 'exit 143' INT TERM
 engine_on_stop() {
   $DOCKER rm -f snakekit-hub >/dev/null 2>&1
   local s; s=$($DOCKER service ls -q 2>/dev/null); [ -z "$s" ] || $DOCKER service rm $s >/dev/null 2>&1
@@ -91,6 +97,8 @@ fi
 OLD_SHARED=week-of-class-$$
 export SNAKEKIT_DUMMY_PASSWORD=$OLD_SHARED SNAKEKIT_HUB_BIND=127.0.0.1:18000
 export SNAKEKIT_SUBMIT_LIMIT_MB=8 SNAKEKIT_EXCHANGE_QUOTA_MB=64 SNAKEKIT_MEM_LIMIT=768M SNAKEKIT_CPU_LIMIT=1
+# bounds for a hang, not speeds: 25 servers starting at once on a busy 2-core machine take minutes
+export SNAKEKIT_START_TIMEOUT=900 SNAKEKIT_HTTP_TIMEOUT=900
 # The start command exactly as docker/hub/README.md gives it (the settings above in the environment)
 start=$(awk '/^## Start it/ {f = 1} f && /^```sh$/ {getline; print; exit}' docker/hub/README.md)
 [ "$start" = "SNAKEKIT_INSTRUCTORS=teacher,ta docker/hub/up" ] \
@@ -111,7 +119,7 @@ tail -n +2 "$RUN/students.csv" >> "$RUN/passwords.csv"
 say "accounts: teacher and ta made by docker/hub/up, $STUDENTS students' by docker/hub/accounts from the roster, a first password each"
 # Lesson 00 in headless Chromium through the hub's proxy (docker/browser-check --hub-user: the
 # student logs in on the hub's page), the 3D view drawn and moved; screenshots in artifacts/hub.
-DOCKER=$DOCKER "$VENV_BIN/python" docker/hub/loop.py http://127.0.0.1:18000 --students "$STUDENTS" --browser "$ROOT/artifacts/hub" \
+DOCKER=$DOCKER "$VENV_BIN/python" docker/hub/loop.py http://127.0.0.1:18000 --students "$STUDENTS" --submitting "$SUBMITTING" --browser "$ROOT/artifacts/hub" \
   --passwords "$RUN/passwords.csv" --old-shared-password "$OLD_SHARED" \
   --submit-limit-mb "$SNAKEKIT_SUBMIT_LIMIT_MB" ${SNAKEKIT_HUB_BENCH:+--bench} || die "the week on the hub failed"
 figure "hub memory after the week: $($DOCKER stats --no-stream --format '{{.MemUsage}}' snakekit-hub)"

@@ -14,23 +14,26 @@ Exit codes: 0 the batch completed (even if some submissions failed: see the CSV)
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 from snakekit.errors import SnakekitError
 
+from grader.course.folder import default_course
 from grader.files import CommandParser
 from grader.scoring import references as recorded_references
 from grader.scoring import draws
 
-COURSE = Path("course")
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = CommandParser(prog="snakekit grade", description="Grade every submission of an assignment: nbgrader's "
                 "autograde in parallel sandboxes, scored against the reference runs, with feedback.")
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
-    p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
+    p.add_argument("--course", type=Path, default=default_course(),
+                   help="the nbgrader course folder (default: the current folder when it holds "
+                        "nbgrader_config.py, else course/)")
     p.add_argument("--jobs", type=int, default=None, help="submissions graded at once (default: one more than the cores)")
     p.add_argument("--timeout", type=float, default=120.0,
                    help="wall-clock limit of a whole notebook [s]: at its end the running cell is stopped and the "
@@ -125,7 +128,7 @@ def interrupted(course: Path, assignment: str, results: list, students: list[str
     again = " ".join(f"--student {s}" for s in left[:20])
     print(f"snakekit grade: interrupted; {len(done)} submission(s) graded before it are in the gradebook and "
           f"{csv_path}, the other {len(left)} are as they were"
-          + (f" (grade them: `snakekit grade {assignment}{'' if course == COURSE else f' --course {course}'} "
+          + (f" (grade them: `snakekit grade {assignment}{'' if course == default_course() else f' --course {course}'} "
              f"{excerpt(again, 300, quote=False)}`"
              f"{' ...' if len(left) > 20 else ''})" if left else ""), file=sys.stderr)
     return 130
@@ -134,6 +137,10 @@ def interrupted(course: Path, assignment: str, results: list, students: list[str
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
     args = build_parser().parse_args(argv)
+    if os.environ.get("SNAKEKIT_GRADING_URL"):  # an instructor's or TA's server on the class's hub
+        from grader.lms.hub_grading import grade_on_hub
+
+        return grade_on_hub(args, out)
     course = args.course
     args.references = args.references or recorded_references.course_references(course)
     problems = []

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from snakekit.errors import SnakekitError
 
+from grader.course.folder import default_course
 from grader.errors import CourseError
 from grader.files import check_output, one_line
 from grader.arm import lock
@@ -31,7 +32,9 @@ def parser(calibrating: bool) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="snakekit lab" + (" calibrate" if calibrating else ""),
                                 description="Graded runs of the students' trajectories on the arm (docs/lab.md).")
     p.add_argument("assignment")
-    p.add_argument("--course", type=Path, default=Path("course"), help="the course folder (default: course)")
+    p.add_argument("--course", type=Path, default=default_course(),
+                   help="the nbgrader course folder (default: the current folder when it holds "
+                        "nbgrader_config.py, else course/)")
     arm = p.add_mutually_exclusive_group()
     arm.add_argument("--port", help="the arm's serial port or a bridge's socket:// URL (default: $SNAKEKIT_PORT)")
     arm.add_argument("--emulator", action="store_true", help="the bus emulator instead of the arm")

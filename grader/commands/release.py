@@ -25,11 +25,10 @@ from snakekit.errors import SnakekitError
 
 from grader.commands.late import EXAMPLES, LatePenalty, LateRule, parse
 from grader.course import solutions
-from grader.course.folder import backup_gradebook, config, generate, gradebook
+from grader.course.folder import backup_gradebook, config, default_course, generate, gradebook
 from grader.errors import CourseError
 from grader.files import CommandParser, excerpt, one_line
 
-COURSE = Path("course")
 PLUGIN = f"{LatePenalty.__module__}.{LatePenalty.__name__}"
 BEGIN = "# --- late penalties: written by `snakekit release` (change them with it) ---"
 END = "# --- end of the late penalties ---"
@@ -155,7 +154,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
                 "date into the gradebook, the late-penalty rule into the course's config, and with --exchange "
                 "nbgrader release_assignment.")
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep (a folder of <course>/source/)")
-    p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
+    p.add_argument("--course", type=Path, default=default_course(),
+                   help="the nbgrader course folder (default: this folder when it is one, else course/)")
     p.add_argument("--due", default=None, help="the due date, e.g. '2026-03-02 23:59' (in --timezone) or "
                    "'2026-03-02 23:59 Europe/Zurich'")
     p.add_argument("--timezone", default="UTC", help="zone of a --due without one (default: UTC)")

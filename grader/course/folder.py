@@ -23,6 +23,14 @@ from grader.errors import CourseError
 #: Backups of the gradebook kept in ``<course>/backups/`` (the oldest are removed).
 BACKUPS_KEPT = 20
 
+
+def default_course() -> Path:
+    """The course folder a TA's command works on without ``--course``: the current folder when it
+    is one (it holds ``nbgrader_config.py``, as ``course/`` does where nbgrader's own commands
+    run), else ``course/`` in it (the repository's root)."""
+    return Path.cwd() if Path("nbgrader_config.py").is_file() else Path("course")
+
+
 def config(course: Path):
     """The course's ``nbgrader_config.py`` as a traitlets Config (empty if there is none)."""
     from traitlets.config import Config

@@ -47,13 +47,12 @@ from pathlib import Path
 
 from snakekit.errors import SnakekitError
 
-from grader.course.folder import default_roster, gradebook, require
+from grader.course.folder import default_course, default_roster, gradebook, require
 from grader.errors import CourseError
 from grader.files import CommandParser, excerpt, file_name, one_line, read_table, student_id, uninterrupted, unique_in
 from grader.lms.download import RESUBMISSION, Upload, read_download
 from grader.lms.roster import Roster, no_roster_who, normal_name
 
-COURSE = Path("course")
 MANIFEST_COLUMNS = ["student", "lms", "lms_id", "lms_name", "file", "notebook", "submitted_at", "late", "attempts", "note"]
 
 
@@ -367,7 +366,9 @@ def main(argv: list[str] | None = None, out=None) -> int:
                 "<student>.ipynb) into the course's submitted/ folder, the newest attempt of each student.")
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
     p.add_argument("--from", dest="source", type=Path, required=True, help="the download: a zip or a folder")
-    p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
+    p.add_argument("--course", type=Path, default=default_course(),
+                   help="the nbgrader course folder (default: the current folder when it holds "
+                        "nbgrader_config.py, else course/)")
     p.add_argument("--roster", type=Path, default=None, help="CSV: student and canvas_id / moodle_id / name ... "
                    "(default: <course>/roster.csv if it exists)")
     p.add_argument("--times", type=Path, default=None, help="CSV of submission times (Moodle's grading worksheet, "

@@ -47,11 +47,10 @@ from grader.lms.collect import read_manifest
 from grader.lms.roster import Roster
 from snakekit.errors import SnakekitError
 
-from grader.course.folder import config, course_id, default_roster, gradebook, require
+from grader.course.folder import config, course_id, default_course, default_roster, gradebook, require
 from grader.errors import CourseError
 from grader.files import CommandParser, check_output, excerpt, one_line, uninterrupted
 
-COURSE = Path("course")
 CANVAS_PREFIX = re.compile(r"^(?P<prefix>.*?_(?:\d+|anon_[A-Za-z0-9]+)_\d+_)")
 
 
@@ -110,7 +109,9 @@ def export_main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
     p = CommandParser(prog="snakekit export", description="One row per student, one column per assignment and the "
                 "total (late penalties applied), for Canvas's or Moodle's grade import.")
-    p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
+    p.add_argument("--course", type=Path, default=default_course(),
+                   help="the nbgrader course folder (default: the current folder when it holds "
+                        "nbgrader_config.py, else course/)")
     p.add_argument("--lms", choices=["canvas", "moodle"], default=None, help="the LMS's import format")
     p.add_argument("-o", "--out", type=Path, default=None, help="the CSV (default: <course>/grades-<lms or all>.csv)")
     p.add_argument("--roster", type=Path, default=None, help="the roster CSV (default: <course>/roster.csv)")
@@ -274,7 +275,9 @@ def return_main(argv: list[str] | None = None, out=None, *, before=None) -> int:
     p = CommandParser(prog="snakekit return", description="Hand each student's safe feedback page back: to the hub's "
                 "exchange (nbgrader fetch_feedback) or as one zip for the LMS's bulk feedback upload.")
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
-    p.add_argument("--course", type=Path, default=COURSE, help="the nbgrader course folder (default: course/)")
+    p.add_argument("--course", type=Path, default=default_course(),
+                   help="the nbgrader course folder (default: the current folder when it holds "
+                        "nbgrader_config.py, else course/)")
     p.add_argument("--exchange", type=Path, default=None, help="nbgrader's exchange folder (default: the "
                    "course's Exchange.root, else nbgrader's /srv/nbgrader/exchange)")
     p.add_argument("-o", "--out", type=Path, default=None, help="the LMS zip (default: <course>/feedback-<a>-<lms>.zip)")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 from pathlib import Path
 
@@ -47,9 +48,21 @@ def run_on_engine(script: str, capsys, *, what: str, show: tuple[str, ...], time
         need_program("chromium")
         need("playwright.sync_api")
     env = dict(os.environ, PATH=f"{ROOT / '.venv/bin'}:{os.environ['PATH']}")
-    proc = subprocess.run(["bash", str(ROOT / script)], cwd=ROOT, env=env, capture_output=True, text=True,
-                          timeout=timeout_min * 60)
-    out = proc.stdout + proc.stderr
+    proc = subprocess.Popen(["bash", str(ROOT / script)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        out, _ = proc.communicate(timeout=timeout_min * 60)
+        late = ""
+    except subprocess.TimeoutExpired:
+        # a bound for a hang: stop the script's process group (dockerd has its own session), so its
+        # exit trap removes what ran and stops the engine; then the lines it printed so far
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            out, _ = proc.communicate(timeout=300)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            out, _ = proc.communicate()
+        late = f"{what}: stopped after its limit of {timeout_min} min"
     shown = [line for line in out.splitlines() if line.startswith(show) or "FAILED" in line]
     with capsys.disabled():
         print()
@@ -57,6 +70,7 @@ def run_on_engine(script: str, capsys, *, what: str, show: tuple[str, ...], time
             print(line)
     # the script's own lines first: under xdist the lines printed above stay in the worker, and the
     # output's end is mostly dockerd's log
+    assert not late, late + "; its lines until then:\n" + "\n".join(shown)[-6000:] + "\n--- the output's end:\n" + out[-3000:]
     assert proc.returncode == 0, "\n".join(shown)[-6000:] + "\n--- the output's end:\n" + out[-3000:]
     assert "host state checked" in out, out[-3000:]  # the engine stopped, the host as it was
     return out

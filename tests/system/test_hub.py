@@ -30,12 +30,12 @@ def test_the_hub_and_the_image_pin_one_jupyterhub_of_the_same_major_version():
 
 @on_engine
 def test_hub_week_of_a_class(capsys):
-    """docker/hub/test.sh: the hub starts; 20 students fetch, submit and get feedback; refusals."""
-    out = run_on_engine("docker/hub/test.sh", capsys, what="the hub test", timeout_min=30,
+    """docker/hub/test.sh: the hub starts; 25 students log in at once, 6 fetch, submit and get feedback; refusals."""
+    out = run_on_engine("docker/hub/test.sh", capsys, what="the hub test", timeout_min=45,
                         show=("figure:", "hub-test:", "hub:", "check-config:"))
     assert "hub-test: passed" in out
     # identity: accounts made by the teacher, a password each; what a student could try is refused
-    assert "accounts: teacher and ta made by docker/hub/up, 20 students' by docker/hub/accounts" in out, out[-3000:]
+    assert "accounts: teacher and ta made by docker/hub/up, 25 students' by docker/hub/accounts" in out, out[-3000:]
     assert re.search(r"refused log-ins \(9\): s02 with s01's password; teacher with a student's password; "
                      r"teacher with the TA's password; teacher with no password; s01 with no password; "
                      r"a name without an account; teacher with the old shared password; s01 with the old shared "
@@ -47,7 +47,26 @@ def test_hub_week_of_a_class(capsys):
                      r"snakekit-lab-s01:8888 open\), through the hub /user/s01/proxy/70\d\d/static/ 40[34] with s02's "
                      r"token and 403 with s02's log-in; s01's own: 200", out), out[-3000:]
     assert "all known and valid" in out and "LTI13Authenticator" in out
-    assert re.search(r"20 students fetched, filled and submitted", out), out[-3000:]
+    assert re.search(r"6 students fetched, filled and submitted", out), out[-3000:]  # docker/hub/test.sh's SUBMITTING
+    # the class logging in at once (to the servers the teacher started before): every one of the 25
+    # ready, each one's time printed
+    assert "25 students logged in at once, each with a ready server" in out
+    again = re.search(r"figure: 25 students logging in at once to servers started before the lesson, log-in to a "
+                      r"ready server: median [\d.]+ s, max [\d.]+ s \(target <= 30 s\); each: (.*)", out)
+    assert again, out[-3000:]
+    assert [n for n, _ in re.findall(r"(s\d\d) ([\d.]+)", again.group(1))] == [f"s{i:02d}" for i in range(1, 26)]
+    # no host shell: the kit's commands in every terminal; the README's commands per role; grading from the hub
+    assert ("every terminal has snakekit and nbgrader on its PATH: bash -l and sh -l, in the teacher's, the TA's "
+            "and a student's server") in out, out[-3000:]
+    assert "(2 commands in the teacher's terminal, in course/)" in out, out[-3000:]
+    assert re.search(r"figure: grading the 6 collected submissions \(snakekit grade in the TA's terminal, the hub's "
+                     r"grading service\): [\d.]+ s", out), out[-3000:]
+    assert re.search(r"refused: grading for a student \(the grading service 403 to s01's token; snakekit grade in "
+                     r"their server: snakekit grade: the hub's grading service refused \(403\): s01 is not an "
+                     r"instructor or TA", out), out[-3000:]
+    assert "ta: feedback returned" in out
+    assert re.search(r"figure: memory: s01's server with lesson 00 run and its 3D view open in Chromium: usage \d+ MiB, "
+                     r"peak \d+ MiB", out), out[-3000:]
     assert "every student fetched their feedback page" in out
     for refusal in ("submitting as", "collecting or reading others' submissions", "another's feedback",
                     "the hub's tokens", "over the size limit", "a full exchange",
