@@ -159,7 +159,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     p.add_argument("--due", default=None, help="the due date, e.g. '2026-03-02 23:59' (in --timezone) or "
                    "'2026-03-02 23:59 Europe/Zurich'")
     p.add_argument("--timezone", default="UTC", help="zone of a --due without one (default: UTC)")
-    p.add_argument("--late-penalty", default=None, metavar="RULE", help=f"what a late notebook loses: {EXAMPLES} "
+    p.add_argument("--late-penalty", default=None, metavar="RULE", help=f"what a late notebook loses: {EXAMPLES.replace('%', '%%')} "
                    "(per-UNIT:N is N points per started minute/hour/day/week late, per-UNIT:N%% N %% of its score)")
     p.add_argument("--exchange", nargs="?", const=True, default=None, type=Path, metavar="DIR",
                    help="also release to nbgrader's exchange (the hub's, or DIR): nbgrader release_assignment")

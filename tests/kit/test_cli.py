@@ -1,5 +1,6 @@
 """`snakekit sweep` as a user runs it: summary, saved run, plot, and clear failures."""
 
+import re
 import subprocess
 import sys
 import time
@@ -74,6 +75,22 @@ def test_console_script_is_installed():
     exe = Path(sys.executable).parent / "snakekit"
     r = subprocess.run([str(exe), "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "sweep" in r.stdout and "emulator" in r.stdout
+
+
+def _commands() -> list[str]:
+    """Every command `snakekit --help` lists, and the plug-in commands it runs (snakekit lab, ...)."""
+    from snakekit.cli import PLUGIN_COMMANDS
+
+    r = subprocess.run(SNAKEKIT + ["--help"], capture_output=True, text=True, timeout=60)
+    names = re.findall(r"^    (\w+) ", r.stdout, re.M)
+    return sorted(set(names) | set(PLUGIN_COMMANDS))
+
+
+@pytest.mark.parametrize("command", _commands())
+def test_every_commands_help_prints_its_usage(command):
+    r = subprocess.run(SNAKEKIT + [command, "--help"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.startswith("usage: ") and "Traceback" not in r.stdout + r.stderr, r.stdout[:500] + r.stderr[-500:]
 
 
 def test_emulator_command_prints_a_port_the_sdk_can_use():
