@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import datetime as dt
 import os
 import re
 import shutil
@@ -58,8 +59,9 @@ CANVAS_PREFIX = re.compile(r"^(?P<prefix>.*?_(?:\d+|anon_[A-Za-z0-9]+)_\d+_)")
 # --- export -----------------------------------------------------------------------------------
 
 
-def scores(course: Path, assignments: list[str] | None = None) -> tuple[list[str], dict[str, float], dict[str, dict]]:
-    """(assignments, their max scores, {student: {assignment: score after the late penalty}})."""
+def scores(course: Path, assignments: list[str] | None = None):
+    """(assignments, their max scores, {student: {assignment: score after the late penalty}}, their due
+    dates (naive UTC, as nbgrader keeps them, or None))."""
     with gradebook(course) as gb:
         graded = [a for a in gb.assignments if a.submissions and a.notebooks]
         if assignments:
@@ -76,11 +78,21 @@ def scores(course: Path, assignments: list[str] | None = None) -> tuple[list[str
             for sub in a.submissions:
                 penalty = float(sub.late_submission_penalty or 0.0)
                 table.setdefault(sub.student.id, {})[a.name] = round(float(sub.score or 0.0) - penalty, 4)
-        return names, maxes, table
+        dues = {a.name: a.duedate for a in graded}
+        return names, maxes, table, dues
 
 
-def export(course: Path, lms: str | None, path: Path, roster: Roster | None, assignments=None) -> int:
-    names, maxes, table = scores(course, assignments)
+def not_due(dues: dict, now: dt.datetime | None = None) -> dict:
+    """The assignments whose due date is still ahead (UTC), with it."""
+    now = (now or dt.datetime.now(dt.timezone.utc)).astimezone(dt.timezone.utc).replace(tzinfo=None)
+    return {a: due for a, due in dues.items() if due is not None and due > now}
+
+
+def export(course: Path, lms: str | None, path: Path, roster: Roster | None, assignments=None, out=None) -> int:
+    """Write the grades CSV; a student with no submission of an assignment not due yet gets an empty
+    cell (no grade, not 0: Moodle's import reads an empty cell as no grade), after its due date 0 (as nbgrader export)."""
+    names, maxes, table, dues = scores(course, assignments)
+    ahead = not_due(dues)
     students = sorted(set(table) | (roster.students if roster else set()))
     fmt = lambda x: f"{x:g}"  # noqa: E731
     with open(path, "w", newline="") as f:
@@ -93,7 +105,7 @@ def export(course: Path, lms: str | None, path: Path, roster: Roster | None, ass
         else:
             w.writerow(["student", *names, "total"])
         for s in students:
-            got = [table.get(s, {}).get(a, 0.0) for a in names]  # no submission: 0, as nbgrader export
+            got = [table.get(s, {}).get(a, None if a in ahead else 0.0) for a in names]
             r = roster.row(s) if roster else {}
             if lms == "canvas":
                 ident = [r.get("name", s), r.get("canvas_id", ""), r.get("sis_id", ""), r.get("login_id", ""),
@@ -102,7 +114,14 @@ def export(course: Path, lms: str | None, path: Path, roster: Roster | None, ass
                 ident = [r.get("name", s), r.get("email", ""), r.get("sis_id", ""), s]
             else:
                 ident = [s]
-            w.writerow([*ident, *[fmt(x) for x in got], fmt(round(sum(got), 4))])
+            w.writerow([*ident, *["" if x is None else fmt(x) for x in got],
+                        fmt(round(sum(x for x in got if x is not None), 4))])
+    for a in (a for a in names if a in ahead):
+        empty = [s for s in students if a not in table.get(s, {})]
+        if empty:
+            print(f"{a} is due {ahead[a]:%Y-%m-%d %H:%M} UTC: {len(empty)} student(s) with no submission yet "
+                  f"({excerpt(', '.join(empty), quote=False)}) get an empty cell (no grade, "
+                  "not 0); export after the due date gives them 0", file=out or sys.stdout)
     return len(students)
 
 
@@ -126,7 +145,7 @@ def export_main(argv: list[str] | None = None, out=None) -> int:
         if args.lms == "canvas" and roster is not None and not any(r.get("canvas_id") for r in roster.rows):
             print("snakekit export: the roster has no canvas_id column: Canvas will match students by name",
                   file=sys.stderr)
-        n = export(course, args.lms, path, roster, args.assignment)
+        n = export(course, args.lms, path, roster, args.assignment, out=out)
     except (SnakekitError, OSError) as e:
         print(f"snakekit export: {one_line(e)}", file=sys.stderr)
         return 2
