@@ -4,7 +4,8 @@
     snakekit return ASSIGNMENT [--course DIR] [--exchange DIR] [-o feedback.zip]
 
 ``export`` writes one row per student and one column per assignment (the gradebook's score
-minus nbgrader's late penalty, so a score changed in formgrader is there) and the total:
+minus nbgrader's late penalty, so a score changed in formgrader is there; no submission: 0 once
+the gradebook's due date has passed, an empty cell before it) and the total:
 
 * ``--lms canvas``: Canvas's gradebook import ("Import" in Grades): ``Student, ID, SIS User
   ID, SIS Login ID, Section``, one column per assignment, a ``Points Possible`` row, and the
@@ -90,7 +91,8 @@ def not_due(dues: dict, now: dt.datetime | None = None) -> dict:
 
 def export(course: Path, lms: str | None, path: Path, roster: Roster | None, assignments=None, out=None) -> int:
     """Write the grades CSV; a student with no submission of an assignment not due yet gets an empty
-    cell (no grade, not 0: Moodle's import reads an empty cell as no grade), after its due date 0 (as nbgrader export)."""
+    cell (no grade, not 0: Moodle's import reads an empty cell as no grade), after its due date 0 (as
+    nbgrader export)."""
     names, maxes, table, dues = scores(course, assignments)
     ahead = not_due(dues)
     students = sorted(set(table) | (roster.students if roster else set()))
