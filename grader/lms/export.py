@@ -50,6 +50,7 @@ from grader.lms.roster import Roster
 from snakekit.errors import SnakekitError
 
 from grader.course.folder import config, course_id, default_roster, gradebook, require
+from grader.course.gradebook import NO_TIME, untimed
 from grader.errors import CourseError
 from grader.files import CommandParser, check_output, excerpt, one_line, uninterrupted
 
@@ -118,6 +119,13 @@ def export(course: Path, lms: str | None, path: Path, roster: Roster | None, ass
                 ident = [s]
             w.writerow([*ident, *["" if x is None else fmt(x) for x in got],
                         fmt(round(sum(x for x in got if x is not None), 4))])
+    for a in names:
+        unknown = [s for s in students if a in table.get(s, {}) and untimed(course, a, s)]
+        if unknown:
+            print(f"{a}: {len(unknown)} student(s) graded without a submission time "
+                  f"({excerpt(', '.join(unknown), quote=False)}; '{NO_TIME}' in snakekit grade's CSV): exported as "
+                  "on time, no late penalty; collect them again with --times TIMES.csv and grade them before "
+                  "importing", file=out or sys.stdout)
     for a in (a for a in names if a in ahead):
         empty = [s for s in students if a not in table.get(s, {})]
         if empty:

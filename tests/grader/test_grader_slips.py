@@ -589,4 +589,13 @@ def test_export_before_the_due_date_leaves_a_missing_submission_empty(course, tm
                                        - dt.timedelta(minutes=1))
     said, rows = export()
     assert rows == [header, *possible, [*ident["ann"], ann, ann], [*ident["ben"], "0", "0"], [*ident["cat"], "0", "0"]]
-    assert not any("no submission" in line for line in said)
+    assert said == [f"exported 3 student(s) to {out}" + (f" ({lms} import format)" if lms != "plain" else "")]
+
+    # ann's graded notebook is a resubmission collected without its time (the earlier one's kept in attempts/)
+    attempts = course / "submitted" / "ann" / A / "attempts"
+    attempts.mkdir(parents=True)
+    (attempts / "previously-collected-1-timestamp.txt").write_text("2026-03-02 11:00:00.000000 UTC")
+    said, rows = export()
+    assert said[0] == (f"{A}: 1 student(s) graded without a submission time (ann; 'no submission time' in snakekit "
+                       "grade's CSV): exported as on time, no late penalty; collect them again with --times TIMES.csv "
+                       "and grade them before importing")
