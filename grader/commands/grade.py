@@ -146,7 +146,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     problems = []
     from grader.course.folder import check_assignment
     from grader.errors import CourseError
-    from grader.files import check_output, one_line
+    from grader.files import check_output, excerpt, one_line
 
     if not course.is_dir():
         problems.append(f"no course folder {course} (give --course DIR, the folder with nbgrader_config.py)")
@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
         return 2
     from grader.arm.keep import HOOKS
     from grader.batch import Grader
-    from grader.course.gradebook import class_rows, read_class_csv, write_csv
+    from grader.course.gradebook import NO_TIME, class_rows, read_class_csv, write_csv
     from grader.course.folder import backup_gradebook
 
     grader = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
@@ -250,6 +250,15 @@ def main(argv: list[str] | None = None, out=None) -> int:
         late = f"  (late: {row['raw_score']} - {row['late_penalty']})" if float(row.get("late_penalty") or 0) else ""
         print(f"{r.student:<{width}}  {row.get('score', f'{r.score:g}'):>6} / {r.max_score:g}  {r.status}"
               + (f": {r.detail}" if r.detail and r.status != "graded" else "") + late, file=out)
+    no_time = [r.student for r in results if by_student.get(r.student, {}).get("status") == NO_TIME]
+    if no_time:
+        course_opt = "" if course == default_course() else f" --course {course}"
+        print(f"no submission time for the notebook of {len(no_time)} student(s): "
+              f"{excerpt(', '.join(no_time), quote=False)} "
+              f"(graded as on time, status '{NO_TIME}' in the CSV; the earlier attempt's time stays with it in "
+              f"attempts/); give them theirs: `snakekit collect {args.assignment}{course_opt} --from ZIP --times "
+              f"TIMES.csv`, then `snakekit grade {args.assignment}{course_opt} "
+              f"{excerpt(' '.join(f'--student {s}' for s in no_time), 300, quote=False)}`", file=out)
     print(f"graded {len(results)} submission(s) of {args.assignment}, {len(failed)} with problems; "
           f"CSV ({len(rows)} student(s)): {csv_path}; feedback: {course / 'feedback'}/<student>/{args.assignment}/"
           + (f"; gradebook backed up to {backup}" if backup else ""), file=out)

@@ -108,7 +108,9 @@ def write_grade(course: Path, a, r, late_plugin=None, lock=None) -> None:
     with (lock or contextlib.nullcontext()), warnings.catch_warnings(), Gradebook(_db_url(course), a.course_id) as gb:
         warnings.simplefilter("ignore")  # nbgrader's SQLAlchemy session warnings; nothing to act on
         gb.update_or_create_student(r.student)
-        sub = gb.update_or_create_submission(a.name, r.student, **({"timestamp": timestamp} if timestamp else {}))
+        # the time belongs to the file: a notebook without timestamp.txt has no time, never the one an earlier
+        # attempt left in the gradebook (nbgrader's autograde would keep that)
+        sub = gb.update_or_create_submission(a.name, r.student, timestamp=timestamp)
         for nb in sub.notebooks:
             for grade in nb.grades:
                 if grade.name in by_id:
@@ -118,6 +120,18 @@ def write_grade(course: Path, a, r, late_plugin=None, lock=None) -> None:
             nb.flagged = r.status != "graded"  # formgrader shows the flag: look at this one
         gb.db.commit()
     late_penalties(course, a.name, r.student, late_plugin)
+
+
+#: The class CSV's status of a submission graded without a time while an earlier attempt had one.
+NO_TIME = "no submission time"
+
+
+def untimed(course: Path, assignment: str, student: str) -> bool:
+    """The notebook to grade has no submission time, while an earlier attempt of the student had one
+    (``snakekit collect`` keeps that time beside the earlier file in ``attempts/``): its lateness is unknown."""
+    folder = Path(course) / "submitted" / student / assignment
+    return not (folder / "timestamp.txt").is_file() and \
+        any((folder / "attempts").glob("previously-collected-*-timestamp.txt"))
 
 
 def keep_release_files(course: Path, assignment: str, student: str) -> None:
@@ -188,6 +202,10 @@ def class_rows(course: Path, assignment: str, results: list = (), previous: dict
                 status, detail = now[s].status, now[s].detail
             else:
                 status, detail = previous.get(s, {}).get("status") or "graded", previous.get(s, {}).get("detail", "")
+            if status == "graded" and untimed(course, assignment, s):
+                status = NO_TIME
+                detail = "; ".join(x for x in (detail, "graded as on time: this notebook has no submission time "
+                                               "(the earlier attempt's stays with it in attempts/)") if x)
             manual = [g.grade_id for g in got.exercises if g.manual is not None]
             if manual and "set by hand" not in detail:
                 detail = "; ".join(x for x in (detail, f"score of {', '.join(manual)} set by hand in formgrader") if x)

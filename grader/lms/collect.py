@@ -153,7 +153,8 @@ def which_notebook(u: Upload, cells: dict[str, set[str]]) -> str | None:
     return best if best is not None and len(ids & cells[best]) * 2 >= max(len(cells[best]), 1) else None
 
 
-def _not_another_assignments(course: Path, assignment: str, source: Path, uploads: list[Upload], cells) -> None:
+def _not_another_assignments(course: Path, assignment: str, source: Path, uploads: list[Upload], cells,
+                             options: str = "") -> None:
     """Refuse a download none of whose notebooks is ``assignment``'s while some are another
     assignment's of the gradebook (by their grade ids): nothing of it is placed."""
     if not uploads or any(which_notebook(u, cells) for u in uploads):
@@ -171,7 +172,8 @@ def _not_another_assignments(course: Path, assignment: str, source: Path, upload
         other = max(found, key=lambda name: (found[name], name))
         raise CourseError(f"{source}: its notebooks are {other}'s, not {assignment}'s ({found[other]} of "
                           f"{len(uploads)} hold {other}'s cells, none {assignment}'s); nothing was collected. Collect it "
-                          f"as `snakekit collect {other} --from {source}`, or download {assignment}'s submissions")
+                          f"as `snakekit collect {other} --from {source}{options}`, or download {assignment}'s "
+                          "submissions")
 
 
 # --- collecting ---------------------------------------------------------------------------------
@@ -181,8 +183,11 @@ def _stamp(t: dt.datetime) -> str:
     return t.astimezone(dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S.%f UTC")
 
 
-def collect(course: Path, assignment: str, source: Path, *, roster: Roster | None = None, times=(), out=None):
-    """Place the download's notebooks in ``submitted/``; returns (collected rows, problems)."""
+def collect(course: Path, assignment: str, source: Path, *, roster: Roster | None = None, times=(), out=None,
+            options: str = ""):
+    """Place the download's notebooks in ``submitted/``; returns (collected rows, problems).
+
+    ``options``: the command's other options as the TA typed them, for a command it suggests."""
     out = out or sys.stdout
     cells = assignment_cells(course, assignment)
     with gradebook(course) as gb:
@@ -191,7 +196,7 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
     if not uploads and not problems:
         raise CourseError(f"{source} holds no notebook (.ipynb)")
     old = read_manifest(course, assignment)  # a damaged one stops collect before anything is placed
-    _not_another_assignments(course, assignment, source, uploads, cells)
+    _not_another_assignments(course, assignment, source, uploads, cells, options)
     by_student: dict[str, list[Upload]] = {}
     unmatched = []
     aside = course / "collected" / f"{assignment}-unmatched"
@@ -359,6 +364,16 @@ def read_manifest(course: Path, assignment: str) -> dict[str, dict]:
 # --- the command ----------------------------------------------------------------------------------
 
 
+def _options(args, parser) -> str:
+    """The options the TA gave besides ``--from`` (shell-quoted), to repeat in a suggested command."""
+    import shlex
+
+    given = [(opt, getattr(args, dest)) for opt, dest in (("--course", "course"), ("--roster", "roster"),
+                                                         ("--times", "times"), ("--timezone", "timezone"))
+             if getattr(args, dest) != parser.get_default(dest)]
+    return "".join(f" {opt} {shlex.quote(str(value))}" for opt, value in given)
+
+
 def main(argv: list[str] | None = None, out=None) -> int:
     import dateutil.tz
 
@@ -389,7 +404,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
         print(f"snakekit collect: {one_line(e)}", file=sys.stderr)
         return 2
     try:
-        _, problems = collect(course.resolve(), args.assignment, args.source, roster=roster, times=times, out=out)
+        _, problems = collect(course.resolve(), args.assignment, args.source, roster=roster, times=times, out=out,
+                              options=_options(args, p))
     except (SnakekitError, OSError) as e:
         print(f"snakekit collect: {one_line(e)}", file=sys.stderr)
         return 2

@@ -4,7 +4,8 @@
     snakekit return ASSIGNMENT [--course DIR] [--exchange DIR] [-o feedback.zip]
 
 ``export`` writes one row per student and one column per assignment (the gradebook's score
-minus nbgrader's late penalty, so a score changed in formgrader is there) and the total:
+minus nbgrader's late penalty, so a score changed in formgrader is there; no submission: 0 once
+the gradebook's due date has passed, an empty cell before it) and the total:
 
 * ``--lms canvas``: Canvas's gradebook import ("Import" in Grades): ``Student, ID, SIS User
   ID, SIS Login ID, Section``, one column per assignment, a ``Points Possible`` row, and the
@@ -36,6 +37,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import datetime as dt
 import os
 import re
 import shutil
@@ -48,6 +50,7 @@ from grader.lms.roster import Roster
 from snakekit.errors import SnakekitError
 
 from grader.course.folder import config, course_id, default_course, default_roster, gradebook, require
+from grader.course.gradebook import NO_TIME, untimed
 from grader.errors import CourseError
 from grader.files import CommandParser, check_output, excerpt, one_line, uninterrupted
 
@@ -57,8 +60,9 @@ CANVAS_PREFIX = re.compile(r"^(?P<prefix>.*?_(?:\d+|anon_[A-Za-z0-9]+)_\d+_)")
 # --- export -----------------------------------------------------------------------------------
 
 
-def scores(course: Path, assignments: list[str] | None = None) -> tuple[list[str], dict[str, float], dict[str, dict]]:
-    """(assignments, their max scores, {student: {assignment: score after the late penalty}})."""
+def scores(course: Path, assignments: list[str] | None = None):
+    """(assignments, their max scores, {student: {assignment: score after the late penalty}}, their due
+    dates (naive UTC, as nbgrader keeps them, or None))."""
     with gradebook(course) as gb:
         graded = [a for a in gb.assignments if a.submissions and a.notebooks]
         if assignments:
@@ -75,11 +79,22 @@ def scores(course: Path, assignments: list[str] | None = None) -> tuple[list[str
             for sub in a.submissions:
                 penalty = float(sub.late_submission_penalty or 0.0)
                 table.setdefault(sub.student.id, {})[a.name] = round(float(sub.score or 0.0) - penalty, 4)
-        return names, maxes, table
+        dues = {a.name: a.duedate for a in graded}
+        return names, maxes, table, dues
 
 
-def export(course: Path, lms: str | None, path: Path, roster: Roster | None, assignments=None) -> int:
-    names, maxes, table = scores(course, assignments)
+def not_due(dues: dict, now: dt.datetime | None = None) -> dict:
+    """The assignments whose due date is still ahead (UTC), with it."""
+    now = (now or dt.datetime.now(dt.timezone.utc)).astimezone(dt.timezone.utc).replace(tzinfo=None)
+    return {a: due for a, due in dues.items() if due is not None and due > now}
+
+
+def export(course: Path, lms: str | None, path: Path, roster: Roster | None, assignments=None, out=None) -> int:
+    """Write the grades CSV; a student with no submission of an assignment not due yet gets an empty
+    cell (no grade, not 0: Moodle's import reads an empty cell as no grade), after its due date 0 (as
+    nbgrader export)."""
+    names, maxes, table, dues = scores(course, assignments)
+    ahead = not_due(dues)
     students = sorted(set(table) | (roster.students if roster else set()))
     fmt = lambda x: f"{x:g}"  # noqa: E731
     with open(path, "w", newline="") as f:
@@ -92,7 +107,7 @@ def export(course: Path, lms: str | None, path: Path, roster: Roster | None, ass
         else:
             w.writerow(["student", *names, "total"])
         for s in students:
-            got = [table.get(s, {}).get(a, 0.0) for a in names]  # no submission: 0, as nbgrader export
+            got = [table.get(s, {}).get(a, None if a in ahead else 0.0) for a in names]
             r = roster.row(s) if roster else {}
             if lms == "canvas":
                 ident = [r.get("name", s), r.get("canvas_id", ""), r.get("sis_id", ""), r.get("login_id", ""),
@@ -101,7 +116,21 @@ def export(course: Path, lms: str | None, path: Path, roster: Roster | None, ass
                 ident = [r.get("name", s), r.get("email", ""), r.get("sis_id", ""), s]
             else:
                 ident = [s]
-            w.writerow([*ident, *[fmt(x) for x in got], fmt(round(sum(got), 4))])
+            w.writerow([*ident, *["" if x is None else fmt(x) for x in got],
+                        fmt(round(sum(x for x in got if x is not None), 4))])
+    for a in names:
+        unknown = [s for s in students if a in table.get(s, {}) and untimed(course, a, s)]
+        if unknown:
+            print(f"{a}: {len(unknown)} student(s) graded without a submission time "
+                  f"({excerpt(', '.join(unknown), quote=False)}; '{NO_TIME}' in snakekit grade's CSV): exported as "
+                  "on time, no late penalty; collect them again with --times TIMES.csv and grade them before "
+                  "importing", file=out or sys.stdout)
+    for a in (a for a in names if a in ahead):
+        empty = [s for s in students if a not in table.get(s, {})]
+        if empty:
+            print(f"{a} is due {ahead[a]:%Y-%m-%d %H:%M} UTC: {len(empty)} student(s) with no submission yet "
+                  f"({excerpt(', '.join(empty), quote=False)}) get an empty cell (no grade, "
+                  "not 0); export after the due date gives them 0", file=out or sys.stdout)
     return len(students)
 
 
@@ -127,7 +156,7 @@ def export_main(argv: list[str] | None = None, out=None) -> int:
         if args.lms == "canvas" and roster is not None and not any(r.get("canvas_id") for r in roster.rows):
             print("snakekit export: the roster has no canvas_id column: Canvas will match students by name",
                   file=sys.stderr)
-        n = export(course, args.lms, path, roster, args.assignment)
+        n = export(course, args.lms, path, roster, args.assignment, out=out)
     except (SnakekitError, OSError) as e:
         print(f"snakekit export: {one_line(e)}", file=sys.stderr)
         return 2

@@ -7,7 +7,11 @@
   file keeps its time, never a guess) and names the new files that have none.
 * Ctrl-C in ``grade`` or ``collect`` stops between two students: those done before are in the
   gradebook, the CSV or the manifest, the others as they were.
-* Another assignment's download is refused, naming the assignment its notebooks belong to.
+* Another assignment's download is refused, naming the assignment its notebooks belong to, in the
+  command the TA typed (every option kept).
+* A resubmission collected without ``--times`` is graded without a time, marked, never with the
+  earlier attempt's time.
+* ``export`` before an assignment's due date gives a student with no submission an empty cell, not 0.
 """
 
 from __future__ import annotations
@@ -172,6 +176,63 @@ def test_a_second_collect_without_times_keeps_the_times_it_had(course, tmp_path,
     assert "no submission time for the new file(s) of 1 student(s): cat" in r.stdout
 
 
+def test_a_resubmission_without_a_time_is_graded_marked_never_with_the_earlier_time(course, tmp_path, capsys):
+    from conftest import need_program
+    from grader_helpers import REFERENCES, good_notebook, read_csv
+    from test_grader_week import LATE_PLUGIN
+
+    from grader.course.folder import gradebook
+
+    need_program("unshare")
+    (course / "late.py").write_text(LATE_PLUGIN)  # 1 point per hour late
+    with open(course / "nbgrader_config.py", "a") as f:
+        f.write("c.AssignLatePenalties.plugin_class = 'late.PerHour'\n")
+    (course / "roster.csv").write_text("student,name,canvas_id\nann,Ann Lee,101\n")
+    on_time = DUE - dt.timedelta(minutes=2)
+    (tmp_path / "times.csv").write_text(f"canvas_id,submitted_at\n101,{on_time:%Y-%m-%d %H:%M:%S}\n")
+    first = {f"leeann_101_5001_{A}.ipynb": good_notebook(course, "ann")}
+    grade = ["grade", A, "--course", course, "--references", REFERENCES, "--student", "ann"]
+    assert run(capsys, "collect", A, "--course", course, "--from", canvas_zip(tmp_path / "monday.zip", first),
+               "--times", tmp_path / "times.csv").returncode == 0
+    r = run(capsys, *grade)
+    assert r.returncode == 0, r.stdout + r.stderr
+    row = read_csv(course / f"grades-{A}.csv")["ann"]
+    assert (row["score"], row["late_penalty"], row["status"], row["submitted_at"]) == \
+        ("7", "0", "graded", f"{on_time:%Y-%m-%d %H:%M:%S} UTC")
+
+    # she hands in again after the due date (Canvas marks it not LATE); the download is collected without --times
+    second = {**first, f"leeann_101_5007_{A}-1.ipynb": good_notebook(course, "ann again")}
+    r = run(capsys, "collect", A, "--course", course, "--from", canvas_zip(tmp_path / "friday.zip", second))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert manifest(course)["ann"]["submitted_at"] == ""
+    r = run(capsys, *grade)
+    assert r.returncode == 0, r.stdout + r.stderr
+    row = read_csv(course / f"grades-{A}.csv")["ann"]
+    assert (row["score"], row["late_penalty"], row["status"], row["submitted_at"]) == \
+        ("7", "0", "no submission time", "")  # never the earlier attempt's time, and said in the CSV
+    assert row["detail"] == "graded as on time: this notebook has no submission time (the earlier attempt's stays " \
+        "with it in attempts/)"
+    with gradebook(course) as gb:
+        assert gb.find_submission(A, "ann").timestamp is None
+    assert [line for line in r.stdout.splitlines() if line.startswith("no submission time")] == [
+        f"no submission time for the notebook of 1 student(s): ann (graded as on time, status 'no submission time' "
+        f"in the CSV; the earlier attempt's time stays with it in attempts/); give them theirs: `snakekit collect {A} "
+        f"--course {course} --from ZIP --times TIMES.csv`, then `snakekit grade {A} --course {course} --student ann`"]
+
+    # the fix the line gives: her real time (3 h 10 min late) costs 3 points (one per hour, rounded)
+    late = DUE + dt.timedelta(hours=3, minutes=10)
+    (tmp_path / "times2.csv").write_text(f"canvas_id,submitted_at\n101,{late:%Y-%m-%d %H:%M:%S}\n")
+    assert run(capsys, "collect", A, "--course", course, "--from", tmp_path / "friday.zip",
+               "--times", tmp_path / "times2.csv").returncode == 0
+    r = run(capsys, *grade)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "no submission time" not in r.stdout
+    row = read_csv(course / f"grades-{A}.csv")["ann"]
+    assert (row["score"], row["raw_score"], row["late_penalty"], row["status"], row["submitted_at"]) == \
+        ("4", "7", "3", "graded", f"{late:%Y-%m-%d %H:%M:%S} UTC")
+    assert manifest(course)["ann"]["submitted_at"] == f"{late:%Y-%m-%d %H:%M:%S}.000000 UTC"
+
+
 # --- Ctrl-C ------------------------------------------------------------------------------------------
 
 #: A bound for a hang, not a speed: Ctrl-C stops within 5 s (measured); the test waits 30 s.
@@ -274,7 +335,19 @@ def run_collect(course: Path, dl: Path):
 # --- another assignment's download -------------------------------------------------------------------
 
 
-def test_another_assignments_download_is_refused_naming_it(course, tmp_path, capsys):
+#: The options a TA may give collect, each as typed and as the suggested command repeats it.
+COLLECT_OPTIONS = {
+    "none": lambda course, tmp: [],
+    "--times": lambda course, tmp: ["--times", tmp / "times.csv"],
+    "--roster": lambda course, tmp: ["--roster", course / "roster.csv"],
+    "--timezone": lambda course, tmp: ["--timezone", "Europe/Zurich"],
+    "all": lambda course, tmp: ["--roster", course / "roster.csv", "--times", tmp / "times.csv", "--timezone",
+                                "Europe/Zurich"],
+}
+
+
+@pytest.mark.parametrize("given", COLLECT_OPTIONS)
+def test_another_assignments_download_is_refused_naming_it(course, tmp_path, capsys, given):
     import nbformat
 
     from grader.course.folder import gradebook
@@ -302,9 +375,13 @@ def test_another_assignments_download_is_refused_naming_it(course, tmp_path, cap
     # the TA picks last week's download: t0_intro's notebooks, collected as t1_sweep
     wrong = canvas_zip(tmp_path / "t0.zip", {"leeann_101_4001_t0_intro.ipynb": t0_notebook("ann"),
                                              "odeben_102_4002_t0_intro.ipynb": t0_notebook("ben")})
-    r = run(capsys, "collect", A, "--course", course, "--from", wrong)
+    (tmp_path / "times.csv").write_text("canvas_id,submitted_at\n101,2026-03-01 10:00\n")
+    options = [str(x) for x in COLLECT_OPTIONS[given](course, tmp_path)]
+    r = run(capsys, "collect", A, "--course", course, "--from", wrong, *options)
+    again = " ".join(["--course", str(course), *options])  # every option the TA gave, in the order collect lists them
     one_line_error(r, f"{wrong}: its notebooks are t0_intro's, not {A}'s (2 of 2 hold t0_intro's cells, none {A}'s); "
-                      f"nothing was collected. Collect it as `snakekit collect t0_intro --from {wrong}`")
+                      f"nothing was collected. Collect it as `snakekit collect t0_intro --from {wrong} {again}`, or "
+                      f"download {A}'s submissions")
     assert tree(course) == before  # the manifest's rows, the notebooks, their times: as they were
 
 
@@ -458,3 +535,67 @@ def test_files_a_run_of_the_instructor_notebook_writes_do_not_block_grading(cour
     assert r.returncode == 2
     assert f"{course}/source/{A} changed since {REFERENCES}/{A}.npz was recorded from it" in r.stderr
     assert csv_path.read_bytes() == before
+
+
+# --- export before the due date ---------------------------------------------------------------------
+
+#: Each export format: its header, and (for the roster's ann, ben, cat) the cells before the scores.
+EXPORT_FORMATS = {
+    "plain": ([], ["student", A, "total"], {"ann": ["ann"], "ben": ["ben"], "cat": ["cat"]}),
+    "canvas": (["--lms", "canvas"], ["Student", "ID", "SIS User ID", "SIS Login ID", "Section", A, "Final Points"],
+               {"ann": ["Ann Lee", "101", "", "", ""], "ben": ["Ben Ode", "102", "", "", ""],
+                "cat": ["Cat Park", "103", "", "", ""]}),
+    "moodle": (["--lms", "moodle"], ["Full name", "Email address", "ID number", "Username", A, "Total"],
+               {"ann": ["Ann Lee", "ann@uni.test", "", "ann"], "ben": ["Ben Ode", "ben@uni.test", "", "ben"],
+                "cat": ["Cat Park", "cat@uni.test", "", "cat"]}),
+}
+
+
+@pytest.mark.parametrize("lms", EXPORT_FORMATS)
+def test_export_before_the_due_date_leaves_a_missing_submission_empty(course, tmp_path, capsys, lms):
+    from grader.course.folder import gradebook
+
+    options, header, ident = EXPORT_FORMATS[lms]
+    (course / "roster.csv").write_text("student,name,canvas_id,email\nann,Ann Lee,101,ann@uni.test\n"
+                                       "ben,Ben Ode,102,ben@uni.test\ncat,Cat Park,103,cat@uni.test\n")
+    due = (dt.datetime.now(dt.timezone.utc) + dt.timedelta(days=3)).replace(second=0, microsecond=0, tzinfo=None)
+    with gradebook(course) as gb:  # ann handed in and was graded: all right but her first exercise; ben and cat not yet
+        gb.update_or_create_assignment(A, duedate=due)
+        gb.update_or_create_student("ann")
+        grades = list(gb.add_submission(A, "ann").notebooks[0].grades)
+        for g in grades[1:]:
+            g.auto_score = g.max_score
+        grades[0].auto_score = 0.0
+        gb.db.commit()
+        max_score = f"{gb.find_assignment(A).max_score:g}"
+        ann = f"{sum(g.max_score for g in grades[1:]):g}"
+    assert ann not in ("0", max_score)
+    out = tmp_path / "grades.csv"
+
+    def export():
+        r = run(capsys, "export", "--course", course, "-o", out, *options)
+        assert r.returncode == 0, r.stdout + r.stderr
+        with open(out, newline="") as f:
+            return r.stdout.splitlines(), list(csv.reader(f))
+
+    said, rows = export()
+    possible = [["Points Possible", "", "", "", "", max_score, max_score]] if lms == "canvas" else []
+    assert rows == [header, *possible, [*ident["ann"], ann, ann], [*ident["ben"], "", "0"], [*ident["cat"], "", "0"]]
+    assert said[0] == (f"{A} is due {due:%Y-%m-%d %H:%M} UTC: 2 student(s) with no submission yet (ben, cat) get an "
+                       "empty cell (no grade, not 0); export after the due date gives them 0")
+
+    with gradebook(course) as gb:  # the due date has passed: no submission is 0, as nbgrader export
+        gb.update_or_create_assignment(A, duedate=dt.datetime.now(dt.timezone.utc).replace(tzinfo=None)
+                                       - dt.timedelta(minutes=1))
+    said, rows = export()
+    assert rows == [header, *possible, [*ident["ann"], ann, ann], [*ident["ben"], "0", "0"], [*ident["cat"], "0", "0"]]
+    assert said == [f"exported 3 student(s) to {out}" + (f" ({lms} import format)" if lms != "plain" else "")]
+
+    # ann's graded notebook is a resubmission collected without its time (the earlier one's kept in attempts/)
+    attempts = course / "submitted" / "ann" / A / "attempts"
+    attempts.mkdir(parents=True)
+    (attempts / "previously-collected-1-timestamp.txt").write_text("2026-03-02 11:00:00.000000 UTC")
+    said, rows = export()
+    assert said[0] == (f"{A}: 1 student(s) graded without a submission time (ann; 'no submission time' in snakekit "
+                       "grade's CSV): exported as on time, no late penalty; collect them again with --times TIMES.csv "
+                       "and grade them before importing")
