@@ -13,6 +13,8 @@ does). Then:
 * saving a score, extra credit or comment in formgrader writes that student's pages and the
   class CSV again from the gradebook at once: the page, the CSV, ``snakekit export`` and
   formgrader show the same score.
+* formgrader's pages and API give each submission's score after the late penalty, and say the
+  penalty (:mod:`grader.commands.formgrader_scores`), as the page, the CSV and the export do.
 * formgrader's Autograde button grades the submission with ``snakekit grade ASSIGNMENT
   --student STUDENT`` (the sandbox, the out-of-kernel scoring, the feedback), not with
   nbgrader's in-kernel autograde. Its options come from the config's ``SnakekitGrade``
@@ -35,6 +37,7 @@ from pathlib import Path
 
 from nbconvert.exporters import HTMLExporter
 
+from grader.commands import formgrader_scores
 from grader.feedback import exporter, scores
 from grader.arm import feedback as lab_feedback
 
@@ -50,6 +53,7 @@ def use_safe_grading(c) -> None:
     if handlers is not None:
         handlers.AutogradeHandler.post = _autograde_post(handlers)
         saved_in_formgrader(handlers)
+        formgrader_scores.install(handlers)
         math_from_the_server(c)
 
 

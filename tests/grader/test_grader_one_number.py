@@ -5,10 +5,13 @@ download and graded once; each test works on its own copy. Random sequences of w
 (grade the class, ``grade --student``, a score, extra credit or comment saved in formgrader, a due
 date moved so a late penalty changes, ``return``, ``export``) are run on it, and after every step
 each student's score and each exercise's points are the same on the feedback page, in the
-CSV, in both exports and in the gradebook (what formgrader shows), and equal what the steps
+CSV, in both exports and in the gradebook, and equal what the steps
 taken make of the first grading: nothing changed that no step touched. The numbers expected are
 worked here from the steps (a score set by hand replaces the grader's, extra credit adds to it,
 the course's rule of 1 point per started hour late is applied at grading, capped at the score).
+formgrader's running server is asked too, once, for a late and an on-time student: every one of its
+answers that shows a score, and its Manage Students page in headless Chromium, give the score after
+the late penalty and say the penalty.
 """
 
 from __future__ import annotations
@@ -17,20 +20,23 @@ import csv
 import datetime as dt
 import inspect
 import io
+import json
 import math
 import random
 import re
 import shutil
+import statistics
 import subprocess
 import sys
+import urllib.request
 import zipfile
 from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 
-from conftest import need_program
-from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, make_course
+from conftest import need, need_program
+from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, make_course, use_safe_grading
 from test_grader_week import notebook_bytes
 
 A = ASSIGNMENT
@@ -91,7 +97,7 @@ def course(graded, tmp_path):
 
 def in_gradebook(course) -> dict:
     """Per student: (score after the late penalty, {grade id: points}, {grade id: the grader's points}), as
-    formgrader shows them (nbgrader's own API)."""
+    nbgrader's gradebook holds them."""
     from grader.course.folder import gradebook
 
     out = {}
@@ -289,3 +295,75 @@ def test_after_grade_student_the_page_keeps_the_score_set_by_hand(course, tmp_pa
     assert shown["ex1_tool_xy_test"] == float(in_csv(course)["carol"]["ex1_tool_xy_test"]) == 2
     assert "set by your teacher (the grader gave 0)" in text
     assert "Your teacher set the points to 2 (the grader gave 0)." in text
+
+
+# --- formgrader's own server --------------------------------------------------------------------
+
+
+#: formgrader's pages that show a submission's score: the class's, then bob's own.
+SCORE_PAGES = ["manage_students", f"manage_submissions/{A}", f"gradebook/{A}/{A}", "manage_students/bob",
+               f"manage_students/bob/{A}"]
+
+
+def formgrader_answers(course, home) -> tuple[dict, dict]:
+    """What formgrader's server answers (its API, by path), and the score cells of each of its score pages as
+    headless Chromium shows them (sorted)."""
+    from tests.system.test_browser import CHROMIUM_FLAGS, JupyterLab
+
+    sync_api = need("playwright.sync_api")
+    chromium = need_program("chromium")
+    paths = ["students", f"submissions/{A}", f"submission/{A}/bob", f"submitted_notebooks/{A}/{A}",
+             f"assignment/{A}", f"notebooks/{A}", *(f"student_submissions/{s}" for s in STUDENTS),
+             *(f"student_notebook_submissions/{s}/{A}" for s in STUDENTS)]
+    server = JupyterLab(course, home)  # in the course folder, as a TA starts it: formgrader reads its config
+    try:
+        answers, shown = {}, {}
+        for path in paths:
+            req = urllib.request.Request(f"{server.url}/formgrader/api/{path}",
+                                         headers={"Authorization": f"token {server.token}"})
+            with urllib.request.urlopen(req, timeout=120) as r:  # a bound for a hang: a fraction of a second
+                answers[path] = json.loads(r.read())
+        with sync_api.sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_FLAGS)
+            try:
+                page = server.browser_context(browser, []).new_page()
+                for path in SCORE_PAGES:
+                    page.goto(f"{server.url}/formgrader/{path}")
+                    page.wait_for_function("() => { const cells = document.querySelectorAll('#main-table td.score');"
+                                           " return cells.length && [...cells].every(td => td.textContent); }",
+                                           timeout=120_000)
+                    shown[path] = sorted(td.strip() for td in page.locator("#main-table td.score").all_inner_texts())
+            finally:
+                browser.close()
+    finally:
+        server.stop()
+    return answers, shown
+
+
+def test_formgrader_shows_each_score_after_the_late_penalty_as_the_page_csv_and_export(course, tmp_path):
+    use_safe_grading(course, 120)
+    home = tmp_path / "home"
+    home.mkdir()
+    answers, shown = formgrader_answers(course, home)
+    rows, plain, canvas = in_csv(course), exported(course, tmp_path), exported(course, tmp_path, "canvas")
+    assert (plain["bob"], float(rows["bob"]["late_penalty"]), plain["alice"]) == (4, 3, 7)  # one late, one on time
+    by = {path: {r.get("student", r.get("id")): r for r in answers[path]}
+          for path in ("students", f"submissions/{A}", f"submitted_notebooks/{A}/{A}")}
+    cells = {s: f"{plain[s]:g} / 7" + (f" (late: -{float(rows[s]['late_penalty']):g})" if s == "bob" else "")
+             for s in STUDENTS}
+    assert cells["bob"] == "4 / 7 (late: -3)"
+    for path in SCORE_PAGES:  # what the TA sees
+        assert shown[path] == sorted(cells.values() if "bob" not in path else [cells["bob"]]), path
+    for s in sorted(STUDENTS, key=lambda s: s != "bob"):  # the late student first
+        want, late = float(rows[s]["score"]), float(rows[s]["late_penalty"])
+        assert want == plain[s] == canvas[s] == on_page(course, s)[0], s
+        given = {"students": by["students"][s], "submissions": by[f"submissions/{A}"][s],
+                 "student's assignments": next(r for r in answers[f"student_submissions/{s}"] if r["name"] == A),
+                 "student's notebooks": answers[f"student_notebook_submissions/{s}/{A}"][0],
+                 "gradebook's submissions": by[f"submitted_notebooks/{A}/{A}"][s]}
+        for where, r in given.items():
+            assert (r["score"], r.get("late_penalty")) == (want, late), f"{s}, formgrader's {where}: {r}"
+    assert answers[f"submission/{A}/bob"]["score"] == plain["bob"]
+    mean = statistics.fmean(plain.values())
+    assert answers[f"assignment/{A}"]["average_score"] == pytest.approx(mean)
+    assert answers[f"notebooks/{A}"][0]["average_score"] == pytest.approx(mean)
