@@ -84,7 +84,14 @@ def check_current(args, out) -> list[str]:
                 "source/) and run the command again"]
     diffs = release_differences(course, a) if known else []
     if diffs and args.regenerate:
-        backup_gradebook(course)
+        backup = backup_gradebook(course)
+        collected = sorted(p.parent.name for p in (course / "submitted").glob(f"*/{a}") if p.is_dir())
+        cells = next((d for d in diffs if d.startswith("the gradebook's cells")), None)
+        if collected and cells:  # their test cells are the old release's: nbgrader's checksums tell the change
+            print(f"snakekit grade: warning: {len(collected)} submission(s) of {a} were collected from the release "
+                  f"before this one, whose test cells differ ({cells.split('(', 1)[1].split(')', 1)[0]}): grading "
+                  "marks such a cell 'tests tampered'; to grade them as they were released, undo the change in "
+                  f"{course}/source/{a} (the gradebook before it: {backup})", file=sys.stderr)
         print(f"snakekit grade: the release of {a} is stale ({diffs[0]}); running nbgrader generate_assignment "
               f"{a} --force", file=out)
         regenerate(course, a)
