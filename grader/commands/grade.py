@@ -69,7 +69,8 @@ def _refs_command(args, assignment: str) -> str:
 def check_current(args, out) -> list[str]:
     """Problems (each with the command that fixes it) if the release, the gradebook or the
     reference no longer match ``source/<a>``; with ``--regenerate`` they are fixed instead."""
-    from grader.course.folder import backup_gradebook, generate, gradebook, release_differences, source_hash
+    from grader.course.folder import (backup_gradebook, extra_notebooks, gradebook, regenerate, release_differences,
+                                      source_hash)
     from grader.scoring.references import Reference, record_reference
 
     course, a = args.course, args.assignment
@@ -80,12 +81,23 @@ def check_current(args, out) -> list[str]:
     if (course / "gradebook.db").exists():
         with gradebook(course) as gb:
             known = any(x.name == a and x.notebooks for x in gb.assignments)
+    extra = extra_notebooks(course, a) if known else []
+    if extra:  # regenerating would release it: the stray copy is what to remove
+        return [f"an extra notebook is in {course}/source/{a}/: {', '.join(extra)}; remove it (or move it out of "
+                "source/) and run the command again"]
     diffs = release_differences(course, a) if known else []
     if diffs and args.regenerate:
-        backup_gradebook(course)
+        backup = backup_gradebook(course)
+        collected = sorted(p.parent.name for p in (course / "submitted").glob(f"*/{a}") if p.is_dir())
+        cells = next((d for d in diffs if d.startswith("the gradebook's cells")), None)
+        if collected and cells:  # their test cells are the old release's: nbgrader's checksums tell the change
+            print(f"snakekit grade: warning: {len(collected)} submission(s) of {a} were collected from the release "
+                  f"before this one, whose test cells differ ({cells.split('(', 1)[1].split(')', 1)[0]}): grading "
+                  "marks such a cell 'tests tampered'; to grade them as they were released, undo the change in "
+                  f"{course}/source/{a} (the gradebook before it: {backup})", file=sys.stderr)
         print(f"snakekit grade: the release of {a} is stale ({diffs[0]}); running nbgrader generate_assignment "
               f"{a} --force", file=out)
-        generate(course, course, a)
+        regenerate(course, a)
     elif diffs:
         problems.append(f"the release of {a} no longer matches {course}/source/{a}: " + "; ".join(diffs)
                         + f". Regenerate it: `cd {course} && nbgrader generate_assignment {a} --force` "
@@ -143,7 +155,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
         return grade_on_hub(args, out)
     course = args.course
     args.references = args.references or recorded_references.course_references(course)
-    problems = []
+    problems, known = [], course.is_dir()
     from grader.course.folder import check_assignment
     from grader.errors import CourseError
     from grader.files import check_output, excerpt, one_line
@@ -155,6 +167,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
             check_assignment(course, args.assignment)
         except CourseError as e:
             problems.append(str(e))
+            known = False  # then the references' advice would name an assignment that is not there
     if args.jobs is not None and args.jobs < 1:
         problems.append(f"--jobs must be at least 1, got {args.jobs}")
     if not args.timeout > 0:
@@ -163,10 +176,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
         problems.append(f"--cell-timeout must be > 0 s, got {args.cell_timeout:g}")
     if args.memory < 256:
         problems.append(f"--memory must be at least 256 MB, got {args.memory}")
-    if not args.references.is_dir():
+    if known and not args.references.is_dir():
         problems.append(f"no references folder {args.references}; give --references DIR, or record them with "
                         f"`{_refs_command(args, args.assignment)}`")
-    elif not (args.references / f"{args.assignment}.npz").is_file():
+    elif known and not (args.references / f"{args.assignment}.npz").is_file():
         problems.append(f"no reference {args.references}/{args.assignment}.npz: every test cell would keep the "
                         f"kernel's own verdict. Record it: `{_refs_command(args, args.assignment)}`")
     csv_path = args.csv or course / f"grades-{args.assignment}.csv"

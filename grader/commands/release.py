@@ -25,7 +25,7 @@ from snakekit.errors import SnakekitError
 
 from grader.commands.late import EXAMPLES, LatePenalty, LateRule, parse
 from grader.course import solutions
-from grader.course.folder import backup_gradebook, config, default_course, generate, gradebook
+from grader.course.folder import backup_gradebook, config, default_course, gradebook, regenerate
 from grader.errors import CourseError
 from grader.files import CommandParser, excerpt, one_line
 
@@ -99,7 +99,7 @@ def release(course: Path, assignment: str, *, due: dt.datetime | None = None, ru
         if not known:
             raise CourseError(f"{assignment} has no due date for --late-penalty to count from; give --due TIME too")
     backup_gradebook(course)
-    generate(course, course, assignment)
+    regenerate(course, assignment)  # a failure leaves the release and the gradebook as they were
     released = sorted(p.name for p in (course / "release" / assignment).glob("*.ipynb"))
     print(f"{assignment}: released {', '.join(released) or 'no notebook'} into {course}/release/{assignment}/ "
           "(nbgrader generate_assignment)", file=out)

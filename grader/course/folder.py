@@ -145,8 +145,7 @@ def backup_gradebook(course: Path, keep: int = BACKUPS_KEPT) -> Path | None:
     stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%d-%H%M%S-%f")
     dest = folder / f"gradebook-{stamp}.db"
     try:
-        with contextlib.closing(sqlite3.connect(src)) as s, contextlib.closing(sqlite3.connect(dest)) as d:
-            s.backup(d)
+        _copy_db(src, dest)
     except sqlite3.DatabaseError as e:
         dest.unlink(missing_ok=True)
         raise gradebook_error(course, e) from None
@@ -165,6 +164,7 @@ def generate(config_dir: Path, root: Path, assignment: str, *, db: str | None = 
     from nbgrader.coursedir import CourseDirectory
     from traitlets.config import Config
 
+    config_dir, root = Path(config_dir).resolve(), Path(root).resolve()  # nbgrader works from inside root
     cfg = config(config_dir)
     cfg.merge(Config({"CourseDirectory": {"root": str(root), "course_id": course_id(config_dir),
                                           "db_url": db or db_url(root)}}))
@@ -172,13 +172,56 @@ def generate(config_dir: Path, root: Path, assignment: str, *, db: str | None = 
     cwd = os.getcwd()
     os.chdir(root)  # nbgrader resolves some paths from the working folder
     try:
-        with on_path(Path(config_dir).resolve()):
+        with on_path(config_dir):
             api = NbGraderAPI(CourseDirectory(config=cfg), config=cfg)
             out = api.generate_assignment(assignment, force=True, create=True)
     finally:
         os.chdir(cwd)
     if not out.get("success"):
-        raise CourseError(f"nbgrader generate_assignment {assignment} failed:\n{out.get('error') or out.get('log')}")
+        raise CourseError(f"nbgrader generate_assignment {assignment} failed: {nbgrader_reason(out)}; fix "
+                          f"source/{assignment} and run the command again")
+
+
+def nbgrader_reason(out: dict) -> str:
+    """What nbgrader says was wrong, in one line: the first exception its log names (its own last
+    words are often only "Please see the above traceback"), else the last line of its traceback."""
+    import re
+
+    lines = f"{out.get('log') or ''}\n{out.get('error') or ''}".splitlines()
+    said = [m for m in (re.match(r"\s*(?:[\w.]+\.)?(\w+(?:Error|Exception)): (.+)", x) for x in lines) if m]
+    said = [m for m in said if "above traceback" not in m[2]]
+    if said:
+        return f"{said[0][2].strip()} ({said[0][1]})"
+    return next((x.strip() for x in reversed(lines) if x.strip()), "no reason given")
+
+
+def regenerate(course: Path, assignment: str) -> None:
+    """``nbgrader generate_assignment --force`` into a temporary copy of the course's release and
+    gradebook; ``release/<a>`` and the gradebook are replaced only when it succeeded, so a failure
+    (raised as :class:`CourseError`) leaves both as they were."""
+    course = Path(course).resolve()
+    with tempfile.TemporaryDirectory(prefix=".snakekit-regenerate-", dir=course) as tmp:
+        root = Path(tmp)
+        shutil.copytree(course / "source" / assignment, root / "source" / assignment,
+                        ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
+        book = course / "gradebook.db"
+        if book.exists():
+            _copy_db(book, root / "gradebook.db")
+        try:
+            generate(course, root, assignment)
+        except CourseError as e:
+            raise CourseError(f"{e}; {course}/release/{assignment}/ and the gradebook are as they were") from None
+        release = course / "release" / assignment
+        release.parent.mkdir(exist_ok=True)
+        if release.exists():
+            release.rename(root / "previous-release")
+        (root / "release" / assignment).rename(release)
+        _copy_db(root / "gradebook.db", book)
+
+
+def _copy_db(src: Path, dest: Path) -> None:
+    with contextlib.closing(sqlite3.connect(src)) as s, contextlib.closing(sqlite3.connect(dest)) as d:
+        s.backup(d)
 
 
 def _cells(nb_path: Path) -> list:
@@ -205,6 +248,20 @@ def _gradebook_cells(url: str, cid: str, assignment: str) -> dict:
                 for g in nb.grade_cells:
                     out[(nb.name, g.name, "points")] = float(g.max_score)
             return out
+
+
+def extra_notebooks(course: Path, assignment: str) -> list[str]:
+    """The notebooks of ``source/<a>`` that its release never had (by name; a stray copy such as
+    ``06_coded_sweep (copy).ipynb``): from ``release/<a>`` if the course has it, else the gradebook."""
+    course = Path(course)
+    release = course / "release" / assignment
+    if release.is_dir():
+        had = {p.name for p in release.glob("*.ipynb")}
+    else:
+        with gradebook(course) as gb:
+            had = {f"{nb.name}.ipynb" for a in gb.assignments if a.name == assignment for nb in a.notebooks}
+    return sorted(p.name for p in (course / "source" / assignment).glob("*.ipynb") if p.name not in had) if had \
+        else []
 
 
 def release_differences(course: Path, assignment: str) -> list[str]:
