@@ -49,18 +49,12 @@ def need_program(name: str) -> str:
 
 
 #: What a class adds to the course folder (and what a run of an instructor notebook writes beside it).
-CLASS_FILES = ("release", "submitted", "autograded", "feedback", "gradebook.db", ".nbgrader.log", "backups",
-               "collected", "draws", "__pycache__")
-
-
 def copy_course(dest):
     """A copy of the repository's course, as a class would grade it: its sources, cases, references and lab
     settings, none of a class's folders, no run's ``.npz`` beside a notebook. Returns ``dest``."""
-    def ignore(folder, names):
-        runs = [n for n in names if n.endswith(".npz")] if os.path.basename(folder) != "references" else []
-        return [n for n in names if n in CLASS_FILES] + runs
+    from grader.course.folder import course_copy_ignore
 
-    shutil.copytree(os.path.join(ROOT, "course"), dest, ignore=ignore)
+    shutil.copytree(os.path.join(ROOT, "course"), dest, ignore=course_copy_ignore)
     return dest
 
 

@@ -36,6 +36,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from grader.course.folder import course_copy_ignore
 from grader.course.mutants import OPERATORS, Mutant, Skipped, exercises, variants
 from grader.scoring.rerun import exercise
 
@@ -179,14 +180,6 @@ def _local(course: Path, lesson: str, student: str) -> dict:
     return out
 
 
-def _course_files(folder: str, names: list[str]) -> list[str]:
-    """What a copy of the course leaves out: a class's folders, and a run's ``.npz`` beside a notebook (the
-    references in ``references/`` stay: grading reads them there)."""
-    runs = [n for n in names if n.endswith(".npz")] if Path(folder).name != "references" else []
-    return [n for n in names if n in ("release", "submitted", "autograded", "feedback", "gradebook.db", ".nbgrader.log",
-                                      "backups", "collected", "draws", "__pycache__")] + runs
-
-
 def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | None = None, jobs: int = 2,
                  timeout: float | None = None, cell_timeout: float | None = None) -> tuple[list[Row], dict]:
     """Grade ``mutants`` of ``lesson`` in one batch; the rows, and the batch's facts (seed, seconds)."""
@@ -195,7 +188,7 @@ def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | N
     import nbformat
 
     course = tmp / "course"
-    shutil.copytree(ROOT / "course", course, ignore=_course_files)
+    shutil.copytree(ROOT / "course", course, ignore=course_copy_ignore)
     right = {gid: answer for gid, answer, _ in exercises(ROOT / "course" / "source" / lesson / f"{lesson}.ipynb")}
     students = {}
     for m in mutants:

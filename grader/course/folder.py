@@ -309,6 +309,18 @@ def released_files(course: Path, assignment: str) -> list[Path]:
                   and any(fnmatch.fnmatch(p.name, g) for g in cd.include))
 
 
+#: A class's files in a course folder: what a copy of the course for grading another class leaves out.
+CLASS_FILES = ("release", "submitted", "autograded", "feedback", "gradebook.db", ".nbgrader.log", "backups",
+               "collected", "draws", "__pycache__")
+
+
+def course_copy_ignore(folder: str, names: list[str]) -> list[str]:
+    """``shutil.copytree``'s ``ignore`` for a copy of a course as a class would grade it: none of a class's
+    files, no run's ``.npz`` beside a notebook; the references in ``references/`` stay (grading reads them)."""
+    runs = [n for n in names if n.endswith(".npz")] if Path(folder).name != "references" else []
+    return [n for n in names if n in CLASS_FILES] + runs
+
+
 def source_hash(course: Path, assignment: str) -> str:
     """A hash of what a reference depends on in ``source/<a>``: every code cell of its
     notebooks and every other file the release ships (markdown and outputs do not change a
