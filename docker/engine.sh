@@ -170,11 +170,13 @@ engine_start() {
   mkdir -p "$DATA"
   ENGINE_COLD=1
   [ -d "$DATA/image" ] && ENGINE_COLD=0
+  engine_stop_stale
   # in a session of its own: a signal to the caller's process group (a test's time limit) stops the
-  # script, whose engine_stop then removes what ran before it stops dockerd
+  # script, whose engine_stop then removes what ran before it stops dockerd. Without the lock's fd
+  # (9): a dockerd left by a killed run must not hold the lock for the next one.
   setsid dockerd --data-root "$DATA" --exec-root "$RUN/exec" --pidfile "$RUN/dockerd.pid" \
     --host "$DOCKER_HOST" --iptables=false --ip6tables=false --ip-forward=false --bridge=none \
-    --default-address-pool base=10.213.0.0/16,size=24 >"$RUN/dockerd.log" 2>&1 &
+    --default-address-pool base=10.213.0.0/16,size=24 >"$RUN/dockerd.log" 2>&1 9>&- &
   DOCKERD_PID=$!
   t=$(now)
   until $DOCKER version >/dev/null 2>&1; do
@@ -185,6 +187,18 @@ engine_start() {
   ENGINE_START_S=$(since "$t")
   engine_clear_left
   say "dockerd $($DOCKER version -f '{{.Server.Version}}') up in $ENGINE_START_S s (data root $DATA)"
+}
+
+# A dockerd on this data root that a killed run left (SIGKILL skips engine_stop): we hold the lock,
+# so it is no other run's. Stopped (SIGTERM, then SIGKILL after 30 s) before ours starts.
+engine_stop_stale() {
+  local pid n=0
+  for pid in $(pgrep -f -- "^dockerd --data-root $DATA " || true); do
+    say "a dockerd a killed run left on $DATA (pid $pid): stopped"
+    kill "$pid" 2>/dev/null || true
+    while kill -0 "$pid" 2>/dev/null && [ $n -lt 150 ]; do sleep 0.2; n=$((n + 1)); done
+    kill -9 "$pid" 2>/dev/null || true
+  done
 }
 
 # What a run stopped before its engine_stop (killed, machine restarted) left in the data root:
