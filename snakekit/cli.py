@@ -237,7 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_progress)
     p = sub.add_parser("check", help="run a lesson's exercise checks: one row per exercise, exit 1 on a failure")
     p.add_argument("notebook", help="the lesson notebook, e.g. notebooks/03_inverse_kinematics.ipynb")
-    p.add_argument("--timeout", type=_seconds, default=300.0, help="seconds a cell may run (default: 300)")
+    p.add_argument("--timeout", type=_seconds, default=300.0, help="seconds a cell may run before it is interrupted and fails; the next cells still run (default: 300)")
     p.set_defaults(func=_check)
     return parser
 

@@ -87,7 +87,9 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
 
     Prints one row per graded cell (grade id, points, passed or failed, the whole message,
     its later lines indented under the row) and a total; returns 0 when every check passed, 1 otherwise. A cell that
-    runs longer than ``timeout`` [s], or a kernel that dies, stops the run: the rows say
+    runs longer than ``timeout`` [s] is interrupted and fails with that reason, and the run goes
+    on with the next cell, as in the grader (a runaway cell costs only its own exercise). A
+    kernel that dies, or a cell that does not stop when interrupted, stops the run: the rows say
     which cell, and the graded cells after it count as not run.
 
     Raises:
@@ -103,10 +105,18 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
     if not graded:
         print(f"{path}: no graded exercise in this notebook (a lesson from notebooks/ has them)", file=out)
         return 1
-    running = []
-    client = nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3", allow_errors=True,
-                                     on_cell_start=lambda cell, cell_index: running.append(cell_index),
-                                     resources={"metadata": {"path": str(path.resolve().parent)}})
+    running, interrupted = [], set()
+
+    class Client(nbclient.NotebookClient):
+        async def _async_handle_timeout(self, timeout, cell=None):
+            if running[-1] in interrupted:   # interrupted once and still running: the run stops here
+                raise CellTimeoutError.error_from_timeout_and_cell("Cell execution timed out", timeout, cell)
+            interrupted.add(running[-1])
+            return await super()._async_handle_timeout(timeout, cell)
+
+    client = Client(nb, timeout=timeout, kernel_name="python3", allow_errors=True, interrupt_on_timeout=True,
+                    on_cell_start=lambda cell, cell_index: running.append(cell_index),
+                    resources={"metadata": {"path": str(path.resolve().parent)}})
     stopped = ""
     # The kernel's own log (its start-up notes, or a traceback when it is shut down in the middle of
     # a cell) is not the student's output: it goes to a file, and its last line is shown if it dies.
@@ -114,8 +124,9 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
         try:
             client.execute(stderr=log)
         except CellTimeoutError:
-            stopped = (f"cell {running[-1] + 1} ran longer than {timeout:g} s and was stopped (an endless loop, "
-                       "or a long run: run it in JupyterLab to see, or give more time with --timeout)")
+            stopped = (f"cell {running[-1] + 1} ran longer than {timeout:g} s and did not stop when interrupted "
+                       "(a loop inside a compiled library, or a long run: run it in JupyterLab to see, or give "
+                       "more time with --timeout)")
         except DeadKernelError:
             log.seek(0)
             said = [line.strip() for line in log if line.strip() and "WARNING" not in line]
@@ -138,6 +149,9 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
                 failed += 1
                 rows.append((meta["grade_id"], points, "FAILED", "stopped here (see below)" if index == last
                              else f"not run (cell {last + 1} stopped the run)"))
+            elif index in interrupted:
+                failed += 1
+                rows.append((meta["grade_id"], points, "FAILED", _runaway(timeout)))
             elif errors:
                 failed += 1
                 e = errors[0]
@@ -147,10 +161,10 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
             else:
                 got += points
                 rows.append((meta["grade_id"], points, "passed", ""))
-        elif errors and not meta.get("solution"):
-            others.append(f"cell {index + 1}: {errors[0].ename}: {str(errors[0].evalue).strip()}")
-        elif errors:
-            others.append(f"answer cell {meta.get('grade_id')}: {errors[0].ename}: {str(errors[0].evalue).strip()}")
+        elif errors or index in interrupted:
+            where = f"answer cell {meta.get('grade_id')}" if meta.get("solution") else f"cell {index + 1}"
+            others.append(f"{where}: " + (_runaway(timeout) if index in interrupted
+                                          else f"{errors[0].ename}: {str(errors[0].evalue).strip()}"))
     width = max(len(r[0]) for r in rows)
     print(f"{path.name}", file=out)
     for grade_id, points, status, message in rows:
@@ -167,3 +181,11 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
     if stopped:
         print(f"  stopped: {stopped}", file=out)
     return 0 if failed == 0 else 1
+
+
+def _runaway(timeout: float) -> str:
+    """What a student reads for a cell that ran past the limit and was interrupted."""
+    return (f"stopped after {timeout:g} s, the limit for one cell: most likely an endless loop (a while whose "
+            "condition never becomes false, or a counter that is never advanced)\n"
+            "run the cell in JupyterLab to see where it hangs (Kernel > Interrupt stops it there), "
+            "or give a long run more time with --timeout")

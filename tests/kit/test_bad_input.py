@@ -562,8 +562,35 @@ def test_check_on_a_file_that_is_not_a_lesson_says_so_in_one_line(tmp_path, name
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr + r.stdout
 
 
+def test_check_interrupts_an_endless_loop_and_checks_the_cells_after_it(tmp_path):
+    """As in the grader, a runaway cell costs only its own exercise: interrupted at the limit, the
+    run goes on, an answer cell's loop is named too, and every later check is reported."""
+    import nbformat
+    from nbformat.v4 import new_code_cell, new_notebook
+
+    answer = new_code_cell("def settle():\n    n = 0\n    while n < 10:\n        pass\n    return n\nx = 0\n"
+                           "while x < 3:\n    y = x",
+                           metadata={"nbgrader": {"solution": True, "grade": False, "grade_id": "loop_answer"}})
+    cells = [_graded("assert 1 + 1 == 2", grade_id="first_test", points=1), answer,
+             _graded("settle()", grade_id="stuck_test", points=2), _graded("assert True", grade_id="after_test", points=3)]
+    nbformat.write(new_notebook(cells=cells), tmp_path / "lesson.ipynb")
+    exe = Path(sys.executable).parent / "snakekit"
+    r = subprocess.run([str(exe), "check", "--timeout", "3", "lesson.ipynb"], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 1, r.stdout + r.stderr
+    rows = [line.split() for line in r.stdout.splitlines()]
+    assert ["first_test", "1", "pt", "passed"] in rows
+    assert ["after_test", "3", "pt", "passed"] in rows, r.stdout
+    stuck = next(line for line in r.stdout.splitlines() if line.split()[:1] == ["stuck_test"])
+    assert "FAILED  stopped after 3 s, the limit for one cell: most likely an endless loop" in stuck, r.stdout
+    assert "  also failed: answer cell loop_answer: stopped after 3 s, the limit for one cell" in r.stdout
+    assert "2 of 3 exercises passed, 4 of 6 points" in r.stdout
+    assert "stopped:" not in r.stdout and "KeyboardInterrupt" not in r.stdout and "Traceback" not in r.stdout + r.stderr
+
+
 @pytest.mark.parametrize("body, stopped", [
-    ("while True:\n    pass", "stopped: cell 2 ran longer than 3 s and was stopped (an endless loop, or a long run"),
+    ("import signal, time\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\nwhile True:\n    time.sleep(0.1)",
+     "stopped: cell 2 ran longer than 3 s and did not stop when interrupted"),
     ("import os\nos._exit(1)", "stopped: the Python kernel died while running cell 2 (the process ended"),
 ])
 def test_check_reports_a_cell_that_never_ends_or_kills_the_kernel(tmp_path, body, stopped):
