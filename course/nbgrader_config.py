@@ -20,12 +20,6 @@ c.CourseDirectory.root = HERE
 c.CourseDirectory.course_id = "snakekit"
 c.CourseDirectory.db_url = "sqlite:///" + os.path.join(HERE, "gradebook.db")
 
-ASSIGNMENTS = [
-    "00_meet_the_arm", "01_forward_kinematics", "02_jacobian", "03_inverse_kinematics",
-    "04_trajectories", "05_simulation", "06_coded_sweep", "07_real_robot",
-]
-c.CourseDirectory.db_assignments = [dict(name=a) for a in ASSIGNMENTS]
-
 # A cell may run the simulator or the bus emulator for a few seconds; the default 30 s per
 # cell leaves no margin on a busy machine.
 c.ExecutePreprocessor.timeout = 120

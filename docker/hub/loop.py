@@ -31,6 +31,7 @@ import argparse
 import csv
 import io
 import os
+import shlex
 import statistics
 import subprocess
 import sys
@@ -152,6 +153,24 @@ class User:
         return r
 
 
+#: The folder the newest shell the Jupyter server started (a terminal) runs in; run in the container.
+TERMINAL_CWD = """
+import os
+def field(pid, key):
+    with open(f"/proc/{pid}/status") as f:
+        return next(line.split()[1] for line in f if line.startswith(key + ":"))
+shells = []
+for pid in filter(str.isdigit, os.listdir("/proc")):
+    try:
+        parent = field(pid, "PPid")
+        if field(pid, "Name") in ("bash", "sh", "dash") and parent != "0" and field(parent, "Name") not in ("bash", "sh", "dash"):
+            shells.append(int(pid))
+    except (OSError, StopIteration):
+        pass
+print(os.readlink(f"/proc/{max(shells)}/cwd") if shells else "no terminal")
+"""
+
+
 def solutions() -> dict[str, str]:
     nb = nbformat.read(REPO / "course" / "source" / LESSON / f"{LESSON}.ipynb", as_version=4)
     return {c.metadata["nbgrader"]["grade_id"]: c.source for c in nb.cells if c.metadata.get("nbgrader", {}).get("solution")}
@@ -237,6 +256,18 @@ def main() -> int:
                 fail(f"{u.name}: {shell} 'command -v snakekit && command -v nbgrader' gave {r.stdout!r}")
     say("every terminal has snakekit and nbgrader on its PATH: bash -l and sh -l, in the teacher's, "
         "the TA's and a student's server")
+    # --- a terminal from JupyterLab's Launcher starts where the README's `cd course` works ----------
+    for u, where in ((teacher, "/home/student"), (ta, "/home/student"), (students[0], "/home/student/work")):
+        r = u.api("POST", "api/terminals", json={"cwd": ""})   # the Launcher's request, its file browser at /
+        if r.status_code != 200:
+            fail(f"{u.name}: a terminal from the Launcher: {r.status_code} {r.text[:200]}")
+        term = r.json()["name"]
+        cwd = u.sh(f"python3 -c {shlex.quote(TERMINAL_CWD)}").stdout.strip()
+        u.api("DELETE", f"api/terminals/{term}")
+        if cwd != where:
+            fail(f"{u.name}: a terminal from the Launcher starts in {cwd!r}, not {where!r}"
+                 + (" (the README's `cd course` fails there)" if u is not students[0] else ""))
+    say("a terminal from the Launcher starts in ~ for the teacher and the TA (beside course/), in ~/work for a student")
 
     # --- the instructor releases lesson 06 (their commands as docker/hub/README.md gives them) ------
     roles = role_commands((REPO / "docker/hub/README.md").read_text())

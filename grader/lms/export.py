@@ -291,8 +291,8 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
     except KeyboardInterrupt:
         raise Interrupted(done["exchange"], written) from None
     if done["exchange"]:
-        print(f"released {done['exchange']} student(s)' feedback to the exchange: they get it with "
-              f"`nbgrader fetch_feedback {assignment}`", file=out)
+        print(f"released {done['exchange']} student(s)' feedback to the exchange: they get it with Fetch Feedback "
+              f"(JupyterLab's Nbgrader > Assignment List) or `nbgrader fetch_feedback {assignment}`", file=out)
     for p in problems:
         print(f"not returned: {p}", file=out)
     return done["exchange"] + done["zip"], problems

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 import urllib.error
 import urllib.request
@@ -21,6 +22,10 @@ from urllib.parse import quote
 
 #: The service's last line: this and the grader's exit code (grading_service.MARK).
 MARK = "grading-service: exit"
+
+
+#: The course folder as the grading service's container names it (docker/hub/grading_service.py).
+SERVICE_COURSE = re.compile(r"(?<![\w.~/-])/course(?=[/\s:;,)'\"`]|$)")
 
 
 def problems(args) -> list[str]:
@@ -48,6 +53,7 @@ def grade_on_hub(args, out=None) -> int:
         for p in bad:
             print(f"snakekit grade: {p}", file=sys.stderr)
         return 2
+    course = Path(os.environ.get("SNAKEKIT_HUB_COURSE", "~/course")).expanduser()
     token = os.environ.get("JUPYTERHUB_API_TOKEN", "")
     url = os.environ["SNAKEKIT_GRADING_URL"].rstrip("/") + "/api/grade/" + quote(args.assignment, safe="")
     options = {"students": args.student, "regenerate": args.regenerate, "jobs": args.jobs, "timeout": args.timeout,
@@ -63,8 +69,8 @@ def grade_on_hub(args, out=None) -> int:
                 line = raw.decode("utf-8", "replace")
                 if line.startswith(MARK):
                     code = int(line.split()[-1])
-                else:
-                    out.write(line)
+                else:   # the service's paths are the grader container's (/course): the TA's are their own
+                    out.write(SERVICE_COURSE.sub(str(course).replace("\\", "\\\\"), line))
                     out.flush()
     except urllib.error.HTTPError as e:
         try:

@@ -194,3 +194,18 @@ def test_snakekit_grade_on_the_hub_grades_only_the_course_volume(server, capsys,
     assert capsys.readouterr().err == (f"snakekit grade: on the hub, grading runs on the class's course folder {course}, "
                                        f"not {elsewhere}: `cd {course}` and run the command again\n")
     assert started == []
+
+
+
+def test_snakekit_grade_on_the_hub_names_the_files_in_the_tas_own_course_folder(server, monkeypatch):
+    """The service grades in a container with the course at /course; the TA reads the lines in their
+    own server, where the course is ~/course: every such path is theirs, and no other is touched."""
+    course, started, state = server
+    lines = [b"wrote /course/grades-06_coded_sweep.csv\n", b"feedback: /course/feedback/s01/06_coded_sweep/a.html\n",
+             b"course /course: 2 graded; kept /coursework and /data/course/x as they are\n"]
+    monkeypatch.setattr(service, "start", lambda argv: started.append(argv) or FakeContainer(lines, 0, state["hold"]))
+    out = io.StringIO()
+    assert grade_on_hub(hub_args([A], course), out) == 0
+    assert out.getvalue().splitlines()[1:4] == [
+        f"wrote {course}/grades-06_coded_sweep.csv", f"feedback: {course}/feedback/s01/06_coded_sweep/a.html",
+        f"course {course}: 2 graded; kept /coursework and /data/course/x as they are"]
