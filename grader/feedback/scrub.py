@@ -33,6 +33,15 @@ LOADS = re.compile(r"<(script|link|iframe|img)[^>]+(src|href)=[\"'](?!data:)", r
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
+def strip_ansi(text: str) -> str:
+    """``text`` without the terminal colours of a traceback.
+
+    >>> strip_ansi("\x1b[0;31mKeyboardInterrupt\x1b[0m: ")
+    'KeyboardInterrupt: '
+    """
+    return _ANSI.sub("", text)
+
+
 def cell_error(cell) -> tuple[str, str, str] | None:
     """How an executed test cell failed: ``(exception name, message, where)``; None if it did not.
 
