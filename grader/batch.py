@@ -44,7 +44,7 @@ from grader.scoring.cases import CaseServer, draw
 from grader.errors import CasesError, GradingError, InstructorReferenceError
 from grader.files import uninterrupted
 from grader.hooks import NO_HOOKS, BatchHooks
-from grader.course.gradebook import keep_release_files, late_penalties, write_grade
+from grader.course.gradebook import NOT_CARRIED, keep_release_files, late_penalties, not_carried, write_grade
 from grader.feedback import scores
 from grader.scoring.references import course_references, expected
 from grader.sandbox.runner import Runner
@@ -78,13 +78,16 @@ class Grader:
     def __init__(self, course: Path, assignment: str, *, jobs: int | None = None, timeout: float = 120.0,
                  references: Path | None = None, memory: int = 4 << 30, progress=None,
                  workroot: Path | None = None, use_sandbox: bool = True, cell_timeout: float | None = None,
-                 seed: int | None = None, retry_timeouts: bool = True, hooks: BatchHooks = NO_HOOKS):
+                 seed: int | None = None, retry_timeouts: bool = True, hooks: BatchHooks = NO_HOOKS,
+                 new_attempts=frozenset()):
         """``timeout``: each notebook's wall clock [s]; ``cell_timeout``: one cell's (default: a third of
         ``timeout``, :data:`CELL_SHARE`: a runaway cell is interrupted and the exercises after it still run);
         ``references``: the folder of the instructor's references (default: the course's, ``<course>/references/``);
         ``seed``: the batch's hidden cases (default: drawn from ``os.urandom``, printed);
         ``retry_timeouts``: a submission stopped by a clock runs once more before the timeout counts;
-        ``hooks``: what an optional part adds (the arm's lab: :data:`grader.arm.keep.HOOKS`, given by the command)."""
+        ``hooks``: what an optional part adds (the arm's lab: :data:`grader.arm.keep.HOOKS`, given by the command);
+        ``new_attempts``: the students whose notebooks changed since they were graded (a resubmission): a score
+        set by hand on the earlier attempt is not carried over (:func:`grader.course.gradebook.write_grade`)."""
         self.course = Path(course).resolve()
         self.assignment = assignment
         self.hooks = hooks
@@ -99,6 +102,7 @@ class Grader:
         self.use_sandbox = use_sandbox
         self.seed = seed
         self.retry_timeouts = retry_timeouts
+        self.new_attempts = frozenset(new_attempts)
         self.draw = None
         self.late_plugin = None
         self._lock = threading.Lock()
@@ -224,10 +228,14 @@ class Grader:
                         pending[post.submit(r)] = s
                     continue
                 with uninterrupted():  # a Ctrl-C waits until the student's rows and pages are written whole
-                    try:
-                        write_grade(self.course, self.a, r, self.late_plugin, self._lock)  # only this thread writes
+                    try:  # only this thread writes
+                        dropped = write_grade(self.course, self.a, r, self.late_plugin, self._lock,
+                                              new_attempt=s in self.new_attempts)
                     except Exception as e:  # noqa: BLE001
                         raise GradingError(f"cannot write {s}'s grade to the gradebook: {e}") from e
+                    if dropped:  # a hand-set score belongs to the attempt it was set on: the TA is told
+                        r = dataclasses.replace(r, status=NOT_CARRIED if r.status == "graded" else r.status,
+                                                detail="; ".join(x for x in (r.detail, not_carried(dropped)) if x))
                     try:
                         r = self.pages(r)
                     except Exception as e:  # noqa: BLE001 - the grade is in the gradebook; only its page is missing

@@ -237,10 +237,12 @@ def main(argv: list[str] | None = None, out=None) -> int:
     # an attempt graded before and unchanged meets the cases it met then; a new attempt, a fresh draw
     notebooks = sorted(p.stem for p in (course / "source" / args.assignment).glob("*.ipynb"))
     results = []
+    new = draws.resubmitted(course, args.assignment, students, notebooks)  # their hand-set scores are not carried
     try:
         for seed, group in draws.groups(course, args.assignment, students, notebooks, args.seed):
             batch = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
-                           memory=args.memory << 20, cell_timeout=args.cell_timeout, seed=seed, hooks=HOOKS)
+                           memory=args.memory << 20, cell_timeout=args.cell_timeout, seed=seed, hooks=HOOKS,
+                           new_attempts=new)
             try:
                 done = batch.run(group)
             except KeyboardInterrupt as e:

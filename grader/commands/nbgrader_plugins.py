@@ -10,9 +10,10 @@ does). Then:
   so a score or comment a TA entered in formgrader and the late penalty are on the page, beside
   the grader's verdict (kept in the autograded notebook by the grader), and the lab's result
   when ``snakekit lab`` ran the student's sweep (docs/lab.md).
-* saving a score, extra credit or comment in formgrader writes that student's pages and the
-  class CSV again from the gradebook at once: the page, the CSV, ``snakekit export`` and
-  formgrader show the same score.
+* saving a score, extra credit or comment in formgrader sets that student's late penalty again from
+  the score saved (a penalty in percent of the score, or capped at it, follows it) and writes the
+  student's pages and the class CSV again from the gradebook at once: the page, the CSV,
+  ``snakekit export`` and formgrader show the same score.
 * formgrader's pages and API give each submission's score after the late penalty, and say the
   penalty (:mod:`grader.commands.formgrader_scores`), as the page, the CSV and the export do.
 * formgrader's Autograde button grades the submission with ``snakekit grade ASSIGNMENT
@@ -130,9 +131,11 @@ def regenerate(nb, *, student: str, assignment: str, notebook: str, db_url: str,
 
 
 def saved_in_formgrader(handlers) -> None:
-    """formgrader's saving of a score or comment, followed by the student's pages and the class CSV
-    written again from the gradebook (:func:`grader.feedback.scores.refresh`)."""
+    """formgrader's saving of a score or comment, followed by the student's late penalty set again from the
+    score saved (nbgrader's ``AssignLatePenalties``, as grading sets it) and the student's pages and the
+    class CSV written again from the gradebook (:func:`grader.feedback.scores.refresh`)."""
     from grader.arm.keep import HOOKS
+    from grader.course.gradebook import late_penalties
 
     for name, find in (("GradeHandler", "find_grade_by_id"), ("CommentHandler", "find_comment_by_id")):
         cls = getattr(handlers, name)
@@ -143,7 +146,11 @@ def saved_in_formgrader(handlers) -> None:
         def put(self, item_id, _saved=saved, _find=find):
             _saved(self, item_id)
             sub = getattr(self.gradebook, _find)(item_id).notebook.assignment
-            scores.refresh(Path(self.coursedir.root), sub.assignment.name, {sub.student.id}, after=HOOKS.pages)
+            course, assignment, student = Path(self.coursedir.root), sub.assignment.name, sub.student.id
+            self.gradebook.db.commit()  # formgrader's own session ends here: the penalty is written beside it
+            # a penalty that is a share of the score (per-day:10%), or capped at it, follows the score just saved
+            late_penalties(course, assignment, student)
+            scores.refresh(course, assignment, {student}, after=HOOKS.pages)
 
         put.__wrapped__ = saved  # inspect.unwrap reaches formgrader's own handler through it
         put._snakekit = True

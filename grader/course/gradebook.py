@@ -96,15 +96,48 @@ def scores_of(course: Path, assignment: str, students=None) -> dict[str, Submiss
                 if students is None or sub.student.id in students}
 
 
-def write_grade(course: Path, a, r, late_plugin=None, lock=None) -> None:
+#: The class CSV's status of a new attempt whose earlier attempt had a score set by hand (not carried over).
+NOT_CARRIED = "hand-set score not carried over"
+
+
+@dataclass(frozen=True)
+class HandSet:
+    """A score a TA set by hand in formgrader on a cell of an earlier attempt (``manual``, None if only
+    extra credit was given), and its extra credit."""
+
+    grade_id: str
+    manual: float | None
+    extra: float
+
+    def said(self) -> str:
+        parts = ([f"score {self.manual:g}"] if self.manual is not None else []) + \
+            ([f"extra credit {self.extra:+g}"] if self.extra else [])
+        return f"{self.grade_id} ({' and '.join(parts)})"
+
+
+def not_carried(dropped: list[HandSet]) -> str:
+    """What the TA reads of the hand-set scores a new attempt did not take over (the CSV's detail, the terminal).
+
+    >>> not_carried([HandSet("ex1_test", 2.0, 0.0), HandSet("ex2_test", None, 0.5)])
+    "set by hand on the earlier attempt, not carried over to this new one (graded on its own): ex1_test (score 2), ex2_test (extra credit +0.5); set it again in formgrader if it is meant for this attempt (the earlier values stay in the gradebook's backup made before this grading, in backups/ beside the gradebook)"
+    """
+    return ("set by hand on the earlier attempt, not carried over to this new one (graded on its own): "
+            + ", ".join(h.said() for h in dropped) + "; set it again in formgrader if it is meant for this attempt "
+            "(the earlier values stay in the gradebook's backup made before this grading, in backups/ beside the gradebook)")
+
+
+def write_grade(course: Path, a, r, late_plugin=None, lock=None, *, new_attempt: bool = False) -> list[HandSet]:
     """Write one submission's scores to the course's gradebook (one writer: the batch's main
-    thread) and its late penalty."""
+    thread) and its late penalty. A score set by hand belongs to the attempt it was set on: for a
+    ``new_attempt`` (a resubmission) the earlier attempt's hand-set scores and extra credit are cleared,
+    and returned, so the TA is told; otherwise they stay."""
     from nbgrader.api import Gradebook
     from nbgrader.coursedir import CourseDirectory
 
     src = course / "submitted" / r.student / a.name
     timestamp = CourseDirectory(root=str(course)).get_existing_timestamp(str(src))
     by_id = {e.grade_id: e for e in r.exercises}
+    dropped = []
     with (lock or contextlib.nullcontext()), warnings.catch_warnings(), Gradebook(_db_url(course), a.course_id) as gb:
         warnings.simplefilter("ignore")  # nbgrader's SQLAlchemy session warnings; nothing to act on
         gb.update_or_create_student(r.student)
@@ -113,13 +146,17 @@ def write_grade(course: Path, a, r, late_plugin=None, lock=None) -> None:
         sub = gb.update_or_create_submission(a.name, r.student, timestamp=timestamp)
         for nb in sub.notebooks:
             for grade in nb.grades:
+                if new_attempt and (grade.manual_score is not None or grade.extra_credit):
+                    dropped.append(HandSet(grade.name, grade.manual_score, float(grade.extra_credit or 0.0)))
+                    grade.manual_score, grade.extra_credit = None, None
                 if grade.name in by_id:
                     grade.auto_score = by_id[grade.name].score
                     # as nbgrader's autograde: a score a grader entered by hand stays, flagged for review
                     grade.needs_manual_grade = grade.manual_score is not None
-            nb.flagged = r.status != "graded"  # formgrader shows the flag: look at this one
+            nb.flagged = r.status != "graded" or bool(dropped)  # formgrader shows the flag: look at this one
         gb.db.commit()
     late_penalties(course, a.name, r.student, late_plugin)
+    return dropped
 
 
 #: The class CSV's status of a submission graded without a time while an earlier attempt had one.

@@ -33,6 +33,15 @@ LOADS = re.compile(r"<(script|link|iframe|img)[^>]+(src|href)=[\"'](?!data:)", r
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
+def strip_ansi(text: str) -> str:
+    """``text`` without the terminal colours of a traceback.
+
+    >>> strip_ansi("\x1b[0;31mKeyboardInterrupt\x1b[0m: ")
+    'KeyboardInterrupt: '
+    """
+    return _ANSI.sub("", text)
+
+
 def cell_error(cell) -> tuple[str, str, str] | None:
     """How an executed test cell failed: ``(exception name, message, where)``; None if it did not.
 
@@ -137,8 +146,24 @@ def _loading_line(html: str):
                                   text=f"[{what}: it works in the running notebook, not in this page]\n")
 
 
+#: The one line of a run's summary (:meth:`snakekit.Run.summary`) that is not a fact of the submission: how long
+#: the grading machine took. A page shows the line without it, so a regrade writes the same page.
+WALL_TIME = re.compile(r"^(wall time:\s*)\d[\d.]* s \([\d.]+x real time\)$", re.MULTILINE)
+WALL_TIME_SAID = r"\1(left out of this page: it is the grading machine's, and differs from run to run)"
+
+
+def steady(text: str) -> str:
+    r"""``text`` without what differs each time the same notebook runs (:data:`WALL_TIME`).
+
+    >>> steady("robot time:         49.90 s\nwall time:          0.73 s (68.4x real time)\n")
+    "robot time:         49.90 s\nwall time:          (left out of this page: it is the grading machine's, and differs from run to run)\n"
+    """
+    return WALL_TIME.sub(WALL_TIME_SAID, text)
+
+
 def scrub_cell(cell, secret: set[str], paths=()) -> None:
-    """A code cell's outputs made fit for the page: hidden test code, widgets, machine paths, TeX."""
+    """A code cell's outputs made fit for the page: hidden test code, widgets, machine paths, TeX, the
+    grading machine's timing (:func:`steady`)."""
     if cell.cell_type != "code":
         return
     keep = []
@@ -162,6 +187,10 @@ def scrub_cell(cell, secret: set[str], paths=()) -> None:
             latex = "".join(data["text/latex"]) if isinstance(data["text/latex"], list) else str(data["text/latex"])
             out = nbformat.from_dict(dict(out))
             out["data"] = {"text/html": math_html(latex)}
+        if out.get("output_type") == "stream":
+            text = "".join(out["text"]) if isinstance(out.get("text"), list) else str(out.get("text", ""))
+            if WALL_TIME.search(text):
+                out = nbformat.from_dict({**dict(out), "text": steady(text)})
         keep.append(_neutral_output(nbformat.from_dict(dict(out)), paths) if paths else out)
     cell.outputs = keep
 

@@ -16,7 +16,7 @@ import json
 import os
 from pathlib import Path
 
-__all__ = ["attempt", "groups", "keep", "load"]
+__all__ = ["attempt", "groups", "keep", "load", "resubmitted"]
 
 FOLDER = "draws"
 
@@ -58,12 +58,18 @@ def groups(course: Path, assignment: str, students: list[str], notebooks: list[s
     if seed is not None:
         return [(seed, list(students))]
     kept = load(course, assignment)
+    new = resubmitted(course, assignment, students, notebooks)
     by_seed: dict[int | None, list[str]] = {}
     for s in students:
-        k = kept.get(s)
-        same = k is not None and k["attempt"] == attempt(course, assignment, s, notebooks)
-        by_seed.setdefault(k["seed"] if same else None, []).append(s)
+        by_seed.setdefault(kept[s]["seed"] if s in kept and s not in new else None, []).append(s)
     return sorted(by_seed.items(), key=lambda kv: (kv[0] is None, kv[0] or 0))
+
+
+def resubmitted(course: Path, assignment: str, students: list[str], notebooks: list[str]) -> set[str]:
+    """The ``students`` graded before whose notebooks have changed since: a new attempt (a first hand-in is
+    not one)."""
+    kept = load(course, assignment)
+    return {s for s in students if s in kept and kept[s]["attempt"] != attempt(course, assignment, s, notebooks)}
 
 
 def keep(course: Path, assignment: str, seed: int, students: list[str], notebooks: list[str]) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import shutil
 import time
 from dataclasses import dataclass
@@ -126,7 +127,8 @@ class Verdicts:
                 sc = score_exercise(gid, handin, self.expected[gid], cell.max_score)
                 if sc.status == "missing":
                     sc = dataclasses.replace(sc, message=why_missing(find_cell(executed.get(cell.notebook), gid),
-                                                                     sc.message))
+                                                                     sc.message, cell_timeout=self.cell_timeout,
+                                                                     timeout=self.timeout))
                 elif sc.score < sc.max_score:
                     sc = with_local_hint(sc, find_cell(executed.get(cell.notebook), gid))
                 if second and gid in second:   # after the first run's message is made: the line goes before it
@@ -276,16 +278,58 @@ def find_cell(nb, gid):
     return next((c for c in nb.cells if c.get("metadata", {}).get("nbgrader", {}).get("grade_id") == gid), None)
 
 
-def why_missing(cell, message: str) -> str:
+#: What a student reads when a clock stopped the cell that was to hand in: what happened, and where to look.
+LOOP_HINT = ("That usually means an endless loop: a `while` whose condition never becomes false, or a loop "
+             "whose counter is never advanced. Run the cell in your notebook: if it does not finish, stop it "
+             "(Kernel > Interrupt) and look at the loops{where}.")
+
+
+def _clock_stop(cell, cell_timeout: float | None, timeout: float | None) -> str | None:
+    """Why a test cell a clock interrupted handed nothing in, in a student's words; None if no clock stopped it.
+
+    >>> from nbformat.v4 import new_code_cell, new_output
+    >>> c = new_code_cell("ex.hand_in('ex1_test', tool_xy)", execution_count=4)
+    >>> c.metadata["nbgrader"] = {"grade_id": "ex1_test"}
+    >>> c.outputs = [new_output("error", ename="KeyboardInterrupt", evalue="", traceback=[
+    ...     "Cell In[4], line 1, in <module>", "Cell In[2], line 3, in tool_xy(q)", "KeyboardInterrupt: "])]
+    >>> print(_clock_stop(c, 15, 120))  # doctest: +NORMALIZE_WHITESPACE
+    nothing was handed in: the cell was stopped after the per-cell limit of 15 s, while your `tool_xy` ran
+    (exercise ex1_test). That usually means an endless loop: a `while` whose condition never becomes false,
+    or a loop whose counter is never advanced. Run the cell in your notebook: if it does not finish, stop it
+    (Kernel > Interrupt) and look at the loops of `tool_xy`.
+    """
+    outs = cell.get("outputs", [])
+    names = {str(o.get("ename")) for o in outs if o.get("output_type") == "error"}
+    if not names & {"KeyboardInterrupt", "CellTimeoutError"}:
+        return None
+    whole = any("stopped here:" in "".join(o.get("text", "")) for o in outs if o.get("output_type") == "stream")
+    limit = (f"the notebook's time of {timeout:g} s ran out" if whole and timeout
+             else f"the cell was stopped after the per-cell limit of {cell_timeout:g} s" if cell_timeout
+             else "the cell was stopped by the grader's clock")
+    tb = scrub.strip_ansi("\n".join(str(line) for o in outs if o.get("output_type") == "error"
+                                      for line in o.get("traceback", [])))
+    frames = re.findall(r"Cell In\[\d+\], line \d+, in (\w+)", tb)  # "<module>" is not a function
+    fn = f" of `{frames[-1]}`" if frames else ""
+    gid = cell.get("metadata", {}).get("nbgrader", {}).get("grade_id", "")
+    ran = f"while your `{frames[-1]}` ran" if frames else "while this test cell ran"
+    return (f"nothing was handed in: {limit}, {ran}" + (f" (exercise {gid})" if gid else "") + ". "
+            + LOOP_HINT.format(where=fn))
+
+
+def why_missing(cell, message: str, *, cell_timeout: float | None = None, timeout: float | None = None) -> str:
     """The reason a test cell handed nothing in, from how it stopped.
 
     A test cell hands in first, so a cell that handed nothing in stopped before that line
     (the function it hands in is not defined: an error in the answer cell, or it was never
-    run) or the notebook stopped before the cell. The cell's error is the student's own to see.
+    run), a clock stopped it (``cell_timeout``: one cell's limit, ``timeout``: the notebook's [s]),
+    or the notebook stopped before the cell. The cell's error is the student's own to see.
     """
     err = scrub.cell_error(cell) if cell is not None else None
     if err is None:
         return message
+    stopped = _clock_stop(cell, cell_timeout, timeout)
+    if stopped:
+        return stopped
     ename, evalue, _ = err
     hint = ""
     if ename == "NameError":

@@ -1,15 +1,20 @@
 """A runaway cell costs only its exercise: by default one cell gets a third of the notebook's time.
 
 The cell is interrupted (the kernel lives on), its exercise gets what it handed in (nothing), and the
-exercises after it still run and hand in. ``--help`` and grader/README.md say so.
+exercises after it still run and hand in. The student's page and the TA's copy in formgrader say what
+happened in a student's words: the per-cell limit, an endless loop, the function that ran.
+``--help`` and grader/README.md say so.
 """
 
 from __future__ import annotations
 
+import html
 import re
 import subprocess
 import sys
 from pathlib import Path
+
+import nbformat
 
 from conftest import need_program
 from grader_helpers import ASSIGNMENT, REFERENCES, make_course, read_csv, submit
@@ -52,3 +57,17 @@ def test_an_endless_loop_in_one_exercise_leaves_the_others_their_points(tmp_path
     # ex1 (2 points) hangs in its hidden cases and is interrupted; ex2 (4) and ex3 (1) still run and hand in
     assert (loop["status"], float(loop["score"])) == ("timeout", 5.0), loop
     assert re.search(r"a cell ran longer than 15 s and was interrupted", loop["detail"]), loop["detail"]
+    # what the student reads (the page) and the TA sees (formgrader shows the autograded notebook's verdict)
+    said = ("0 / 2 points nothing was handed in: the cell was stopped after the per-cell limit of 15 s, while your "
+            "`tool_xy` ran (exercise ex1_tool_xy_test). That usually means an endless loop: a `while` whose condition "
+            "never becomes false, or a loop whose counter is never advanced. Run the cell in your notebook: if it "
+            "does not finish, stop it (Kernel > Interrupt) and look at the loops of `tool_xy`.")
+    page = html.unescape(re.sub(r"<[^>]+>", " ", (course / "feedback" / "loop" / ASSIGNMENT / f"{ASSIGNMENT}.html")
+                                .read_text()))
+    assert said in " ".join(page.split()), page[page.find("ex1_tool_xy_test: "):][:600]
+    assert "KeyboardInterrupt: ." not in page
+    ran = nbformat.read(course / "autograded" / "loop" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
+    cell = next(c for c in ran.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex1_tool_xy_test")
+    shown = " ".join(html.unescape(re.sub(r"<[^>]+>", " ", o["data"]["text/html"]))
+                     for o in cell.outputs if "snakekit_grader" in o.get("metadata", {}))
+    assert said.split(" ", 4)[-1] in " ".join(shown.split()), shown

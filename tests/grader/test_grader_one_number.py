@@ -8,7 +8,10 @@ each student's score and each exercise's points are the same on the feedback pag
 CSV, in both exports and in the gradebook, and equal what the steps
 taken make of the first grading: nothing changed that no step touched. The numbers expected are
 worked here from the steps (a score set by hand replaces the grader's, extra credit adds to it,
-the course's rule of 1 point per started hour late is applied at grading, capped at the score).
+the course's late rule is applied at grading and whenever a score or comment is saved, capped at the
+score; a resubmission is graded on its own, the earlier attempt's hand-set scores not carried over and
+the TA told). Every sequence runs under each late rule of :data:`RULES`: points per started hour, and a
+percentage of the score per started day, which must follow a score set by hand at once.
 formgrader's running server is asked too, once, for a late and an on-time student: every one of its
 answers that shows a score, and its Manage Students page in headless Chromium, give the score after
 the late penalty and say the penalty.
@@ -33,10 +36,11 @@ import zipfile
 from pathlib import Path
 from types import SimpleNamespace
 
+import nbformat
 import pytest
 
 from conftest import need, need_program
-from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, make_course, use_safe_grading
+from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, good_notebook, make_course, use_safe_grading
 from test_grader_week import notebook_bytes
 
 A = ASSIGNMENT
@@ -57,11 +61,61 @@ def snakekit(*args):
 def grade(course, *extra):
     r = snakekit("grade", A, "--course", course, "--references", REFERENCES, "--jobs", "2", "--timeout", "120", *extra)
     assert r.returncode == 0, r.stderr[-3000:]
+    return r
+
+
+#: The late rules every sequence runs under: points per started hour, and a share of the score per started day.
+RULES = ["per-hour:1", "per-day:10%"]
+
+
+def late_penalty(rule: str, score: float, seconds_late: float) -> float:
+    """What ``rule`` takes off a notebook that scored ``score``, ``seconds_late`` after the due date (at most the
+    score), worked here from the rule's words."""
+    if seconds_late <= 0:
+        return 0.0
+    per, amount = rule.split(":")
+    started = math.ceil(seconds_late / {"per-hour": 3600, "per-day": 86400}[per])
+    each = score * float(amount[:-1]) / 100 if amount.endswith("%") else float(amount)
+    return min(score, round(started * each, 6))
 
 
 @pytest.fixture(scope="module")
-def graded(tmp_path_factory):
-    """The class collected from a Canvas download (with its times), due at DUE, 1 point per started hour late,
+def classes(tmp_path_factory):
+    """The class under each rule of :data:`RULES`, graded once (made when first asked for)."""
+    made = {}
+
+    def of(rule):
+        if rule not in made:
+            made[rule] = graded_under(tmp_path_factory, rule) if rule == RULES[0] else \
+                ruled_again(of(RULES[0]), tmp_path_factory.mktemp("one-number"), rule)
+        return made[rule]
+    return of
+
+
+def ruled_again(course, tmp, rule):
+    """A copy of the graded class under another late rule, its penalties set as grading sets them (nbgrader's
+    ``AssignLatePenalties`` with the course's plug-in) and its pages and CSV written again: the class as
+    graded under ``rule``, without grading it once more."""
+    from grader.commands.release import with_rules
+    from grader.course.gradebook import late_penalties
+    from grader.feedback.scores import refresh
+
+    shutil.copytree(course, tmp / "course")
+    course = tmp / "course"
+    (course / "nbgrader_config.py").write_text(with_rules((course / "nbgrader_config.py").read_text(), {A: rule}))
+    for s in STUDENTS:
+        late_penalties(course, A, s)
+    refresh(course, A)
+    return course
+
+
+@pytest.fixture(scope="module")
+def graded(classes):
+    return classes(RULES[0])
+
+
+def graded_under(tmp_path_factory, rule):
+    """The class collected from a Canvas download (with its times), due at DUE, late penalty ``rule``,
     graded once."""
     from grader.commands.release import with_rules
     from grader.course.folder import gradebook
@@ -69,8 +123,7 @@ def graded(tmp_path_factory):
     need_program("unshare")
     tmp = tmp_path_factory.mktemp("one-number")
     course = make_course(tmp)
-    (course / "nbgrader_config.py").write_text(with_rules((course / "nbgrader_config.py").read_text(),
-                                                          {A: "per-hour:1"}))
+    (course / "nbgrader_config.py").write_text(with_rules((course / "nbgrader_config.py").read_text(), {A: rule}))
     with gradebook(course) as gb:
         gb.update_or_create_assignment(A, duedate=DUE)
     (course / "roster.csv").write_text("student,name,canvas_id\n" + "".join(
@@ -141,7 +194,8 @@ def in_csv(course) -> dict[str, dict]:
 class Class:
     """What the numbers must be: the first grading's points, and what every step since changed."""
 
-    def __init__(self, course):
+    def __init__(self, course, rule=RULES[0]):
+        self.rule = rule
         first = in_gradebook(course)
         self.auto = {s: first[s][2] for s in first}
         self.max = {"ex1_tool_xy_test": 2, "ex2_sweep_test": 4, "ex3_peak_speed_test": 1}
@@ -158,9 +212,18 @@ class Class:
                          or 0.0), 4) for g, a in self.auto[s].items()}
 
     def graded(self, s):
-        """nbgrader's late penalty as grading sets it: 1 point per started hour late, at most the score."""
+        """nbgrader's late penalty as grading (or a score saved) sets it: the rule's, at most the score."""
         late = (HANDED_IN[s][1] - self.due).total_seconds()
-        self.penalty[s] = min(sum(self.points(s).values()), math.ceil(late / 3600)) if late > 0 else 0.0
+        self.penalty[s] = late_penalty(self.rule, sum(self.points(s).values()), late)
+
+    def resubmitted(self, s):
+        """A corrected notebook graded on its own: full marks, nothing set by hand carried over (comments stay)."""
+        dropped = {g: (self.manual[s].get(g), self.extra[s].get(g)) for g in self.max
+                   if self.manual[s].get(g) is not None or self.extra[s].get(g)}
+        self.auto[s] = {g: float(m) for g, m in self.max.items()}
+        self.manual[s], self.extra[s] = {}, {}
+        self.graded(s)
+        return dropped
 
     def score(self, s) -> float:
         return round(sum(self.points(s).values()) - self.penalty[s], 4)
@@ -212,11 +275,24 @@ def step(name, course, tmp, rng, model):
         extra = rng.choice([None, None, 0.5, 1.0])
         formgrader(course)("GradeHandler", s, gid, {"manual_score": manual, "extra_credit": extra})
         model.manual[s][gid], model.extra[s][gid] = manual, extra
+        model.graded(s)  # the penalty follows the score just saved
     elif name == "comment":
         cell = rng.choice(["ex1_tool_xy", "ex2_sweep"])
         text = rng.choice([None, f"See the note {rng.randint(1, 99)} in the lesson."])
         formgrader(course)("CommentHandler", s, cell, {"manual_comment": text})
         model.comments[s][cell] = text
+        model.graded(s)
+    elif name == "resubmit":  # a corrected notebook collected (its time kept), then graded on its own
+        resubmit(course, s)
+        said = grade(course, "--student", s).stdout
+        dropped = model.resubmitted(s)
+        row = in_csv(course)[s]
+        assert row["status"] == ("hand-set score not carried over" if dropped else "graded"), row
+        for g, (manual, extra) in dropped.items():  # the TA is told who, which cell and the old value
+            old = " and ".join(([f"score {manual:g}"] if manual is not None else [])
+                               + ([f"extra credit {extra:+g}"] if extra else []))
+            assert f"{g} ({old})" in row["detail"], row
+            assert re.search(rf"^{s} .*{re.escape(f'{g} ({old})')}", said, re.MULTILINE), said
     elif name == "late penalty":  # the due date moved (formgrader's Manage Assignments): the next grading applies it
         from grader.course.folder import gradebook
 
@@ -244,7 +320,7 @@ def agree(course, tmp, model, after: str):
         total, shown, text = on_page(course, s)
         assert (total, shown) == (want, points), where
         assert (float(rows[s]["score"]), {g: float(rows[s][g]) for g in points}) == (want, points), where
-        assert float(rows[s]["late_penalty"]) == model.penalty[s], where
+        assert float(rows[s]["late_penalty"]) == round(model.penalty[s], 4), where
         assert plain[s] == want and canvas[s] == want, where
         for g, manual in model.manual[s].items():
             if manual is not None and manual != model.auto[s][g]:
@@ -255,8 +331,17 @@ def agree(course, tmp, model, after: str):
             assert (f"Comment from your teacher:</strong> {comment}" in text) == bool(comment), where
 
 
+def resubmit(course, s):
+    """``s`` hands in a corrected notebook (the instructor's answers, with a note of their own), at the time
+    collected before."""
+    nb = nbformat.reads(good_notebook(course, s).decode(), as_version=4)
+    nb.cells.append(nbformat.v4.new_markdown_cell(f"Handed in again by {s}."))
+    nbformat.write(nb, course / "submitted" / s / A / f"{A}.ipynb")
+
+
 #: The steps of every sequence, in an order drawn from its seed, with one grading step after the due date moved.
-STEPS = ["hand-set score", "hand-set score", "hand-set score", "comment", "late penalty", "return", "export"]
+STEPS = ["hand-set score", "hand-set score", "hand-set score", "comment", "late penalty", "return", "export",
+         "resubmit"]
 GRADING = ["grade", "grade --student"]
 
 
@@ -268,10 +353,16 @@ def sequence(seed: int) -> list[str]:
     return steps
 
 
-@pytest.mark.parametrize("seed", range(len(GRADING)))
-def test_every_place_shows_the_same_score_after_any_sequence_of_a_tas_steps(course, tmp_path, seed):
+#: (seed, rule) of each sequence: each grading step under points per hour, a percentage with the cheaper one.
+SEQUENCES = [(0, RULES[0]), (1, RULES[0]), (1, RULES[1])]
+
+
+@pytest.mark.parametrize("seed, rule", SEQUENCES)
+def test_every_place_shows_the_same_score_after_any_sequence_of_a_tas_steps(classes, tmp_path, seed, rule):
+    course = tmp_path / "course"
+    shutil.copytree(classes(rule), course)
     rng = random.Random(1000 + seed)  # the students, cells, scores and times the steps take
-    model = Class(course)
+    model = Class(course, rule)
     agree(course, tmp_path, model, "the first grading")
     taken = []
     for name in sequence(seed):
@@ -285,6 +376,52 @@ def test_a_late_students_page_says_the_score_the_export_gives(course, tmp_path):
     assert total == exported(course, tmp_path)["bob"] == exported(course, tmp_path, "canvas")["bob"] == 4
     assert "Handed in late (2 h 30 min after the due date): the late penalty took 3 point(s) off the 7 your " \
            "exercises scored, so your score is 4." in text
+
+
+@pytest.mark.parametrize("rule", RULES)
+def test_a_score_set_by_hand_on_a_late_student_moves_the_penalty_at_once(classes, tmp_path, rule):
+    """bob (7 of 7, 2 h 30 min late) gets 0 set by hand on ex1 and ex2: 1 point left. The penalty the rule takes
+    off 1 point (at most the score) is on the page, in the CSV, both exports and formgrader's answers at once."""
+    course = tmp_path / "course"
+    shutil.copytree(classes(rule), course)
+    save = formgrader(course)
+    for gid in ("ex1_tool_xy_test", "ex2_sweep_test"):
+        save("GradeHandler", "bob", gid, {"manual_score": 0.0, "extra_credit": None})
+    late = (HANDED_IN["bob"][1] - DUE).total_seconds()
+    penalty = late_penalty(rule, 1.0, late)
+    want = round(1.0 - penalty, 4)
+    assert penalty == {"per-hour:1": 1.0, "per-day:10%": 0.1}[rule]  # capped at the score; 10 % of 1 point
+    total, _, text = on_page(course, "bob")
+    row = in_csv(course)["bob"]
+    assert (total, float(row["score"]), float(row["late_penalty"]), float(row["raw_score"])) == (want, want, penalty, 1)
+    assert exported(course, tmp_path)["bob"] == exported(course, tmp_path, "canvas")["bob"] == want
+    assert f"the late penalty took {penalty:g} point(s) off the 1 your exercises scored, so your score is {want:g}." \
+        in text
+    from grader.commands.formgrader_scores import late_penalties
+    from grader.course.folder import gradebook
+
+    with gradebook(course) as gb:
+        assert late_penalties(gb) == {(A, "bob", A): penalty}  # what formgrader's answers take off
+
+
+def test_a_resubmission_is_graded_on_its_own_and_the_ta_is_told_of_the_hand_set_score_left_behind(course, tmp_path):
+    """carol's slip (ex1: 0 of 2) got 1 point by hand; her corrected notebook scores 7 of 7, not 6, and the TA
+    reads who, which cell and the value left behind, in the terminal and the CSV."""
+    formgrader(course)("GradeHandler", "carol", "ex1_tool_xy_test", {"manual_score": 1.0, "extra_credit": None})
+    assert float(in_csv(course)["carol"]["score"]) == 6
+    resubmit(course, "carol")
+    said = grade(course, "--student", "carol").stdout
+    row = in_csv(course)["carol"]
+    total, shown, text = on_page(course, "carol")
+    assert (float(row["score"]), total, exported(course, tmp_path)["carol"]) == (7, 7, 7)
+    assert shown["ex1_tool_xy_test"] == float(row["ex1_tool_xy_test"]) == 2 and "set by your teacher" not in text
+    assert row["status"] == "hand-set score not carried over"
+    told = "set by hand on the earlier attempt, not carried over to this new one (graded on its own): " \
+           "ex1_tool_xy_test (score 1); set it again in formgrader"
+    assert told in row["detail"]
+    assert re.search(rf"^carol +7 / 7 +hand-set score not carried over: {re.escape(told)}", said, re.MULTILINE), said
+    grade(course, "--student", "carol")  # the same attempt again: nothing more to tell
+    assert (in_csv(course)["carol"]["status"], float(in_csv(course)["carol"]["score"])) == ("graded", 7)
 
 
 def test_after_grade_student_the_page_keeps_the_score_set_by_hand(course, tmp_path):
