@@ -258,12 +258,12 @@ def main() -> int:
         "the TA's and a student's server")
     # --- a terminal from JupyterLab's Launcher starts where the README's `cd course` works ----------
     for u, where in ((teacher, "/home/student"), (ta, "/home/student"), (students[0], "/home/student/work")):
-        r = u.api("POST", "api/terminals", json={"cwd": ""})   # the Launcher's request, its file browser at /
+        r = u.server("POST", "api/terminals", json={"cwd": ""})   # the Launcher's request, its file browser at /
         if r.status_code != 200:
             fail(f"{u.name}: a terminal from the Launcher: {r.status_code} {r.text[:200]}")
         term = r.json()["name"]
         cwd = u.sh(f"python3 -c {shlex.quote(TERMINAL_CWD)}").stdout.strip()
-        u.api("DELETE", f"api/terminals/{term}")
+        u.server("DELETE", f"api/terminals/{term}")
         if cwd != where:
             fail(f"{u.name}: a terminal from the Launcher starts in {cwd!r}, not {where!r}"
                  + (" (the README's `cd course` fails there)" if u is not students[0] else ""))
