@@ -278,3 +278,45 @@ def test_bad_input_gets_one_line_and_exit_2(case, tmp_path):
                 "empty class": f"snakekit collect {LESSON}"}[case]
     assert lines[0].startswith("snakekit report: ") and expected in lines[0], lines[0]
     assert not (course / f"report-{LESSON}").exists()
+
+
+def test_formgrader_serves_the_report_behind_its_login_with_a_menu_entry(course, tmp_path):
+    import urllib.error
+    import urllib.request
+
+    from tests.system.test_browser import JupyterLab
+
+    r = report(course)
+    assert r.returncode == 0, r.stderr
+    home = tmp_path / "home"
+    home.mkdir()
+    server = JupyterLab(course, home)   # in the course folder, as a TA starts it: formgrader reads its config
+
+    class Stay(urllib.request.HTTPRedirectHandler):
+        def redirect_request(self, *args):
+            return None
+
+    def get(path: str, token: bool = True) -> tuple[int, bytes]:
+        req = urllib.request.Request(f"{server.url}/formgrader/{path}",
+                                     headers={"Authorization": f"token {server.token}"} if token else {})
+        try:
+            with urllib.request.build_opener(Stay).open(req, timeout=120) as answer:   # a bound for a hang
+                return answer.status, answer.read()
+        except urllib.error.HTTPError as e:
+            return e.code, e.read()
+
+    try:
+        status, listing = get("reports")
+        assert status == 200 and f"/formgrader/reports/{LESSON}".encode() in listing, listing[-2000:]
+        status, page = get(f"reports/{LESSON}")
+        assert (status, page) == (200, (course / f"report-{LESSON}" / "report.html").read_bytes())
+        status, students = get("manage_students")
+        assert status == 200 and b"/formgrader/reports\">Class reports</a>" in students
+        assert get(f"reports/{LESSON}", token=False)[0] in (302, 403)     # formgrader's own login
+        assert get("reports/..%2F..%2Fnbgrader_config.py")[0] == 404
+        (course / f"report-{LESSON}" / "report.html").unlink()
+        status, listing = get("reports")
+        assert status == 200 and f"none yet: <code>snakekit report {LESSON}</code>".encode() in listing
+        assert get(f"reports/{LESSON}")[0] == 404                          # no report yet: it says how to write one
+    finally:
+        server.stop()
