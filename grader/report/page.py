@@ -26,6 +26,8 @@ __all__ = ["tables", "write_report", "PAGE"]
 PAGE = "report.html"
 #: Students named in a table cell before "and N more".
 NAMES = 6
+#: Pairs shown on the page, the most alike first (all of them are in the CSVs).
+SHOWN = 100
 
 
 def _names(students, limit: int = NAMES) -> str:
@@ -162,9 +164,13 @@ def notebook(s: ClassStanding, code: list, trajectories: list, threshold: float)
     cells.append(new_markdown_cell(f"## Too alike to be chance\n\nA screen for a TA to read; it changes no grade. "
                                    f"Answer cells without the hand-out's and the solution's code, at least "
                                    f"{threshold:.0%} alike ({len(code)} pairs):"))
-    cells.append(_shown("".join(_side_by_side(p) for p in code)) if code else new_markdown_cell("None."))
+    cells.append(_shown("".join(_side_by_side(p) for p in code[:SHOWN])) if code else new_markdown_cell("None."))
     cells.append(new_markdown_cell(f"The same wrong trajectory, equal within float noise ({len(trajectories)} pairs):"))
-    cells.append(_shown(_html_table(*t["trajectories"])) if trajectories else new_markdown_cell("None."))
+    columns, rows = t["trajectories"]
+    cells.append(_shown(_html_table(columns, rows[:SHOWN])) if trajectories else new_markdown_cell("None."))
+    if len(code) > SHOWN or len(trajectories) > SHOWN:
+        cells.append(new_markdown_cell(f"The first {SHOWN} pairs of each are shown; all of them are in `alike.csv` "
+                                       "and `trajectories.csv`."))
     nb = new_notebook(cells=cells)
     nb.metadata["language_info"] = {"name": "python"}
     return nb

@@ -1,7 +1,7 @@
 """Where a class stands and why it fails, from the gradebook and the grader's own records.
 
-The points come from nbgrader's gradebook (:func:`grader.course.gradebook.scores_of`: a score a TA
-changed in formgrader counts as changed); what each check said, which hint fired and how each hidden
+The points come from nbgrader's gradebook (as :func:`grader.course.gradebook.scores_of` reads them, in one
+query: a score a TA changed in formgrader counts as changed); what each check said, which hint fired and how each hidden
 case went come from the verdicts ``snakekit grade`` keeps in the TA's copy of every notebook
 (``autograded/<student>/<a>/<notebook>.ipynb``, :func:`grader.feedback.notebook.recorded`); a
 resubmission from the earlier notebooks ``collect`` keeps in ``submitted/<student>/<a>/attempts/``.
@@ -19,7 +19,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
-from grader.course.gradebook import scores_of
+from grader.course.gradebook import ExerciseGrade, SubmissionScores, cell_order
 from grader.errors import CourseError
 from grader.feedback.notebook import recorded
 from grader.files import MAX_FILE
@@ -190,19 +190,44 @@ def _records(course: Path, assignment: str, student: str) -> list | None:
     return found
 
 
-def _times(course: Path, assignment: str) -> dict:
-    """student -> hours between the hand-in and the due date, where the gradebook has both."""
+def _gradebook(course: Path, assignment: str) -> tuple[dict, dict]:
+    """``(scores, hours)``: student -> :class:`grader.course.gradebook.SubmissionScores` of the gradebook, in one
+    query (nbgrader's objects load a class's grades one by one: 50 s for 500 submissions); student -> hours
+    between the hand-in and the due date, where the gradebook has both. A student's extension of the due
+    date (nbgrader's) is not counted."""
+    from nbgrader.api import Assignment, BaseCell, Grade, Notebook, SubmittedAssignment, SubmittedNotebook
+
     from grader.course.folder import gradebook
 
-    out = {}
+    order = cell_order(course, assignment)
+    grades, penalty, stamps = defaultdict(list), defaultdict(dict), {}
     with gradebook(course) as gb:
-        a = gb.find_assignment(assignment)
-        if a.duedate is None:
-            return out
-        for sub in a.submissions:
-            if sub.timestamp is not None:
-                out[sub.student.id] = round((a.duedate - sub.timestamp).total_seconds() / 3600, 3)
-    return out
+        due = gb.db.query(Assignment.duedate).filter(Assignment.name == assignment).scalar()
+        rows = (gb.db.query(SubmittedAssignment.student_id, SubmittedAssignment.timestamp, Notebook.name,
+                            SubmittedNotebook.late_submission_penalty, BaseCell.name, Grade.max_score,
+                            Grade.auto_score, Grade.manual_score, Grade.extra_credit)
+                .select_from(Grade)
+                .join(SubmittedNotebook, Grade.notebook_id == SubmittedNotebook.id)
+                .join(SubmittedAssignment, SubmittedNotebook.assignment_id == SubmittedAssignment.id)
+                .join(Assignment, SubmittedAssignment.assignment_id == Assignment.id)
+                .join(Notebook, SubmittedNotebook.notebook_id == Notebook.id)
+                .join(BaseCell, Grade.cell_id == BaseCell.id)
+                .filter(Assignment.name == assignment))
+        for student, stamp, nb, late, gid, max_score, auto, manual, extra in rows:
+            grades[student].append(ExerciseGrade(gid, nb, float(max_score or 0), auto, manual, float(extra or 0)))
+            penalty[student][nb] = float(late or 0)
+            stamps[student] = stamp
+    scores, hours = {}, {}
+    for student, gs in grades.items():
+        gs.sort(key=lambda g: (order.get(g.grade_id, len(order)), g.notebook, g.grade_id))
+        late = sum(penalty[student].values())
+        stamp = stamps[student]
+        seconds = max(0.0, (stamp - due).total_seconds()) if stamp is not None and due is not None else 0.0
+        scores[student] = SubmissionScores(student, assignment, sum(g.max_score for g in gs),
+                                           round(sum(g.score for g in gs), 4), late, seconds, tuple(gs))
+        if stamp is not None and due is not None:
+            hours[student] = round((due - stamp).total_seconds() / 3600, 3)
+    return dict(sorted(scores.items())), hours
 
 
 def standing(course: Path, assignment: str) -> ClassStanding:
@@ -212,12 +237,7 @@ def standing(course: Path, assignment: str) -> ClassStanding:
         CourseError: no submission of ``assignment`` is in the gradebook yet.
     """
     course = Path(course)
-    from nbgrader.api import MissingEntry
-
-    try:
-        scores = scores_of(course, assignment)
-    except MissingEntry:
-        scores = {}
+    scores, hours = _gradebook(course, assignment)
     if not scores:
         raise CourseError(f"no submission of {assignment} is in the gradebook of {course} yet: grade it first "
                           f"(snakekit grade {assignment})")
@@ -254,7 +274,6 @@ def standing(course: Path, assignment: str) -> ClassStanding:
                              for (gid, text, hinted), who in groups.items()),
                             key=lambda f: (order.get(f.grade_id, len(order)), -f.count, f.text)))
     attempts = tuple(sorted(s for s in scores if any((course / "submitted" / s / assignment / "attempts").glob("*"))))
-    hours = _times(course, assignment)
     late = tuple(sorted(s for s, x in scores.items() if x.seconds_late > 0 or x.late_penalty > 0
                         or hours.get(s, 0.0) < 0))
     return ClassStanding(assignment, first.max_score, {s: x.score for s, x in sorted(scores.items())}, exercises,

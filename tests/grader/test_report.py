@@ -134,12 +134,33 @@ def graded06(graded_classes):
     return graded_classes(LESSON)
 
 
-@pytest.fixture
-def course(graded06, tmp_path):
-    """A copy of the graded lesson 06 course."""
-    course = tmp_path / "course"
+@pytest.fixture(scope="module")
+def reported(graded06, tmp_path_factory):
+    """A copy of the graded lesson 06 course with the submissions made for the screen handed in, a wrong
+    trajectory copied (``rio``, from ``copied[0]``) and a right one (``amy``, from ``copied[1]``), and
+    ``snakekit report`` run once on it: ``(course, copied)``."""
+    from grader.report.standing import standing
+
+    course = tmp_path_factory.mktemp("reported") / "course"
     shutil.copytree(Path(graded06["course"]), course, symlinks=True)
-    return course
+    for student in MADE:
+        hand_in(course, LESSON, student)
+    kept = sorted(course.glob(f"autograded/*/{LESSON}/lab/*.npz"))
+    assert kept, "snakekit grade kept no trajectory for the lab"
+    cases = standing(course, LESSON).cases
+    wrong = [p for p in kept if any(f < 1 for k, f in cases[(p.parts[-4], p.stem)] if k == "at its defaults")]
+    right = [p for p in kept if p not in wrong]
+    assert wrong and right
+    for copier, original in (("rio", wrong[0]), ("amy", right[0])):
+        dest = course / "autograded" / copier / LESSON / "lab" / original.name
+        dest.parent.mkdir(parents=True)
+        with np.load(original) as z:
+            arrays = dict(z)
+        arrays["positions"] = arrays["positions"] + 1e-12   # float noise: another machine's last digit
+        np.savez(dest, **arrays)
+    r = report(course)
+    assert r.returncode == 0, r.stderr
+    return course, (wrong[0].parts[-4], right[0].parts[-4])
 
 
 def report(course: Path, *args: str) -> subprocess.CompletedProcess:
@@ -152,11 +173,10 @@ def rows(course: Path, table: str) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def test_the_reports_counts_are_the_gradebooks(course):
+def test_the_reports_counts_are_the_gradebooks(reported):
     from nbgrader.api import Gradebook
 
-    r = report(course)
-    assert r.returncode == 0, r.stderr
+    course, _ = reported
     full, partial, zero, totals, late = {}, {}, {}, {}, set()
     with Gradebook(f"sqlite:///{course / 'gradebook.db'}") as gb:
         for sub in gb.find_assignment(LESSON).submissions:
@@ -193,11 +213,8 @@ def test_the_reports_counts_are_the_gradebooks(course):
             seen.add((s, gid))
 
 
-def test_a_copy_with_every_name_changed_is_flagged_and_two_answers_written_apart_are_not(course):
-    for student in MADE:
-        hand_in(course, LESSON, student)
-    r = report(course)
-    assert r.returncode == 0, r.stderr
+def test_a_copy_with_every_name_changed_is_flagged_and_two_answers_written_apart_are_not(reported):
+    course, _ = reported
     pairs = {frozenset((row["first"], row["second"])): float(row["similarity"]) for row in rows(course, "alike")}
     assert pairs.get(frozenset(("lin", "kai")), 0) >= 0.8, pairs
     assert frozenset(("mei", "ned")) not in pairs, pairs
@@ -206,36 +223,19 @@ def test_a_copy_with_every_name_changed_is_flagged_and_two_answers_written_apart
     assert "stamps[index - 1] + 1.0 / rate" in page and "t[k - 1] + 1.0 / rate" in page   # side by side
 
 
-def test_a_copied_wrong_trajectory_is_flagged_and_a_right_one_is_not(course):
-    kept = sorted(course.glob(f"autograded/*/{LESSON}/lab/*.npz"))
-    assert kept, "snakekit grade kept no trajectory for the lab"
-    from grader.report.standing import standing
-
-    cases = standing(course, LESSON).cases
-    wrong = [p for p in kept if any(f < 1 for k, f in cases[(p.parts[-4], p.stem)] if k == "at its defaults")]
-    right = [p for p in kept if p not in wrong]
-    assert wrong and right
-    for copier, original in (("rio", wrong[0]), ("amy", right[0])):
-        dest = course / "autograded" / copier / LESSON / "lab" / original.name
-        dest.parent.mkdir(parents=True)
-        with np.load(original) as z:
-            arrays = dict(z)
-        arrays["positions"] = arrays["positions"] + 1e-12   # float noise: another machine's last digit
-        np.savez(dest, **arrays)
-    r = report(course)
-    assert r.returncode == 0, r.stderr
+def test_a_copied_wrong_trajectory_is_flagged_and_a_right_one_is_not(reported):
+    course, (wrong, right) = reported
     same = {frozenset((row["first"], row["second"])) for row in rows(course, "trajectories")}
-    assert frozenset(("rio", wrong[0].parts[-4])) in same, same
-    assert not [p for p in same if "amy" in p], same
+    assert frozenset(("rio", wrong)) in same, same
+    assert not [p for p in same if "amy" in p or right in p], same
 
 
-def test_the_page_opens_offline_in_chromium_and_its_plots_are_pictures(course):
+def test_the_page_opens_offline_in_chromium_and_its_plots_are_pictures(reported):
     sync_api = need("playwright.sync_api")
     chromium = need_program("chromium")
     from tests.system.test_browser import CHROMIUM_FLAGS
 
-    r = report(course)
-    assert r.returncode == 0, r.stderr
+    course, _ = reported
     page_file = course / f"report-{LESSON}" / "report.html"
     text = page_file.read_text()
     assert "http" not in text and str(course) not in text and str(REPO) not in text
@@ -280,14 +280,14 @@ def test_bad_input_gets_one_line_and_exit_2(case, tmp_path):
     assert not (course / f"report-{LESSON}").exists()
 
 
-def test_formgrader_serves_the_report_behind_its_login_with_a_menu_entry(course, tmp_path):
+def test_formgrader_serves_the_report_behind_its_login_with_a_menu_entry(reported, tmp_path):
     import urllib.error
     import urllib.request
 
     from tests.system.test_browser import JupyterLab
 
-    r = report(course)
-    assert r.returncode == 0, r.stderr
+    course = tmp_path / "course"
+    shutil.copytree(reported[0], course, symlinks=True)
     home = tmp_path / "home"
     home.mkdir()
     server = JupyterLab(course, home)   # in the course folder, as a TA starts it: formgrader reads its config
