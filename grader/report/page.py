@@ -46,8 +46,8 @@ def tables(s: ClassStanding, code: list, trajectories: list) -> dict[str, tuple[
         "totals": (["student", "score", "max_score", "late", "resubmitted", "hours_before_due"],
                    [[st, score, s.max_score, st in s.late, st in s.resubmitted, s.hours_before_due.get(st, "")]
                     for st, score in s.totals.items()]),
-        "failures": (["exercise", "mistake", "recognised_by_a_hint", "count", "examples", "students", "example_message"],
-                     [[exercise_name(f.grade_id), f.text, f.hinted, f.count, ", ".join(f.students[:2]),
+        "failures": (["exercise", "mistake", "kind", "count", "examples", "students", "example_message"],
+                     [[exercise_name(f.grade_id), f.text, _kind(f), f.count, ", ".join(f.students[:2]),
                        " ".join(f.students), f.example] for f in s.failures]),
         "alike": (["first", "second", "similarity", "cells"],
                   [[p.first, p.second, p.similarity, " ".join(f"{gid}:{sim:g}" for gid, _, _, sim in p.cells)]
@@ -55,6 +55,10 @@ def tables(s: ClassStanding, code: list, trajectories: list) -> dict[str, tuple[
         "trajectories": (["first", "second", "exercise", "largest_difference"],
                          [[p.first, p.second, exercise_name(p.grade_id), p.diff] for p in trajectories]),
     }
+
+
+def _kind(f) -> str:
+    return "hint" if f.hinted else "not written" if f.unwritten else "no hint"
 
 
 def _html_table(columns, rows) -> str:
@@ -154,10 +158,11 @@ def notebook(s: ClassStanding, code: list, trajectories: list, threshold: float)
     cells.append(_shown(png=_histogram(totals, s.max_score), alt="distribution of totals"))
     cells.append(new_markdown_cell("## Why they fail\n\nThe same mistake at other cases counts once: grouped by the hint "
                                    "that fired, else by the message with its numbers taken out (`#`)."))
-    for hinted, title in ((True, "### Mistakes a hint recognised"),
-                          (False, "### Mistakes no hint recognised (candidates for the next hint)")):
+    for kind, title in (("hint", "### Mistakes a hint recognised"),
+                        ("no hint", "### Mistakes no hint recognised (candidates for the next hint)"),
+                        ("not written", "### Not written (the hand-out's stub still raised)")):
         rows = [[exercise_name(f.grade_id), f.text, f.count, _names(f.students, 2), f.example]
-                for f in s.failures if f.hinted == hinted]
+                for f in s.failures if _kind(f) == kind]
         cells.append(new_markdown_cell(title))
         cells.append(_shown(_html_table(["exercise", "mistake", "count", "examples", "one student's message"], rows))
                      if rows else new_markdown_cell("None."))

@@ -80,6 +80,11 @@ class FailureGroup:
     def count(self) -> int:
         return len(self.students)
 
+    @property
+    def unwritten(self) -> bool:
+        """The hand-out's stub still raised (COURSE.md: it raises ``NotImplementedError``): not a mistake, no answer."""
+        return not self.hinted and "raised NotImplementedError" in self.text
+
 
 @dataclass(frozen=True)
 class ClassStanding:

@@ -196,6 +196,10 @@ def test_the_reports_counts_are_the_gradebooks(reported):
             for nb in sub.notebooks:
                 scored.update({(sub.student.id, g.name): (float(g.auto_score or 0), g.max_score) for g in nb.grades})
     seen = set()
+    kinds = {(row["exercise"], row["kind"]) for row in rows(course, "failures")}
+    # every exercise has a student who did not write it (the class's "abe", "cal", "dot"...), and 6.2 a hint that fired
+    assert {e for e, kind in kinds if kind == "not written"} == {row["exercise"] for row in rows(course, "exercises")}
+    assert ("6.2 sweep_positions", "hint") in kinds
     for row in rows(course, "failures"):
         students = row["students"].split()
         assert int(row["count"]) == len(students) == len(set(students)) > 0
