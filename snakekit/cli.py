@@ -227,6 +227,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("return", help="return the feedback pages: to the hub's exchange or as an LMS zip "
                                   "(snakekit return --help)", add_help=False)
     sub.add_parser("export", help="grades for Canvas's or Moodle's import (snakekit export --help)", add_help=False)
+    sub.add_parser("report", help="the teacher's view of a graded class: where it stands, why it fails, which "
+                                  "submissions are too alike (snakekit report --help)", add_help=False)
     p = sub.add_parser("generate", help="write the URDF and MJCF from the robot spec")
     p.add_argument("--check", action="store_true", help="only check that the committed files are current")
     p.set_defaults(func=_generate)
@@ -244,7 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: Commands another installed package provides (the grader's), by the entry point group they are in.
 PLUGIN_GROUP = "snakekit.commands"
-PLUGIN_COMMANDS = ("grade", "release", "collect", "return", "export", "lab")
+PLUGIN_COMMANDS = ("grade", "release", "collect", "return", "export", "lab", "report")
 
 
 def plugin_command(name: str):

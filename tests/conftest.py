@@ -58,6 +58,28 @@ def copy_course(dest):
     return dest
 
 
+@pytest.fixture(scope="session")
+def graded_classes(tmp_path_factory):
+    """``lesson -> result``: a class of ``tests/grader/class_submissions/`` graded by ``snakekit grade`` on its
+    first use in this test process (``tests/grader/test_class_grades.py``'s ``grade_class``). Grading a class
+    costs minutes: test_class_grades.py and test_report.py read the same graded course (the report's tests
+    copy it before they change anything); test_report.py's tests join the class's xdist group, so under
+    ``make test`` they run on the worker that grades it."""
+    done = {}
+
+    def graded(lesson: str) -> dict:
+        if lesson not in done:
+            import sys
+
+            sys.path.insert(0, os.path.join(ROOT, "tests", "grader"))
+            from test_class_grades import grade_class
+
+            done[lesson] = grade_class(lesson, tmp_path_factory.mktemp(f"class{lesson[:2]}"))
+        return done[lesson]
+
+    return graded
+
+
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that nothing listens on right now."""
     with socket.socket() as s:

@@ -20,6 +20,8 @@ does). Then:
   --student STUDENT`` (the sandbox, the out-of-kernel scoring, the feedback), not with
   nbgrader's in-kernel autograde. Its options come from the config's ``SnakekitGrade``
   section (``references``, ``timeout``, ``cell_timeout``, ``memory``).
+* formgrader's menu has "Class reports": each assignment's ``snakekit report`` page, behind formgrader's
+  own login (:mod:`grader.commands.formgrader_report`).
 * formgrader's grading page loads MathJax from the Jupyter server (``jupyter_server_mathjax``)
   instead of a CDN (template ``grader/templates/snakekit_formgrade``), so every formgrader page
   works with no network beyond the server.
@@ -38,7 +40,7 @@ from pathlib import Path
 
 from nbconvert.exporters import HTMLExporter
 
-from grader.commands import formgrader_scores
+from grader.commands import formgrader_report, formgrader_scores
 from grader.feedback import exporter, scores
 from grader.arm import feedback as lab_feedback
 
@@ -55,6 +57,7 @@ def use_safe_grading(c) -> None:
         handlers.AutogradeHandler.post = _autograde_post(handlers)
         saved_in_formgrader(handlers)
         formgrader_scores.install(handlers)
+        formgrader_report.install(handlers)
         math_from_the_server(c)
 
 

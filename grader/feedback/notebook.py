@@ -134,7 +134,8 @@ def annotate_notebook(nb, result, *, stopped: int | None = None, timeout: float 
         exercises[ex.grade_id] = {"score": ex.score, "max_score": ex.max_score, "status": ex.status,
                                   "message": ex.message,
                                   "checks": [[c.name, c.fraction, c.weight, c.message] for c in ex.checks] if png else [],
-                                  "plot": base64.b64encode(png).decode() if png else ""}
+                                  "plot": base64.b64encode(png).decode() if png else "",
+                                  "cases": [[kind, fraction] for kind, fraction in ex.cases]}
     nb.metadata[RECORD] = {"status": result.status, "detail": result.detail, "stopped": stopped, "timeout": timeout,
                            "exercises": exercises}
     for cell in nb.cells:
@@ -167,8 +168,9 @@ def recorded(nb):
         exercises, plots = [], {}
         for gid, e in rec["exercises"].items():
             checks = tuple(Check(str(n), float(f), str(m), float(w)) for n, f, w, m in e["checks"])
+            cases = tuple((str(k), float(f)) for k, f in e.get("cases", ()))
             exercises.append(ExerciseScore(str(gid), float(e["score"]), float(e["max_score"]), str(e["status"]),
-                                           str(e["message"]), checks))
+                                           str(e["message"]), checks, cases=cases))
             if e["plot"]:
                 plots[str(gid)] = base64.b64decode(e["plot"])
         stopped = rec.get("stopped")

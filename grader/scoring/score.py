@@ -48,6 +48,7 @@ class ExerciseScore:
         status: ``scored``, ``missing``, ``inconsistent`` or ``tampered``.
         message: what the student reads: the checks that failed, with numbers.
         checks: the individual checks.
+        cases: per hidden case, ``(kind, fraction right)`` (:func:`case_kind`), for the class's report.
         curves: for plots: name -> (times, positions) of the student's and the reference's runs.
     """
 
@@ -58,6 +59,7 @@ class ExerciseScore:
     message: str
     checks: tuple = ()
     curves: dict = field(default_factory=dict, repr=False)
+    cases: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -91,6 +93,18 @@ def kind_of(results) -> str:
     if {"times", "positions"} <= names or {"commanded_times", "commanded_positions"} <= names:
         return "trajectory"
     return "values"
+
+
+def case_kind(args, want) -> str:
+    """What kind of hidden case a case is, from the instructor's result there: one where the exercise
+    asks for an error, the function at its defaults (the task itself), or a case drawn for the batch.
+
+    >>> case_kind((3, 1.0), "LimitError: beyond"), case_kind((), {}), case_kind((3, 1.0), {})
+    ('must raise LimitError', 'at its defaults', 'drawn')
+    """
+    if isinstance(want, str):
+        return f"must raise {want.split(':', 1)[0]}"
+    return "at its defaults" if len(args) == 0 else "drawn"
 
 
 def read_handin(data: bytes) -> list:
@@ -235,7 +249,9 @@ def _score_values(gid, handin, expected: Expected, max_score) -> ExerciseScore:
         if msg:
             why.append(msg)
     check = _cases_check(ok, why)
-    return ExerciseScore(gid, round(check.fraction * max_score, 4), max_score, "scored", check.message, (check,))
+    kinds = tuple((case_kind(args, want), float(right)) for args, want, right in zip(expected.cases, expected.results, ok))
+    return ExerciseScore(gid, round(check.fraction * max_score, 4), max_score, "scored", check.message, (check,),
+                         cases=kinds)
 
 
 def _cases_check(ok, why, name: str = "hidden cases", weight: float = 1.0) -> compare.Check:
@@ -308,12 +324,14 @@ def _score_motion(gid, handin, expected: Expected, max_score) -> ExerciseScore:
     """Each check's credit is its mean over the cases (a case that failed to run: 0 for all)."""
     tol = {**DEFAULT_TOLERANCES["trajectory"], **expected.tolerances}
     fn = expected.function or label(gid)
-    rows, raised, curves = [], [], {}
+    rows, raised, curves, per_case = [], [], {}, []
     for args, got, want in zip(expected.cases, handin, expected.results):
         where = call(fn, args)
         if isinstance(want, str):
             raised.append(_raised_as_expected(fn, args, got, want))
+            per_case.append((case_kind(args, want), raised[-1]))
             continue
+        per_case.append((case_kind(args, want), len(rows)))
         try:
             if isinstance(got, str):
                 raise ValueError(explain_error(got, fn))
@@ -345,4 +363,14 @@ def _score_motion(gid, handin, expected: Expected, max_score) -> ExerciseScore:
     if good and errors:
         failed.insert(0, f"{len(errors)} of {len(rows)} hidden cases gave no trajectory; the first: {errors[0]}")
     msg = " ".join(failed) if failed else "every check passed in every hidden case."
-    return ExerciseScore(gid, round(fraction * max_score, 4), max_score, "scored", msg, tuple(checks), curves)
+    kinds = tuple((kind, float(at[0]) if isinstance(at, tuple) else _case_fraction(rows[at][1]))
+                  for kind, at in per_case)
+    return ExerciseScore(gid, round(fraction * max_score, 4), max_score, "scored", msg, tuple(checks), curves, kinds)
+
+
+def _case_fraction(row) -> float:
+    """One motion case's share right: its checks weighted as the exercise weighs them (0 if it gave no trajectory)."""
+    if not isinstance(row, dict):
+        return 0.0
+    total = sum(c.weight for c in row.values())
+    return float(sum(c.weight * c.fraction for c in row.values()) / total) if total else 0.0

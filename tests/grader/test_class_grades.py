@@ -89,7 +89,7 @@ def grade_class(lesson: str, tmp: Path) -> dict:
                 per[ex] = per.get(ex, 0.0) + float(g.score or 0.0)
             exercises[student.name] = per
     pages = {path.parts[-3]: path.read_text() for path in (course / "feedback").glob(f"*/{lesson}/*.html")}
-    return {"rows": rows, "details": details, "exercises": exercises, "seconds": seconds, "pages": pages,
+    return {"course": course, "rows": rows, "details": details, "exercises": exercises, "seconds": seconds, "pages": pages,
             "seed": seed and seed.group(1), "late": [line for line in r.stderr.splitlines() if "reply never came" in line]}
 
 
@@ -163,12 +163,12 @@ def test_each_class_has_30_submissions_with_ranges_reasons_and_cells_of_the_rele
 
 
 @pytest.fixture(scope="module", params=sorted(CLASSES), ids=IDS)
-def graded(request, tmp_path_factory):
+def graded(request, graded_classes):
     from conftest import need_program
 
     need_program("unshare")
     lesson = request.param
-    result = grade_class(lesson, tmp_path_factory.mktemp(f"class{lesson[:2]}"))
+    result = graded_classes(lesson)   # shared with tests/grader/test_report.py
     hangs = {s.name for s in CLASSES[lesson].STUDENTS if s.status == "timeout"}   # an infinite loop runs twice
     again = sorted(n for n, d in result["details"].items()
                    if ("second run" in d or "both of its runs" in d) and n not in hangs)
