@@ -464,6 +464,27 @@ def test_feedback_html_is_what_nbconverts_own_exporter_writes(tmp_path):
         assert "<math display=\"inline\"><mrow><msub><mi>q</mi><mn>1</mn></msub></mrow></math>" in written
 
 
+@pytest.mark.parametrize("chunks", [["speeds: [0.58 0.61] -> 3 too fast\n"], ["speeds: [0.58 ", "0.61] -> 3 too fast\n"],
+                                    ["speeds: [0.58 0.61]", " -> 3 ", "too fast\n"]])
+def test_a_print_flushed_in_pieces_makes_the_same_page(tmp_path, chunks):
+    """A kernel sends one print as one stream output or several, as it flushed on a quiet or a busy
+    machine: the page is the same, with the line whole (a regrade's page is the same page)."""
+    from nbformat.v4 import new_code_cell, new_notebook, new_output
+
+    from grader.feedback import exporter
+
+    def page(parts):
+        code = new_code_cell("print(speeds)", execution_count=1, id="speeds")
+        code.outputs = [new_output("stream", name="stdout", text=t) for t in parts]
+        nb = new_notebook(cells=[code])
+        nb.metadata = {"language_info": {"name": "python"}}
+        return exporter.write_html(nb, tmp_path / f"{len(parts)}.html").read_text()
+
+    written = page(chunks)
+    assert written == page(["speeds: [0.58 0.61] -> 3 too fast\n"])
+    assert "speeds: [0.58 0.61] -&gt; 3 too fast" in written
+
+
 def test_a_feedback_page_is_what_nbconvert_writes_with_its_alt_texts_and_tabindexes():
     """The page is written without nbconvert's last pass (BeautifulSoup over the whole page, most of a
     page's time); parsed, it is the page nbconvert writes: images without alt text get nbconvert's, the
