@@ -439,7 +439,8 @@ class Again:
 
 
 class Progress:
-    """``grading: [#####.....] 12/60 done, 48 left, 3 failed`` on stderr (or a given stream)."""
+    """``grading: [#####.....] 12/60 done, 48 left, 3 with problems`` on stderr (or a given stream): a
+    submission whose status is not ``graded`` (tests restored, a timeout...), the summary's count."""
 
     def __init__(self, total: int, stream=None, jobs: int = 1):
         self.total, self.done, self.failed = total, 0, 0
@@ -454,7 +455,7 @@ class Progress:
         fill = int(width * self.done / max(self.total, 1))
         rate = (time.monotonic() - self.t0) / self.done if self.done else 0
         return (f"grading [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total}: done {self.done}, "
-                f"left {self.total - self.done}, failed {self.failed}"
+                f"left {self.total - self.done}, {self.failed} with problems"
                 + (f" ({rate:.1f} s per student, {self.jobs} workers)" if self.done else ""))
 
     def _show(self):

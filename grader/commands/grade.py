@@ -206,7 +206,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
             print(f"snakekit grade: no submission of {args.assignment} by {', '.join(missing)} in "
                   f"{course}/submitted", file=sys.stderr)
             return 2
-        students = args.student
+        students = list(dict.fromkeys(args.student))   # a name given twice is graded once
+        if len(students) < len(args.student):
+            twice = sorted({s for s in args.student if args.student.count(s) > 1})
+            print(f"snakekit grade: {', '.join(twice)} given more than once: graded once", file=sys.stderr)
     if not students:
         print(f"snakekit grade: no submissions of {args.assignment} in {course}/submitted/<student>/"
               f"{args.assignment}/; collect them first (`snakekit collect {args.assignment} --from DOWNLOAD` "

@@ -83,6 +83,27 @@ def scores(course: Path, assignments: list[str] | None = None):
         return names, maxes, table, dues
 
 
+def require_graded(course: Path, assignment: str, command: str) -> None:
+    """Refuses (CourseError) when a student's submission was collected again after it was graded: the
+    gradebook's score and the page would be the earlier attempt's, under the new hand-in's name."""
+    from nbgrader.api import MissingEntry
+
+    from grader.scoring.draws import ungraded_attempts
+
+    with gradebook(course) as gb:
+        try:
+            notebooks = [nb.name for nb in gb.find_assignment(assignment).notebooks]
+        except MissingEntry:
+            return
+    stale = ungraded_attempts(course, assignment, notebooks)
+    if stale:
+        raise CourseError(f"{assignment}: {len(stale)} student(s) handed in again after they were graded "
+                          f"({excerpt(', '.join(stale), quote=False)}): their score and page are the earlier "
+                          f"attempt's; grade them first (`snakekit grade {assignment} "
+                          + " ".join(f"--student {s}" for s in stale[:5]) + ("..." if len(stale) > 5 else "")
+                          + f"`), then run {command} again; nothing was written")
+
+
 def not_due(dues: dict, now: dt.datetime | None = None) -> dict:
     """The assignments whose due date is still ahead (UTC), with it."""
     now = (now or dt.datetime.now(dt.timezone.utc)).astimezone(dt.timezone.utc).replace(tzinfo=None)
@@ -94,6 +115,11 @@ def export(course: Path, lms: str | None, path: Path, roster: Roster | None, ass
     cell (no grade, not 0: Moodle's import reads an empty cell as no grade), after its due date 0 (as
     nbgrader export)."""
     names, maxes, table, dues = scores(course, assignments)
+    if not names:
+        raise CourseError(f"nothing is graded yet in {course}'s gradebook: grade an assignment first "
+                          "(`snakekit grade ASSIGNMENT`); nothing was written")
+    for a in names:
+        require_graded(course, a, "snakekit export")
     ahead = not_due(dues)
     students = sorted(set(table) | (roster.students if roster else set()))
     fmt = lambda x: f"{x:g}"  # noqa: E731
@@ -150,7 +176,8 @@ def export_main(argv: list[str] | None = None, out=None) -> int:
     path = args.out or course / f"grades-{args.lms or 'all'}.csv"
     try:
         if not (course / "gradebook.db").is_file():
-            raise CourseError(f"no gradebook in {course} (give --course DIR; grade an assignment first)")
+            raise CourseError(f"no gradebook in {course}: not a course folder, or nothing graded yet (run it in the "
+                              "course folder or give --course DIR; grade an assignment first)")
         check_output(path, course, suffix=".csv", what="-o", command="snakekit export", reads={args.roster: "the roster"})
         roster = Roster.load(default_roster(course, args.roster))
         if args.lms == "canvas" and roster is not None and not any(r.get("canvas_id") for r in roster.rows):
@@ -242,6 +269,7 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
         raise CourseError(f"no feedback pages of {assignment} in {course}/feedback/<student>/{assignment}/; "
                           f"run `snakekit grade {assignment}` first")
     manifest = read_manifest(course, assignment)  # a damaged manifest stops it before anything is written
+    require_graded(course, assignment, "snakekit return")
     if before is not None:
         before(course, assignment, out)
     problems, done = [], {"exchange": 0, "zip": 0}

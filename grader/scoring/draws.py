@@ -16,7 +16,7 @@ import json
 import os
 from pathlib import Path
 
-__all__ = ["attempt", "groups", "keep", "load", "resubmitted"]
+__all__ = ["attempt", "groups", "keep", "load", "resubmitted", "ungraded_attempts"]
 
 FOLDER = "draws"
 
@@ -82,3 +82,11 @@ def keep(course: Path, assignment: str, seed: int, students: list[str], notebook
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
     os.replace(tmp, path)
+
+
+def ungraded_attempts(course: Path, assignment: str, notebooks: list[str]) -> list[str]:
+    """The students whose notebooks in ``submitted/`` changed since they were graded: collected again
+    and not graded since, so the gradebook's score and their page are the earlier attempt's."""
+    folder = Path(course) / "submitted"
+    students = sorted(p.name for p in folder.iterdir() if (p / assignment).is_dir()) if folder.is_dir() else []
+    return sorted(resubmitted(course, assignment, students, notebooks))

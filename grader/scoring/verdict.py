@@ -165,7 +165,7 @@ class Verdicts:
         else:
             status, detail = "graded", ""
         if status == "timeout" and runs > 1:
-            detail += " (in both of its runs: a notebook stopped by the clock is run once more before it counts)"
+            detail += " (run twice, so that a busy grading machine is not the cause, and stopped both times)"
         elif runs > 1:
             detail = (detail + "; " if detail else "") + ("graded on its second run: the first was stopped by the "
                                                            "clock, so it ran once more from the start")

@@ -309,7 +309,7 @@ def test_scores_land_in_nbgraders_gradebook(graded):
 
 def test_progress_shows_done_left_failed(graded):
     err = graded["first"].stderr
-    assert "0/2: done 0, left 2, failed 0" in err and "2/2: done 2, left 0, failed 0" in err
+    assert "0/2: done 0, left 2, 0 with problems" in err and "2/2: done 2, left 0, 0 with problems" in err
 
 
 def test_feedback_has_verdicts_and_plots_but_no_hidden_tests(graded):

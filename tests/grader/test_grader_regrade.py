@@ -76,7 +76,9 @@ def test_a_class_graded_twice_and_one_student_regraded_get_the_same_scores_and_p
     _grade(course)
     _same(_state(course), first)
     assert _seeds(course) == seeds
-    _grade(course, "--student", "half")
+    r = _grade(course, "--student", "half", "--student", "half")   # a TA's slip: the name twice
+    assert "snakekit grade: half given more than once: graded once" in r.stderr
+    assert "graded 1 submission(s)" in r.stdout + r.stderr, r.stdout + r.stderr
     _same(_state(course), first)
     assert _seeds(course) == seeds
 

@@ -205,6 +205,15 @@ def test_a_resubmission_without_a_time_is_graded_marked_never_with_the_earlier_t
     r = run(capsys, "collect", A, "--course", course, "--from", canvas_zip(tmp_path / "friday.zip", second))
     assert r.returncode == 0, r.stdout + r.stderr
     assert manifest(course)["ann"]["submitted_at"] == ""
+    # collected, not graded yet: return and export would hand out the earlier attempt's page and score
+    for command in (["return", A], ["export", "--lms", "canvas"]):
+        listing = sorted(p.name for p in course.rglob("*") if p.is_file())
+        r = run(capsys, *command, "--course", course)
+        assert r.returncode == 2 and r.stderr == (
+            f"snakekit {command[0]}: {A}: 1 student(s) handed in again after they were graded (ann): their score and "
+            f"page are the earlier attempt's; grade them first (`snakekit grade {A} --student ann`), then run "
+            f"snakekit {command[0]} again; nothing was written\n"), r.stderr
+        assert sorted(p.name for p in course.rglob("*") if p.is_file()) == listing
     r = run(capsys, *grade)
     assert r.returncode == 0, r.stdout + r.stderr
     row = read_csv(course / f"grades-{A}.csv")["ann"]
