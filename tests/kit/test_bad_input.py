@@ -562,6 +562,18 @@ def test_check_on_a_file_that_is_not_a_lesson_says_so_in_one_line(tmp_path, name
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr + r.stdout
 
 
+def _check_with_a_3_s_limit(folder, cells):
+    """``snakekit check --timeout 3`` on a notebook of ``cells``: its result (exit 1) and rows, split in words."""
+    import nbformat
+    from nbformat.v4 import new_notebook
+
+    nbformat.write(new_notebook(cells=cells), folder / "lesson.ipynb")
+    r = subprocess.run([str(Path(sys.executable).parent / "snakekit"), "check", "--timeout", "3", "lesson.ipynb"],
+                       cwd=folder, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1, r.stdout + r.stderr
+    return r, [line.split() for line in r.stdout.splitlines()]
+
+
 def test_check_interrupts_an_endless_loop_and_checks_the_cells_after_it(tmp_path):
     """As in the grader, a runaway cell costs only its own exercise: interrupted at the limit, the
     run goes on, an answer cell's loop is named too, and every later check is reported."""
@@ -573,12 +585,7 @@ def test_check_interrupts_an_endless_loop_and_checks_the_cells_after_it(tmp_path
                            metadata={"nbgrader": {"solution": True, "grade": False, "grade_id": "loop_answer"}})
     cells = [_graded("assert 1 + 1 == 2", grade_id="first_test", points=1), answer,
              _graded("settle()", grade_id="stuck_test", points=2), _graded("assert True", grade_id="after_test", points=3)]
-    nbformat.write(new_notebook(cells=cells), tmp_path / "lesson.ipynb")
-    exe = Path(sys.executable).parent / "snakekit"
-    r = subprocess.run([str(exe), "check", "--timeout", "3", "lesson.ipynb"], cwd=tmp_path, capture_output=True,
-                       text=True, timeout=300)
-    assert r.returncode == 1, r.stdout + r.stderr
-    rows = [line.split() for line in r.stdout.splitlines()]
+    r, rows = _check_with_a_3_s_limit(tmp_path, cells)
     assert ["first_test", "1", "pt", "passed"] in rows
     assert ["after_test", "3", "pt", "passed"] in rows, r.stdout
     stuck = next(line for line in r.stdout.splitlines() if line.split()[:1] == ["stuck_test"])
@@ -594,17 +601,9 @@ def test_check_interrupts_an_endless_loop_and_checks_the_cells_after_it(tmp_path
     ("import os\nos._exit(1)", "stopped: the Python kernel died while running cell 2 (the process ended"),
 ])
 def test_check_reports_a_cell_that_never_ends_or_kills_the_kernel(tmp_path, body, stopped):
-    import nbformat
-    from nbformat.v4 import new_notebook
-
     cells = [_graded("assert 1 + 1 == 2", grade_id="first_test", points=1),
              _graded(body, grade_id="stuck_test", points=2), _graded("assert True", grade_id="after_test", points=3)]
-    nbformat.write(new_notebook(cells=cells), tmp_path / "lesson.ipynb")
-    exe = Path(sys.executable).parent / "snakekit"
-    r = subprocess.run([str(exe), "check", "--timeout", "3", "lesson.ipynb"], cwd=tmp_path, capture_output=True,
-                       text=True, timeout=300)
-    assert r.returncode == 1, r.stdout + r.stderr
-    rows = [line.split() for line in r.stdout.splitlines()]
+    r, rows = _check_with_a_3_s_limit(tmp_path, cells)
     assert ["first_test", "1", "pt", "passed"] in rows
     assert ["stuck_test", "2", "pt", "FAILED", "stopped", "here", "(see", "below)"] in rows
     assert ["after_test", "3", "pt", "FAILED", "not", "run", "(cell", "2", "stopped", "the", "run)"] in rows
