@@ -11,6 +11,7 @@ builds one (for 500 submissions that takes a minute): without one it says the co
 
 from __future__ import annotations
 
+import functools
 import html
 import re
 import sys
@@ -41,12 +42,12 @@ def report_file(course: Path, assignment: str) -> Path:
 def _with_nav(render):
     """formgrader's page rendering, every page's menu with "Class reports" after its own entries."""
 
+    @functools.wraps(render)   # keeps the marks of the wrappers inside it: each wraps formgrader once
     def rendered(self, name, **ns):
         page = render(self, name, **ns)
         link = NAV.format(base_url=html.escape(ns.get("base_url", self.base_url)))
         return page if link in page else _LAST_NAV.sub(lambda m: m.group(1) + link, page, count=1)
 
-    rendered.__wrapped__ = render
     rendered._snakekit_reports = True
     return rendered
 

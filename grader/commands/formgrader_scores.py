@@ -12,6 +12,7 @@ cell). A cell's points in the grading view stay the cell's: a penalty belongs to
 
 from __future__ import annotations
 
+import functools
 import sys
 from collections import defaultdict
 
@@ -134,11 +135,11 @@ def late_aware(api_class):
 def _render_with_late(render):
     """formgrader's page rendering, the score pages with :data:`LATE_SCRIPT` after nbgrader's own script."""
 
+    @functools.wraps(render)   # keeps the marks of the wrappers inside it: each wraps formgrader once
     def rendered(self, name, **ns):
         html = render(self, name, **ns)
         return html.replace("</head>", LATE_SCRIPT + "</head>", 1) if name in SCORE_PAGES else html
 
-    rendered.__wrapped__ = render
     rendered._snakekit = True
     return rendered
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import sys
 import time
+from itertools import combinations
 from pathlib import Path
 
 from grader.course.folder import default_course
@@ -68,6 +69,10 @@ def build(course: Path, assignment: str, *, threshold: float):
     common = alike.common_limit(max(len(answers), len(s.totals)))
     code = alike.code_pairs(answers, handout, threshold=threshold, common=common)
     same = alike.trajectory_pairs(alike.kept_trajectories(course, assignment), _lab_case_right(s.cases), common=common)
+    # the same wrong trajectory from the same mistake a hint named is that mistake's, not a copy: a
+    # wrong formula gives the same numbers to everyone who writes it
+    known = {frozenset(pair) for f in s.failures if f.hinted for pair in combinations(f.students, 2)}
+    same = [p for p in same if frozenset((p.first, p.second)) not in known]
     return s, code, same
 
 

@@ -152,9 +152,31 @@ def filtered(code: str) -> str:
 _BUILTINS = frozenset(dir(builtins))
 
 
+def stable_kgrams(string: str, k: int) -> np.ndarray:
+    """A hash of every ``k`` characters of ``string`` (a polynomial over their code points, modulo 2**64):
+    the same in every run. copydetect's own uses Python's ``hash``, which is salted anew in each process,
+    so its fingerprints, and a pair's similarity, moved between two reports of the same class.
+
+    >>> a, b = stable_kgrams("defF(V):returnV", 5), stable_kgrams("xdefF(V):returnV", 5)
+    >>> len(a), bool((a == b[1:]).all()), int(stable_kgrams("abcde", 5)[0]) == int(stable_kgrams("abcde", 5)[0])
+    (11, True, True)
+    """
+    codes = np.frombuffer(string.encode("utf-32-le"), dtype=np.uint32).astype(np.uint64)
+    n = len(codes) - k + 1
+    if n <= 0:
+        return np.zeros(0, dtype=np.int64)
+    h = np.zeros(n, dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        for j in range(k):
+            h = h * np.uint64(1_000_003) + codes[j:j + n]
+    return h.view(np.int64)
+
+
 def _fingerprint(text: str, boilerplate=None, window: int = WINDOW):
+    import copydetect.utils
     from copydetect import CodeFingerprint
 
+    copydetect.utils.hashed_kgrams = stable_kgrams   # what copydetect's fingerprints hash with: the same every run
     return CodeFingerprint("cell.py", K, window, boilerplate=boilerplate, filter=False, fp=io.StringIO(filtered(text)))
 
 

@@ -96,7 +96,7 @@ def _bars(labels, series: dict, title: str, xlabel: str, *, stacked: bool = True
     ax.set_xlabel(xlabel)
     ax.set_title(title)
     if len(series) > 1:
-        ax.legend(loc="lower right")
+        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0))   # beside the bars, never over them
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
@@ -121,12 +121,14 @@ def _histogram(values, max_score: float) -> bytes:
 
 
 def _side_by_side(pair) -> str:
-    rows = "".join(f"<tr><th colspan=2>{html.escape(gid)}: {sim:.0%} alike</th></tr>"
-                   f"<tr><td><pre>{html.escape(a)}</pre></td><td><pre>{html.escape(b)}</pre></td></tr>"
+    left = 'style="text-align: left; vertical-align: top"'   # code as written: indentation shows
+    rows = "".join(f"<tr><th colspan=2 {left}>{html.escape(gid)}: {sim:.0%} alike</th></tr>"
+                   f"<tr><td {left}><pre {left}>{html.escape(a)}</pre></td>"
+                   f"<td {left}><pre {left}>{html.escape(b)}</pre></td></tr>"
                    for gid, a, b, sim in pair.cells)
     return (f"<h4>{html.escape(pair.first)} and {html.escape(pair.second)}: {pair.similarity:.0%} alike</h4>"
-            f"<table><thead><tr><th>{html.escape(pair.first)}</th><th>{html.escape(pair.second)}</th></tr></thead>"
-            f"<tbody>{rows}</tbody></table>")
+            f"<table><thead><tr><th {left}>{html.escape(pair.first)}</th><th {left}>{html.escape(pair.second)}</th>"
+            f"</tr></thead><tbody>{rows}</tbody></table>")
 
 
 def notebook(s: ClassStanding, code: list, trajectories: list, threshold: float):
@@ -137,8 +139,8 @@ def notebook(s: ClassStanding, code: list, trajectories: list, threshold: float)
     hours = sorted(s.hours_before_due.values())
     md = [f"# {s.assignment}: the class's report",
           f"{n} submissions graded; mean total {mean:.2f} of {s.max_score:g}; {len(s.late)} late, "
-          f"{len(s.resubmitted)} resubmitted." + (f" Hand-in before the due date: median {hours[len(hours) // 2]:.1f} h "
-                                                  f"(earliest {hours[-1]:.1f} h, latest {hours[0]:.1f} h)."
+          f"{len(s.resubmitted)} resubmitted." + (f" Handed in: median {_due(hours[len(hours) // 2])} "
+                                                  f"(earliest {_due(hours[-1])}, latest {_due(hours[0])})."
                                                   if hours else " The gradebook has no due date or no hand-in times.")
           + (f" Without the grader's verdicts (a notebook that never ran): {_names(s.unrecorded)}." if s.unrecorded else "")]
     cells = [new_markdown_cell("\n\n".join(md)), new_markdown_cell("## Where the class stands")]
@@ -178,7 +180,17 @@ def notebook(s: ClassStanding, code: list, trajectories: list, threshold: float)
                                        "and `trajectories.csv`."))
     nb = new_notebook(cells=cells)
     nb.metadata["language_info"] = {"name": "python"}
+    nb.metadata["title"] = f"{s.assignment}: the class's report"   # the page's <title>
     return nb
+
+
+def _due(hours_before: float) -> str:
+    """Hours before the due date in words: "3.8 h before the due date", "10.3 h after it".
+
+    >>> _due(3.84), _due(-10.27)
+    ('3.8 h before the due date', '10.3 h after the due date')
+    """
+    return f"{abs(hours_before):.1f} h {'before' if hours_before >= 0 else 'after'} the due date"
 
 
 def _write_csv(path: Path, columns, rows) -> None:

@@ -13,6 +13,7 @@ import csv
 import shutil
 import subprocess
 import sys
+from itertools import combinations
 from pathlib import Path
 
 import numpy as np
@@ -227,6 +228,22 @@ def test_a_copied_wrong_trajectory_is_flagged_and_a_right_one_is_not(reported):
     assert not [p for p in same if "amy" in p or right in p], same
 
 
+def test_a_report_made_again_is_the_same_and_a_mistake_a_hint_named_is_no_copy(reported, tmp_path):
+    """Run again (another process, so another salt of Python's hash), the report is the same byte for
+    byte; and no pair is flagged for a trajectory that a mistake a hint named, made by both, explains."""
+    course, _ = reported
+    again = tmp_path / "again"
+    r = report(course, "--out", str(again))
+    assert r.returncode == 0, r.stderr
+    first = course / f"report-{LESSON}"
+    for name in ("alike.csv", "trajectories.csv", "failures.csv", "report.html"):
+        assert (again / name).read_bytes() == (first / name).read_bytes(), name
+    shared = {frozenset(p) for row in rows(course, "failures") if row["kind"] == "hint"
+              for p in combinations(row["students"].split(), 2)}
+    flagged = {frozenset((row["first"], row["second"])) for row in rows(course, "trajectories")}
+    assert not flagged & shared, flagged & shared
+
+
 def test_the_page_opens_offline_in_chromium_and_its_plots_are_pictures(reported):
     sync_api = need("playwright.sync_api")
     chromium = need_program("chromium")
@@ -317,3 +334,22 @@ def test_formgrader_serves_the_report_behind_its_login_with_a_menu_entry(reporte
         assert get(f"reports/{LESSON}")[0] == 404                          # no report yet: it says how to write one
     finally:
         server.stop()
+
+
+def test_formgraders_page_rendering_is_wrapped_once_by_each_addition_whatever_the_order():
+    """The late-penalty script and the reports' menu entry each wrap formgrader's page rendering once,
+    however often and in whichever order the course's config installs them (each server start): a
+    second late script would print "(late: -3)" twice beside a score."""
+    import nbgrader.server_extensions.formgrader.apihandlers as handlers
+    import nbgrader.server_extensions.formgrader.base as base
+
+    from grader.commands import formgrader_report, formgrader_scores
+
+    for install in (formgrader_scores.install, formgrader_report.install, formgrader_scores.install,
+                    formgrader_report.install, formgrader_report.install, formgrader_scores.install):
+        install(handlers)
+    files, render = [], base.BaseHandler.render
+    while render is not None:
+        files.append(Path(render.__code__.co_filename).name)
+        render = getattr(render, "__wrapped__", None)
+    assert files.count("formgrader_scores.py") == 1 and files.count("formgrader_report.py") == 1, files
