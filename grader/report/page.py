@@ -163,7 +163,7 @@ def notebook(s: ClassStanding, code: list, trajectories: list, threshold: float)
     for kind, title in (("hint", "### Mistakes a hint recognised"),
                         ("no hint", "### Mistakes no hint recognised (candidates for the next hint)"),
                         ("not written", "### Not written (the hand-out's stub still raised)")):
-        rows = [[exercise_name(f.grade_id), f.text, f.count, _names(f.students, 2), f.example]
+        rows = [[exercise_name(f.grade_id), f.shown, f.count, _names(f.students, 2), f.example]
                 for f in s.failures if _kind(f) == kind]
         cells.append(new_markdown_cell(title))
         cells.append(_shown(_html_table(["exercise", "mistake", "count", "examples", "one student's message"], rows))

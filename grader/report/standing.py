@@ -81,6 +81,12 @@ class FailureGroup:
         return len(self.students)
 
     @property
+    def shown(self) -> str:
+        """The mistake as a teacher reads it: a hint as one of the students got it (their numbers, where the
+        grouping has ``#``), else the message without numbers."""
+        return (hint_of(self.example, numbers=True) or self.text) if self.hinted else self.text
+
+    @property
     def unwritten(self) -> bool:
         """The hand-out's stub still raised (COURSE.md: it raises ``NotImplementedError``): not a mistake, no answer."""
         return not self.hinted and "raised NotImplementedError" in self.text
@@ -165,18 +171,20 @@ def mistake_of(message: str) -> str:
 _HINTS = (re.compile(r"The check in your notebook adds: (.+?)(?=$| Hint: )", re.S), re.compile(r"Hint: (.+?)(?=$| Hint: |\. [A-Z])", re.S))
 
 
-def hint_of(message: str) -> str:
-    """The first hint that fired in a grader's message, its numbers taken out ("" if none).
+def hint_of(message: str, *, numbers: bool = False) -> str:
+    """The first hint that fired in a grader's message, its numbers taken out unless ``numbers`` ("" if none).
 
     >>> hint_of("rate: 100 Hz between points, expected 10 Hz (tolerance 1%). Hint: this looks like 100 Hz where 10 Hz was asked: the time step is 0.1 s.")
     'this looks like # Hz where # Hz was asked: the time step is # s.'
     >>> hint_of("0 of 6 right. The check in your notebook adds: millimetres?"), hint_of("0 of 6 right.")
     ('millimetres?', '')
+    >>> hint_of("rate: 100 Hz. Hint: this looks like 100 Hz where 10 Hz was asked.", numbers=True)
+    'this looks like 100 Hz where 10 Hz was asked.'
     """
     for pattern in _HINTS:
         m = pattern.search(message)
         if m:
-            return without_numbers(m.group(1).strip())
+            return m.group(1).strip() if numbers else without_numbers(m.group(1).strip())
     return ""
 
 
