@@ -178,6 +178,8 @@ def notebook(s: ClassStanding, code: list, trajectories: list, threshold: float)
     if len(code) > SHOWN or len(trajectories) > SHOWN:
         cells.append(new_markdown_cell(f"The first {SHOWN} pairs of each are shown; all of them are in `alike.csv` "
                                        "and `trajectories.csv`."))
+    for i, cell in enumerate(cells):   # ids of their own, not random ones: the same class, the same page
+        cell.id = f"report-{i}"
     nb = new_notebook(cells=cells)
     nb.metadata["language_info"] = {"name": "python"}
     nb.metadata["title"] = f"{s.assignment}: the class's report"   # the page's <title>
