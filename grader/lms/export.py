@@ -116,8 +116,9 @@ def export(course: Path, lms: str | None, path: Path, roster: Roster | None, ass
     nbgrader export)."""
     names, maxes, table, dues = scores(course, assignments)
     if not names:
-        raise CourseError(f"nothing is graded yet in {course}'s gradebook: grade an assignment first "
-                          "(`snakekit grade ASSIGNMENT`); nothing was written")
+        print(f"nothing is graded yet in {course}'s gradebook: the CSV has the students and no assignment's "
+              "column; grade an assignment first (`snakekit grade ASSIGNMENT`) before importing it",
+              file=out or sys.stdout)
     for a in names:
         require_graded(course, a, "snakekit export")
     ahead = not_due(dues)

@@ -174,6 +174,8 @@ def test_export_writes_and_replaces_its_csv_but_no_other(course, capsys, tmp_pat
     for _ in range(2):
         r = run(capsys, "export", "--course", course, "-o", out)
         assert r.returncode == 0, r.stderr
+        assert f"nothing is graded yet in {course}'s gradebook: the CSV has the students and no assignment's " \
+            "column" in r.stdout, r.stdout
     assert out.read_text().splitlines()[0] == "student,total"
     r = run(capsys, "export", "--course", course, "-o", tmp_path / "elsewhere" / "times.csv")
     one_line_error(r, "exists and is not one this command wrote")
