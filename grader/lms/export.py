@@ -177,7 +177,7 @@ def export_main(argv: list[str] | None = None, out=None) -> int:
     path = args.out or course / f"grades-{args.lms or 'all'}.csv"
     try:
         if not (course / "gradebook.db").is_file():
-            raise CourseError(f"no gradebook in {course}: not a course folder, or nothing graded yet (run it in the "
+            raise CourseError(f"no gradebook in {course} (not a course folder, or nothing graded yet: run it in the "
                               "course folder or give --course DIR; grade an assignment first)")
         check_output(path, course, suffix=".csv", what="-o", command="snakekit export", reads={args.roster: "the roster"})
         roster = Roster.load(default_roster(course, args.roster))

@@ -19,6 +19,7 @@ ARGS = {
     "return": ["nosuch"],
     "export": [],
     "lab": ["nosuch", "--emulator"],
+    "report": ["nosuch"],
 }
 COMMANDS = {ep.name: ep for ep in entry_points(group="snakekit.commands")}
 
