@@ -61,9 +61,17 @@ def _kind(f) -> str:
     return "hint" if f.hinted else "not written" if f.unwritten else "no hint"
 
 
+#: A cell of text or code, as it is read: from the left, from the top (JupyterLab's tables right-align).
+LEFT = 'style="text-align: left; vertical-align: top"'
+
+
 def _html_table(columns, rows) -> str:
+    """A table whose numbers stand right, as usual, and whose text reads from the left."""
+    def cell(v):
+        return f"<td>{v}</td>" if isinstance(v, int | float) else f"<td {LEFT}>{html.escape(str(v))}</td>"
+
     head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in row) + "</tr>" for row in rows)
+    body = "".join("<tr>" + "".join(cell(v) for v in row) + "</tr>" for row in rows)
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
@@ -121,13 +129,12 @@ def _histogram(values, max_score: float) -> bytes:
 
 
 def _side_by_side(pair) -> str:
-    left = 'style="text-align: left; vertical-align: top"'   # code as written: indentation shows
-    rows = "".join(f"<tr><th colspan=2 {left}>{html.escape(gid)}: {sim:.0%} alike</th></tr>"
-                   f"<tr><td {left}><pre {left}>{html.escape(a)}</pre></td>"
-                   f"<td {left}><pre {left}>{html.escape(b)}</pre></td></tr>"
+    rows = "".join(f"<tr><th colspan=2 {LEFT}>{html.escape(gid)}: {sim:.0%} alike</th></tr>"
+                   f"<tr><td {LEFT}><pre {LEFT}>{html.escape(a)}</pre></td>"
+                   f"<td {LEFT}><pre {LEFT}>{html.escape(b)}</pre></td></tr>"
                    for gid, a, b, sim in pair.cells)
     return (f"<h4>{html.escape(pair.first)} and {html.escape(pair.second)}: {pair.similarity:.0%} alike</h4>"
-            f"<table><thead><tr><th {left}>{html.escape(pair.first)}</th><th {left}>{html.escape(pair.second)}</th>"
+            f"<table><thead><tr><th {LEFT}>{html.escape(pair.first)}</th><th {LEFT}>{html.escape(pair.second)}</th>"
             f"</tr></thead><tbody>{rows}</tbody></table>")
 
 
