@@ -141,9 +141,7 @@ def _last_durations() -> dict[str, float]:
 SERIAL_FILES = {"tests/grader/test_arm_lab.py", "tests/grader/test_lab_safety.py", "tests/grader/test_return_lab.py",
                 "tests/grader/test_grader_adversarial.py", "tests/kit/test_bridge.py", "tests/kit/test_emulator.py",
                 "tests/kit/test_hardware.py", "tests/kit/test_late_replies.py", "tests/kit/test_servo_path.py",
-                "tests/kit/test_safety.py", "tests/kit/test_bus_protocol.py",
-                # module fixtures that run lesson 07 with the others (graded all at once)
-                "tests/lessons/test_course.py", "tests/lessons/test_lessons_4_to_7.py"}
+                "tests/kit/test_safety.py", "tests/kit/test_bus_protocol.py"}
 #: ...and every test of lesson 07 (the real robot's lesson runs on the emulated bus in real time),
 #: and the references' check
 SERIAL_IDS = ("07_real_robot",

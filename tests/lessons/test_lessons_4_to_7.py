@@ -86,38 +86,38 @@ class CaseServer:
         self.sock.close()
 
 
-@pytest.fixture(scope="module")
-def graded():
-    """Each lesson's instructor notebook run with drawn cases: its cells, its hand-ins, the cases."""
+@pytest.fixture(scope="module", params=LESSONS)
+def graded(request):
+    """A lesson's instructor notebook run with drawn cases: its cells, its hand-ins, the cases. One
+    lesson per fixture, so lesson 07 (on the emulated bus in real time) runs with the ``serial``
+    tests and the others beside them."""
     nbformat = need("nbformat")
     nbclient = need("nbclient")
     from snakekit.handin import decode_results
 
-    out = {}
+    lesson = request.param
     with tempfile.TemporaryDirectory(prefix="sk-") as tmp:   # short: a socket path has at most 107 bytes
-        for lesson in LESSONS:
-            work, handin = Path(tmp) / lesson, Path(tmp) / f"{lesson}-handin"
-            shutil.copytree(ROOT / "course" / "source" / lesson, work,
-                            ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.npz"))
-            handin.mkdir()
-            cases = draw(lesson)
-            server = CaseServer(Path(tmp) / f"{lesson[:2]}.sock", cases)
-            env = {"SNAKEKIT_HANDIN_DIR": str(handin), "SNAKEKIT_CASES": str(Path(tmp) / f"{lesson[:2]}.sock"),
-                   "SNAKEKIT_TEST": "1", "MPLBACKEND": "Agg",
-                   "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
-            old = {k: os.environ.get(k) for k in env}
-            os.environ.update(env)
-            try:
-                nb = nbformat.read(work / f"{lesson}.ipynb", as_version=4)
-                nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
-                                        resources={"metadata": {"path": str(work)}}).execute()
-            finally:
-                for k, v in old.items():
-                    os.environ.pop(k) if v is None else os.environ.__setitem__(k, v)
-                server.close()
-            results = {p.stem: decode_results(p.read_bytes()) for p in handin.glob("*.npz")}
-            out[lesson] = {"nb": nb, "cases": cases, "results": results, "asked": server.asked}
-    return out
+        work, handin = Path(tmp) / lesson, Path(tmp) / f"{lesson}-handin"
+        shutil.copytree(ROOT / "course" / "source" / lesson, work,
+                        ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.npz"))
+        handin.mkdir()
+        cases = draw(lesson)
+        server = CaseServer(Path(tmp) / f"{lesson[:2]}.sock", cases)
+        env = {"SNAKEKIT_HANDIN_DIR": str(handin), "SNAKEKIT_CASES": str(Path(tmp) / f"{lesson[:2]}.sock"),
+               "SNAKEKIT_TEST": "1", "MPLBACKEND": "Agg",
+               "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
+        old = {k: os.environ.get(k) for k in env}
+        os.environ.update(env)
+        try:
+            nb = nbformat.read(work / f"{lesson}.ipynb", as_version=4)
+            nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
+                                    resources={"metadata": {"path": str(work)}}).execute()
+        finally:
+            for k, v in old.items():
+                os.environ.pop(k) if v is None else os.environ.__setitem__(k, v)
+            server.close()
+        results = {p.stem: decode_results(p.read_bytes()) for p in handin.glob("*.npz")}
+        return {"nb": nb, "cases": cases, "results": results, "asked": server.asked}
 
 
 def value(result):
@@ -128,9 +128,8 @@ def value(result):
 # --- hand-ins -----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("lesson", LESSONS)
-def test_every_graded_cell_hands_in_one_result_per_drawn_case(graded, lesson):
-    run = graded[lesson]
+def test_every_graded_cell_hands_in_one_result_per_drawn_case(graded):
+    run = graded
     test_cells = [c.metadata["nbgrader"]["grade_id"] for c in run["nb"].cells
                   if c.metadata.get("nbgrader", {}).get("grade")]
     assert sorted(run["cases"]) == sorted(test_cells), "one case function per graded cell"
@@ -139,11 +138,12 @@ def test_every_graded_cell_hands_in_one_result_per_drawn_case(graded, lesson):
         assert len(run["results"][gid]) == len(run["cases"][gid]), gid
 
 
+@pytest.mark.parametrize("graded", ["04_trajectories"], indirect=True)
 def test_lesson4_hands_in_what_the_formulas_give(graded):
     np = need("numpy")
     from snakekit.trajectory import quintic_time_scaling
 
-    run = graded["04_trajectories"]
+    run = graded
     for (T, t), r in zip(run["cases"]["ex04_1_quintic_test"], run["results"]["ex04_1_quintic_test"]):
         assert np.allclose(value(r), quintic_time_scaling(T, t), rtol=1e-12, atol=1e-15)
     for (d, v, a), r in zip(run["cases"]["ex04_2_trapezoid_test"], run["results"]["ex04_2_trapezoid_test"]):
@@ -170,11 +170,12 @@ def test_lesson4_hands_in_what_the_formulas_give(graded):
     assert counts[-1] == 0 and max(counts) > 0, "one trajectory inside the limits, others beyond them"
 
 
+@pytest.mark.parametrize("graded", ["05_simulation"], indirect=True)
 def test_lesson5_hands_in_the_step_response_numbers(graded):
     np = need("numpy")
     from snakekit.profile_planner import ProfilePlanner
 
-    run = graded["05_simulation"]
+    run = graded
     for (t, y, g), r in zip(run["cases"]["ex05_1_rise_time_test"], run["results"]["ex05_1_rise_time_test"]):
         p = (y - y[0]) / (g - y[0])
         assert value(r) == pytest.approx(t[np.argmax(p >= 0.9)] - t[np.argmax(p >= 0.1)], abs=1e-12)
@@ -192,11 +193,12 @@ def test_lesson5_hands_in_the_step_response_numbers(graded):
         assert value(r) == pytest.approx(hi, abs=1e-9), (d, pv, pa)
 
 
+@pytest.mark.parametrize("graded", ["06_coded_sweep"], indirect=True)
 def test_lesson6_hands_in_sweeps_runs_and_lags(graded):
     np = need("numpy")
     import snakekit
 
-    run = graded["06_coded_sweep"]
+    run = graded
     for (n, f), r in zip(run["cases"]["ex06_1_sweep_times_test"], run["results"]["ex06_1_sweep_times_test"]):
         assert np.allclose(value(r), np.arange(n) / f, rtol=1e-12)
     for (t, k, a), r in zip(run["cases"]["ex06_2_sweep_positions_test"], run["results"]["ex06_2_sweep_positions_test"]):
@@ -227,11 +229,12 @@ def test_lesson6_hands_in_sweeps_runs_and_lags(graded):
         assert value(r) == pytest.approx(best, abs=0.002)
 
 
+@pytest.mark.parametrize("graded", ["07_real_robot"], indirect=True)
 def test_lesson7_hands_in_ticks_moves_and_recoveries(graded):
     np = need("numpy")
     from snakekit import hardware
 
-    run = graded["07_real_robot"]
+    run = graded
     for (q,), r in zip(run["cases"]["ex07_1_ticks_test"], run["results"]["ex07_1_ticks_test"]):
         assert np.array_equal(r["ticks"], hardware.radians_to_ticks(q)) and bool(r["whole_numbers"])
     upper = 1.57
