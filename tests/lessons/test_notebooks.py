@@ -38,6 +38,20 @@ def test_committed_without_outputs(path):
                 f"{path.name}: clear the outputs before committing"
 
 
+#: a cell that moves an arm (a robot's run or move) and what lets the student watch it in the 3D view
+MOVES = re.compile(r"\b(?:robot|sim|arm)\.(?:run|move_to|home)\(")
+WATCHED = re.compile(r"\.play\(|ControlPanel\(")
+
+
+@pytest.mark.parametrize("path", LESSONS, ids=[p.stem for p in LESSONS])
+def test_every_lesson_that_moves_the_arm_lets_the_student_watch_a_move_in_the_3d_view(path):
+    sources = ["".join(c["source"]) for c in json.loads(path.read_text())["cells"] if c["cell_type"] == "code"]
+    moving = [s.splitlines()[0] for s in sources if MOVES.search(s)]
+    if moving:
+        assert any(WATCHED.search(s) for s in sources), \
+            f"{path.name} moves the arm (first in the cell starting {moving[0]!r}) but never plays a run in the 3D view"
+
+
 def execute(path: Path, work: Path, monkeypatch, **env):
     """Run a notebook in a fresh kernel in ``work`` (a copy of its folder); errors are kept."""
     nbformat = need("nbformat")
