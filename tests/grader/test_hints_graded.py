@@ -90,8 +90,10 @@ def test_every_lesson_has_known_mistakes_each_in_a_notebook_with_no_mistake_in_a
             assert not any(names[a] in calls[b] for a in answers for b in answers), (lesson, sorted(answers))
 
 
-# ids "lessonNN-k", not the lesson's name: lesson 07's name marks a test serial, and this one need not be
-@pytest.mark.parametrize("lesson, k", CASES, ids=[f"lesson{lesson[:2]}-{k}" for lesson, k in CASES])
+# ids "lessonNN-k", not the lesson's name: lesson 07's name marks a test serial, and this one need not be. Under
+# `make test` a lesson's mistakes go to one worker (its batch graded once) and the lessons to several.
+@pytest.mark.parametrize("lesson, k", [pytest.param(lesson, k, marks=pytest.mark.xdist_group(f"hints{lesson[:2]}"),
+                                                    id=f"lesson{lesson[:2]}-{k}") for lesson, k in CASES])
 def test_a_mistake_the_notebooks_check_names_gets_the_same_hint_graded(graded, lesson, k):
     course, who = graded(lesson)
     gid, wrong, words, *anywhere = MISTAKES[lesson][k]
