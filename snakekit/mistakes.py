@@ -30,17 +30,34 @@ class either(tuple):
         return super().__new__(cls, values)
 
 
-def mistake_hint(arr, exp, unit, mistakes, *, tol: float) -> str:
-    """The hint for a result ``arr`` that misses ``exp``: a known mistake's (``mistakes``: hint ->
-    the value, or :class:`either` of the values, it gives), a transposed square array, or a unit
-    slip (degrees, millimetres), "" when none fits."""
-    def near(a, b):
-        b = np.asarray(b, dtype=float)
-        return b.shape == a.shape and bool(np.allclose(a, b, rtol=1e-6, atol=tol))
+def _near(a, b, tol: float) -> bool:
+    b = np.asarray(b, dtype=float)
+    return b.shape == a.shape and bool(np.allclose(a, b, rtol=1e-6, atol=tol))
 
+
+def known_mistake(arr, mistakes, *, tol: float) -> str:
+    """The hint of the known mistake (``mistakes``: hint -> the value, or :class:`either` of the
+    values, it gives) whose value ``arr`` is, whatever its shape (a forgotten ``abs`` leaves rows
+    out), "" when none is.
+
+    >>> known_mistake(np.zeros((0, 3)), {"the lower limit counts too: compare abs(q).": np.zeros((0, 3))}, tol=1e-9)
+    'the lower limit counts too: compare abs(q).'
+    """
     for hint, value in (mistakes or {}).items():
-        if any(near(arr, v) for v in (value if isinstance(value, either) else (value,))):
+        if any(_near(arr, v, tol) for v in (value if isinstance(value, either) else (value,))):
             return hint
+    return ""
+
+
+def mistake_hint(arr, exp, unit, mistakes, *, tol: float) -> str:
+    """The hint for a result ``arr`` that misses ``exp``: a known mistake's (:func:`known_mistake`),
+    a transposed square array, or a unit slip (degrees, millimetres), "" when none fits."""
+    def near(a, b):
+        return _near(a, b, tol)
+
+    hint = known_mistake(arr, mistakes, tol=tol)
+    if hint:
+        return hint
     if arr.ndim == 2 and exp.ndim == 2 and near(arr, exp.T):   # a square array, built the other way round
         return "rows and columns are swapped: this is the transpose of the expected array."
     units = set(unit) if isinstance(unit, (tuple, list)) else {unit}

@@ -180,23 +180,20 @@ def _local(course: Path, lesson: str, student: str) -> dict:
     return out
 
 
-def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | None = None, jobs: int = 2,
-                 timeout: float | None = None, cell_timeout: float | None = None) -> tuple[list[Row], dict]:
-    """Grade ``mutants`` of ``lesson`` in one batch; the rows, and the batch's facts (seed, seconds)."""
-    from nbgrader.api import Gradebook
-
+def grade_students(lesson: str, students: dict, tmp: Path, *, seed: int | None = None, jobs: int = 2,
+                   timeout: float | None = None, cell_timeout: float | None = None) -> tuple[Path, float, str]:
+    """Grade one batch of ``lesson`` on a copy of the course in ``tmp``: ``students`` maps each student to the
+    answers typed into the lesson's student notebook (answer grade id -> source; every other answer the
+    instructor's). Returns the graded course folder, the batch's seconds and ``snakekit grade``'s stderr."""
     import nbformat
 
     course = tmp / "course"
     shutil.copytree(ROOT / "course", course, ignore=course_copy_ignore)
     right = {gid: answer for gid, answer, _ in exercises(ROOT / "course" / "source" / lesson / f"{lesson}.ipynb")}
-    students = {}
-    for m in mutants:
-        students[_student(m)] = notebook(lesson, right, {m.grade_id: m.source})
-    for name, nb in students.items():
+    for name, replaced in students.items():
         folder = course / "submitted" / name / lesson
         folder.mkdir(parents=True)
-        nbformat.write(nb, folder / f"{lesson}.ipynb")
+        nbformat.write(notebook(lesson, right, replaced), folder / f"{lesson}.ipynb")
     timeout = timeout or TIMEOUTS.get(lesson, TIMEOUT)
     cell_timeout = cell_timeout or CELL_TIMEOUTS.get(lesson, timeout / 3)
     command = [sys.executable, "-m", "snakekit.cli", "grade", lesson, "--course", str(course), "--jobs", str(jobs),
@@ -205,9 +202,19 @@ def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | N
     started = time.monotonic()
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
     r = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, env=env, timeout=3600)
-    seconds = time.monotonic() - started
     if r.returncode != 0:
         raise RuntimeError(f"snakekit grade {lesson} exited {r.returncode}:\n{r.stderr[-3000:]}")
+    return course, time.monotonic() - started, r.stderr
+
+
+def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | None = None, jobs: int = 2,
+                 timeout: float | None = None, cell_timeout: float | None = None) -> tuple[list[Row], dict]:
+    """Grade ``mutants`` of ``lesson`` in one batch; the rows, and the batch's facts (seed, seconds)."""
+    from nbgrader.api import Gradebook
+
+    students = {_student(m): {m.grade_id: m.source} for m in mutants}
+    course, seconds, stderr = grade_students(lesson, students, tmp, seed=seed, jobs=jobs, timeout=timeout,
+                                             cell_timeout=cell_timeout)
     with open(course / f"grades-{lesson}.csv", newline="") as f:
         status = {row["student"]: row["status"] for row in csv.DictReader(f)}
     scores = {}
@@ -228,7 +235,7 @@ def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | N
                   _local(course, lesson, name).get(own, "not run"), status.get(name, "no row"))
         row.broken = rules(row, depends, pts)
         rows.append(row)
-    drawn = re.search(r"drawn with seed (\d+)", r.stderr)
+    drawn = re.search(r"drawn with seed (\d+)", stderr)
     facts = {"seconds": seconds, "variants": len(mutants), "full": pts, "seed": drawn.group(1) if drawn else seed}
     return rows, facts
 

@@ -7,8 +7,8 @@ case went come from the verdicts ``snakekit grade`` keeps in the TA's copy of ev
 resubmission from the earlier notebooks ``collect`` keeps in ``submitted/<student>/<a>/attempts/``.
 
 A failure message is grouped so that the same mistake at different cases counts once: by the hint
-that fired (a grader check's ``Hint:``, or the notebook's own check, "The check in your notebook
-adds: ..."), else by the message with its numbers taken out (:func:`without_numbers`).
+that fired (the notebook's own check's, "Your notebook's check fails too: ... Hint: ...", else a grader
+check's ``Hint:``), else by the message with its numbers taken out (:func:`without_numbers`).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from grader.feedback.notebook import recorded
 from grader.files import MAX_FILE
 from grader.scoring.rerun import exercise
 from grader.scoring.score import label
+from grader.scoring.verdict import LOCAL
 
 __all__ = ["ExerciseStanding", "CaseKindRate", "FailureGroup", "ClassStanding", "standing", "without_numbers",
            "hint_of", "mistake_of", "exercise_name"]
@@ -147,8 +148,8 @@ def without_numbers(message: str) -> str:
 
 _CALL = r"\w+\([^()]*\):? "
 _CASE = re.compile(r"^(?:# of # hidden cases (?:wrong|gave no trajectory)(?: \(some in part\))?; the first: )?(?:" + _CALL + ")?")
-#: where a message goes on to another case or check
-_NEXT = re.compile(r" (?:\w+\([^()]*\): |# of # hidden cases|[\w ]+: right in every hidden case)")
+#: where a message goes on to another case or check, or to what the notebook's own check said
+_NEXT = re.compile(r" (?:\w+\([^()]*\): |# of # hidden cases|[\w ]+: right in every hidden case|" + re.escape(LOCAL) + ")")
 
 
 def mistake_of(message: str) -> str:
@@ -168,7 +169,8 @@ def mistake_of(message: str) -> str:
     return _NEXT.split(first, maxsplit=1)[0]
 
 
-_HINTS = (re.compile(r"The check in your notebook adds: (.+?)(?=$| Hint: )", re.S), re.compile(r"Hint: (.+?)(?=$| Hint: |\. [A-Z])", re.S))
+_HINTS = (re.compile(re.escape(LOCAL) + r".*?Hint: (.+?)(?=$| Hint: )", re.S),
+          re.compile(r"Hint: (.+?)(?=$| Hint: |\. [A-Z])", re.S))
 
 
 def hint_of(message: str, *, numbers: bool = False) -> str:
@@ -176,7 +178,7 @@ def hint_of(message: str, *, numbers: bool = False) -> str:
 
     >>> hint_of("rate: 100 Hz between points, expected 10 Hz (tolerance 1%). Hint: this looks like 100 Hz where 10 Hz was asked: the time step is 0.1 s.")
     'this looks like # Hz where # Hz was asked: the time step is # s.'
-    >>> hint_of("0 of 6 right. The check in your notebook adds: millimetres?"), hint_of("0 of 6 right.")
+    >>> hint_of("0 of 6 right. Your notebook's check fails too: x is 331.5 m. Hint: millimetres?"), hint_of("0 of 6 right.")
     ('millimetres?', '')
     >>> hint_of("rate: 100 Hz. Hint: this looks like 100 Hz where 10 Hz was asked.", numbers=True)
     'this looks like 100 Hz where 10 Hz was asked.'

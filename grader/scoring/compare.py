@@ -16,6 +16,7 @@ rate: 100 Hz between points, expected 10 Hz (tolerance 1%). Hint: this looks lik
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,8 +24,15 @@ import numpy as np
 from snakekit.model import SPEC, SnakeSpec
 from snakekit.trajectory import Trajectory
 
-__all__ = ["Check", "falloff", "align", "tracking", "point_count", "rate", "limits", "sweep_count",
+__all__ = ["GUESSES", "Check", "falloff", "align", "tracking", "point_count", "rate", "limits", "sweep_count",
            "home", "smoothness", "count_sweeps"]
+
+
+#: The grader's own guesses at a mistake from the numbers of a hidden case: the hints of :func:`rate` and
+#: :func:`home` and the transpose of :func:`grader.scoring.score._compare_case`. Where the notebook's own
+#: check names the mistake, its hint is the one shown (:func:`grader.scoring.verdict.with_local_check`).
+GUESSES = re.compile(r" Hint: (?:this looks like \S+ Hz where \S+ Hz was asked: the time step is \S+ s|the time vector "
+                     r"starts at 1 instead of 0|the sweep does not return home)\.| \(the transpose\?\)")
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from grader.feedback import notebook as feedback
 from grader.scoring import rerun
 from grader.course.assignment import read_inside
 from grader.hooks import NO_HOOKS, BatchHooks
+from grader.scoring.compare import GUESSES
 from grader.scoring.score import ExerciseScore, read_handin, score_exercise
 
 
@@ -130,7 +131,7 @@ class Verdicts:
                                                                      sc.message, cell_timeout=self.cell_timeout,
                                                                      timeout=self.timeout))
                 elif sc.score < sc.max_score:
-                    sc = with_local_hint(sc, find_cell(executed.get(cell.notebook), gid))
+                    sc = with_local_check(sc, find_cell(executed.get(cell.notebook), gid))
                 if second and gid in second:   # after the first run's message is made: the line goes before it
                     again, replaced = second[gid]
                     sc = rerun.better(sc, score_exercise(gid, again, self.expected[gid], cell.max_score), replaced)
@@ -235,24 +236,38 @@ def kernel_score(gid, cell, nb) -> ExerciseScore:
     return ExerciseScore(gid, 0.0, cell.max_score, "scored", msg)
 
 
-def with_local_hint(sc: ExerciseScore, cell) -> ExerciseScore:
-    """``sc`` with the hint of the notebook's own check, when that check failed with one in the
-    graded run: the student reads the same hint graded as in the notebook.
+def with_local_check(sc: ExerciseScore, cell) -> ExerciseScore:
+    """``sc`` with what the notebook's own check said, when it failed in the graded run: the visible case
+    it failed at and its message, hint included, as the student reads them under the cell (and can run
+    again). A hint of the check's is the only hint on the page: the grader's own guesses from the hidden
+    cases' numbers (:data:`grader.scoring.compare.GUESSES`) give way to it, so the two never name two
+    different mistakes.
 
     >>> from nbformat.v4 import new_code_cell, new_output
     >>> c = new_code_cell("ex.close(...)")
     >>> c.outputs = [new_output("error", ename="CheckFailed", traceback=[],
     ...              evalue="exercise 1.1 planar_fk: tool x is 331.5 m, expected 0.3315 m.\\nHint: millimetres?")]
-    >>> with_local_hint(ExerciseScore("ex01_1_planar_fk_test", 0.0, 3.0, "scored", "0 of 6 right."), c).message
-    '0 of 6 right. The check in your notebook adds: millimetres?'
+    >>> print(with_local_check(ExerciseScore("ex01_1_planar_fk_test", 0.0, 3.0, "scored", "0 of 6 right."), c).message)
+    0 of 6 right. Your notebook's check fails too: tool x is 331.5 m, expected 0.3315 m. Hint: millimetres?
     """
     err = next((o for o in (cell or {}).get("outputs", []) if o.get("output_type") == "error"), None)
     if err is None or err.get("ename") not in ("CheckFailed", "ShortcutError"):
         return sc
-    hint = CheckFailed.hint_of(scrub.neutral(str(err.get("evalue", "")), scrub.machine_paths()))
-    if not hint or hint in sc.message:
-        return sc
-    return dataclasses.replace(sc, message=f"{sc.message} The check in your notebook adds: {hint}")
+    text = scrub.neutral(str(err.get("evalue", "")), scrub.machine_paths())
+    said, hint = text.partition(CheckFailed.HINT)[0], CheckFailed.hint_of(text)
+    said = " ".join(re.sub(r"^exercise [\w.]+ \w+: ", "", said.strip()).split())   # the page names the exercise
+    hint, message, checks = " ".join(hint.split()), sc.message, sc.checks
+    if hint:
+        message = GUESSES.sub("", message)
+        checks = tuple(dataclasses.replace(c, message=GUESSES.sub("", c.message)) for c in checks)
+    flat = " ".join(message.split())
+    told = [part for part in (said, f"Hint: {hint}" if hint else "") if part and part.removeprefix("Hint: ") not in flat]
+    return dataclasses.replace(sc, message=" ".join([message, LOCAL + " ".join(told)] if told else [message]),
+                               checks=checks)
+
+
+#: What starts the notebook's own check's words in a graded message (:func:`with_local_check`).
+LOCAL = "Your notebook's check fails too: "
 
 
 def stopped_cells(reported, executed: dict) -> dict[str, int]:

@@ -207,6 +207,11 @@ _IK2 = ("    c2 = (x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2)\n"
 _TASK1 = ("def task1(panel, targets):\n    out = []\n    for x, y, heading in targets:\n"
           "        panel.set_target(x, y, heading)\n        run = panel.execute()\n"
           "        out.append({})\n    return np.array(out)")
+_LIMITS = ("def limit_violations(trajectory):\n    t, p = trajectory.times, trajectory.positions\n"
+           "    rows = [[t[k], j + 1, 0] for k, j in zip(*np.nonzero(np.abs(p) > spec.upper))]\n"
+           "    speed = np.abs(np.diff(p, axis=0)) / np.diff(t)[:, None]\n"
+           "    rows += [[t[k + 1], j + 1, 1] for k, j in zip(*np.nonzero(speed > spec.velocity_limit))]\n"
+           "    return np.array(sorted(rows), dtype=float).reshape(-1, 3)")
 MISTAKES = {
     "00_meet_the_arm": [
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
@@ -439,7 +444,11 @@ MISTAKES = {
          "    return snakekit.Trajectory(times, q_start + np.outer(quintic(duration, times), np.asarray(q_end) - q_start))",
          "the rate looks like 100 Hz"),
         ("ex04_4_limit_check_test", "def limit_violations(trajectory):\n    return np.array([])",
-         "an empty result has shape (0, 3)")],
+         "an empty result has shape (0, 3)"),
+        ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(p) > spec.upper", "p > spec.upper"),
+         "breaks the position limit too: compare np.abs(q)"),
+        ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(np.diff(p, axis=0))", "np.diff(p, axis=0)"),
+         "breaks the speed limit too")],
     "05_simulation": [
         ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
          "    progress = y / target\n"
