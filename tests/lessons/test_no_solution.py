@@ -434,6 +434,9 @@ MISTAKES = {
         ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = distance\n"
          "    if d >= v_max ** 2 / a_max:\n        return np.array([d / v_max + v_max / a_max, v_max])\n"
          "    return np.array([2 * np.sqrt(d / a_max), np.sqrt(a_max * d)])", "take abs(distance)"),
+        ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = abs(distance)\n"
+         "    if d >= v_max / a_max:\n        return np.array([d / v_max + v_max / a_max, v_max])\n"
+         "    return np.array([2 * np.sqrt(d / a_max), np.sqrt(a_max * d)])", "(not v_max / a_max)"),
         ("ex04_3_sample_10hz_test", "def sample_move(q_start, q_end, duration, rate=10.0):\n"
          "    times = np.arange(1, int(round(duration * rate)) + 2) / rate\n"
          "    s = quintic(duration, times - 1 / rate)\n"
@@ -542,7 +545,12 @@ MISTAKES = {
          "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
          "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 501)\n"
          "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag / 1000, ct, cq)) ** 2)) for lag in lags]\n"
-         "    return float(lags[int(np.argmin(rms))])", "in milliseconds")],
+         "    return float(lags[int(np.argmin(rms))])", "in milliseconds"),
+        ("ex06_4_phase_lag_test", "def estimate_lag(run, joint=0):\n    t = run.measured.times\n"
+         "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
+         "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 0.5 + 1e-9, 0.05)\n"
+         "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag, ct, cq)) ** 2)) for lag in lags]\n"
+         "    return float(lags[int(np.argmin(rms))])", "between your grid's steps")],
     "07_real_robot": [
         ("ex07_1_ticks_test", "def to_ticks(q):\n"
          "    return (2048 + np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "astype(int) cuts toward zero"),
