@@ -79,6 +79,19 @@ def test_progress_shows_each_lesson_the_total_and_what_is_next(folder):
     assert f"Next: exercise 0.1 in {L0} ({points0['ex00_1_tool_distance_test']:g} points): write it" in shown
 
 
+def test_in_a_graded_copy_the_cell_says_where_progress_shows_instead_of_not_started(folder, monkeypatch):
+    from grader.sandbox import runner
+    from snakekit.lesson_progress import progress_report
+
+    assert "SNAKEKIT_HANDIN_DIR" in Path(runner.__file__).read_text()  # what the grader's sandbox sets
+    work, _, _ = folder
+    monkeypatch.setenv("SNAKEKIT_HANDIN_DIR", str(work / "handin"))
+    out = io.StringIO()
+    assert progress_report(work, out=out) == 0
+    assert out.getvalue() == ("Your progress across the lessons shows when you run this cell in your own notebooks; "
+                              "the graded copy holds this lesson only.\n")
+
+
 def test_the_command_reads_the_folder_it_is_given_and_refuses_one_without_lessons(folder, tmp_path, capsys):
     from snakekit.cli import main
 
