@@ -84,6 +84,16 @@ def _fmt(v: float, unit: str) -> str:
     return f"{s} {unit}".rstrip()
 
 
+def _fmt_pair(got: float, want: float, unit: str) -> tuple[str, str]:
+    """A value and the expected one, with as many digits as it takes to tell them apart."""
+    a, b = _fmt(got, unit), _fmt(want, unit)
+    digits = 5
+    while a == b and got != want and digits <= 17:
+        a, b = (f"{x:.{digits}g} {unit}".rstrip() for x in (got, want))
+        digits += 1
+    return a, b
+
+
 def _fmt_diff(d: float, unit: str) -> str:
     if unit == "m":
         return f"{d * 1000:.4g} mm"
@@ -288,7 +298,8 @@ class Exercise:
             tol_text += ", " + f"{rtol:g}".replace("e-0", "e-") + " relative"
             tol_text += f" + {_fmt_diff(tol, u)}" if tol else ""
         hint = mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()) * 10 + 1e-9)
-        self.fail(f"{name}{_where(where)} is {_fmt(float(arr[i]), u)}, expected {_fmt(float(exp[i]), u)}: "
+        shown, wanted = _fmt_pair(float(arr[i]), float(exp[i]), u)
+        self.fail(f"{name}{_where(where)} is {shown}, expected {wanted}: "
                   f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
 
     def hand_in(self, grade_id: str, fn, *, forbid: tuple = (), what: str = "", array: bool = False) -> int:

@@ -53,6 +53,20 @@ def test_a_wrapper_that_stumbles_on_a_none_names_the_forgotten_return():
     assert said.startswith("exercise 9.1 double: double returned None when called with 0.5: did you forget `return`?")
 
 
+@pytest.mark.parametrize("got, want, unit", [(-0.000252097, -0.000252, "rad"), (0.13521, 0.135214, "m"),
+                                               (49.90001, 49.9, "s"), (1.0 + 1e-7, 1.0, "")])
+def test_a_value_off_by_less_than_its_shown_digits_is_shown_with_the_digits_that_tell_it_apart(got, want, unit):
+    said = message(lambda: checks.Exercise("9.3", "f").close(got, want, what="value", unit=unit, tol=1e-15))
+    shown, wanted = said.split(" is ", 1)[1].split(": off by", 1)[0].split(", expected ")
+    assert shown != wanted, said
+    assert float(shown.split()[0]) != float(wanted.split()[0])
+    # each is the value it stands for, to the digits shown
+    for text, value in ((shown, got), (wanted, want)):
+        number = text.split()[0]
+        digits = len(number.lstrip("-").replace(".", "").split("e")[0].lstrip("0"))
+        assert abs(float(number) - value) <= abs(value) * 10.0 ** (1 - digits), (text, value)
+
+
 def test_a_list_where_an_array_is_asked_says_to_return_an_array():
     ex = checks.Exercise("9.2", "rows")
     said = message(lambda: ex.close([[0.0, 0.0], [1.0, 0.0]], [[0.0, 0.0], [1.0, 0.0]], what="rows", unit="m",
