@@ -1,6 +1,7 @@
 """The ``snakekit`` command.
 
     snakekit sweep [--backend sim] [--realtime] [--out run.npz|run.mcap|run.bag] [--plot sweep.png]
+    snakekit ros [--backend sim] [--rate 50]   (the arm as a ROS 1 node: /joint_states, goals on /arm/command)
     snakekit emulator [...]          (an emulated MX-28 bus on a pseudo-terminal or a TCP port)
     snakekit bridge PORT [--listen HOST:PORT]   (serve the arm's serial port over TCP)
     snakekit generate [--check]      (the URDF and MJCF from the robot spec)
@@ -89,6 +90,19 @@ def _save_interrupted(run, goals: int, path: Path, out) -> None:
             signal.signal(signal.SIGINT, previous)
 
 
+def _backend_options(args) -> dict | None:
+    """The options of ``args.backend`` from the command line: the hardware's port (or
+    $SNAKEKIT_PORT); None, said in one line, when it needs one that was not given."""
+    if args.backend != "hardware":
+        return {}
+    port = args.port or os.environ.get("SNAKEKIT_PORT")
+    if not port:
+        print(f"snakekit {args.command}: --backend hardware needs --port (e.g. --port /dev/ttyUSB0, or "
+              "socket://HOST:7800 through snakekit bridge) or SNAKEKIT_PORT set", file=sys.stderr)
+        return None
+    return {"port": port}
+
+
 def _sweep(args, out) -> int:
     from .collision import check_path
     from .profile_planner import ReferencePath
@@ -105,16 +119,11 @@ def _sweep(args, out) -> int:
         for p in problems:
             print(f"snakekit sweep: {p}", file=sys.stderr)
         return 2
-    options = {}
+    options = _backend_options(args)
+    if options is None:
+        return 2
     if args.backend == "sim":
         options["realtime"] = args.realtime
-    if args.backend == "hardware":
-        port = args.port or os.environ.get("SNAKEKIT_PORT")
-        if not port:
-            print("snakekit sweep: --backend hardware needs --port (e.g. --port /dev/ttyUSB0, or "
-                  "socket://HOST:7800 through snakekit bridge) or SNAKEKIT_PORT set", file=sys.stderr)
-            return 2
-        options["port"] = port
     trajectory = side_sweep()
     check_path(trajectory.times, trajectory.positions,  # before a robot is made (every run checks again)
                path=ReferencePath.from_rest(trajectory.times, trajectory.positions))
@@ -142,6 +151,16 @@ def _sweep(args, out) -> int:
             saved = False
     print(f"total wall time:    {time.perf_counter() - wall0:.2f} s", file=out)
     return 0 if run.limits_held() and saved else 1
+
+
+def _ros(args, out) -> int:
+    from .ros import serve
+
+    options = _backend_options(args)
+    if options is None:
+        return 2
+    serve(args.backend, rate=args.rate, topic=args.topic, out=out, **options)
+    return 0
 
 
 def _generate(args, out) -> int:
@@ -179,15 +198,24 @@ def _progress(args, out) -> int:
     return progress_report(args.folder, out=out)
 
 
-def _seconds(text: str) -> float:
-    """``--timeout``'s value: seconds > 0, at most a day (nbclient takes 0 as "no limit")."""
-    from .validate import number, quote
+def _positive(option: str, unit: str, at_most: float, hint: str, units: str):
+    """An option's type: a number above 0 and at most ``at_most`` [``unit``]; anything else is
+    a usage error that says so (``units``: the unit's name in words)."""
 
-    try:
-        return number(float(text), "--timeout", "s", above=0, at_most=86400,
-                      hint="It is how long one cell may run (default: 300)")
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e) if "--timeout" in str(e) else f"not a number of seconds: {quote(text)}")
+    def parse(text: str) -> float:
+        from .validate import number, quote
+
+        try:
+            return number(float(text), option, unit, above=0, at_most=at_most, hint=hint)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e) if option in str(e) else f"not a number of {units}: {quote(text)}")
+
+    return parse
+
+
+# --timeout: seconds > 0, at most a day (nbclient takes 0 as "no limit")
+_seconds = _positive("--timeout", "s", 86400, "It is how long one cell may run (default: 300)", "seconds")
+_rate = _positive("--rate", "Hz", 1000, "It is how often /joint_states is published (default: 50)", "Hz")
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -212,6 +240,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "or .bag (a ROS 1 bag)")
     p.add_argument("--plot", metavar="PLOT.png", help="plot commanded vs measured angles per joint")
     p.set_defaults(func=_sweep)
+    p = sub.add_parser("ros", help="the arm as a ROS 1 node: /joint_states, /robot_description, "
+                       "trajectory_msgs/JointTrajectory goals through the kit's checks (docs/ros.md)")
+    p.add_argument("--backend", default="sim", choices=list(BACKENDS), help="robot backend (default: sim, in real time)")
+    p.add_argument("--port", help="serial port of the arm, or socket://HOST:PORT of a snakekit bridge "
+                                  "(hardware backend; default: $SNAKEKIT_PORT)")
+    p.add_argument("--rate", type=_rate, default=50.0, help="how often /joint_states is published [Hz] (default: 50)")
+    p.add_argument("--topic", default="/arm/command", help="the goals' topic (default: /arm/command)")
+    p.set_defaults(func=_ros)
     sub.add_parser("emulator", help="emulate the arm's MX-28 bus on a pseudo-terminal "
                                     "(snakekit emulator --help for its options)", add_help=False)
     sub.add_parser("bridge", help="serve the arm's USB serial port over TCP, for a container or another "

@@ -58,6 +58,10 @@ class Robot(ABC):
     #: The longest trajectory :meth:`run` accepts [s]; longer is refused as probably given in
     #: milliseconds. Raise it on a robot to run a longer one on purpose.
     max_duration = MAX_DURATION
+    #: Called as ``on_record(time [s], positions [rad], velocities [rad/s])`` with each state a
+    #: run paced by the wall clock records, as it is taken (a live view: the ROS node's
+    #: ``/joint_states``); the arrays are the run's own, to copy, not keep. None: no call.
+    on_record = None
     #: What the last run stopped part way (Ctrl-C, an error once goals went out) had sent and
     #: recorded, as a :class:`Run`; None when the last run finished or nothing was recorded.
     interrupted_run: Run | None = None
@@ -226,6 +230,8 @@ class Robot(ABC):
                 else:
                     t, rec_p[r], rec_v[r], rec_e[r] = self._record()
                     rec_t[r] = t - t0
+                    if self.on_record is not None:
+                        self.on_record(t, rec_p[r], rec_v[r])
                     r += 1
             complete = True
         finally:

@@ -223,6 +223,8 @@ class SimRobot(Robot):
                 self._advance((k0 + step) * dt)
                 rec_p[r], rec_v[r], rec_e[r] = d.qpos, d.qvel, d.actuator_force
                 done = r + 1
+                if self.on_record is not None:
+                    self.on_record(self._now(), rec_p[r], rec_v[r])
                 if bar is not None:
                     bar.update(record_at[r])
             complete = True

@@ -21,7 +21,7 @@ PACKAGE = Path(snakekit.__file__).parent
 LAYER = {
     "errors": 0, "model": 0, "host": 0, "handin": 1, "bridge": 1, "validate": 1, "progress": 1, "collision": 2, "kinematics": 2,
     "trajectory": 2, "profile_planner": 2,
-    "run": 3, "bags": 3, "robot": 3, "sim": 4, "hardware": 4, "emulator": 4, "plots": 5, "viewer": 5, "widgets": 5,
+    "run": 3, "bags": 3, "robot": 3, "sim": 4, "hardware": 4, "emulator": 4, "plots": 5, "ros": 5, "viewer": 5, "widgets": 5,
     "checks": 5, "start": 5, "notebook_check": 5, "watch": 1, "mistakes": 1, "lesson_progress": 5, "cli": 6, "__init__": 6, "__main__": 6,
 }
 # Imports across one layer, on purpose (docs/architecture.md says why).
@@ -30,6 +30,7 @@ ALLOWED_SIDEWAYS = {("kinematics", "collision"), ("robot", "run"), ("run", "bags
 # Third-party packages that only some parts of the kit may import.
 HEAVY = {"pinocchio": {"kinematics", "collision"}, "coal": {"collision"}, "mujoco": {"sim"}, "meshcat": {"viewer"}, "zmq": {"viewer"},
          "ipywidgets": {"widgets"}, "dynamixel_sdk": {"hardware"}, "rosbags": {"bags"}, "mcap": {"bags"},
+         "rospy": {"ros"}, "rosgraph": {"ros"}, "sensor_msgs": {"ros"}, "trajectory_msgs": {"ros"},
          "matplotlib": {"plots", "widgets", "cli", "checks"}}
 
 

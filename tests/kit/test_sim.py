@@ -8,6 +8,8 @@ import pytest
 import snakekit
 from snakekit import SPEC, Trajectory
 from snakekit.profile_planner import VELOCITY_UNIT
+from snakekit.robot import Robot
+from snakekit.run import JointState
 from snakekit.sim import SimRobot
 from snakekit.trajectory import joint_trajectory
 
@@ -148,6 +150,44 @@ def test_real_time_mode_follows_the_wall_clock(monkeypatch):
     assert run.realtime and wall >= 0.7 - 0.02
     assert run.robot_time == pytest.approx(0.7, abs=0.011)
     assert slept and all(s > 0 for s in slept) and sum(slept) <= 0.7 + 1e-9, (len(slept), sum(slept))
+
+
+class StepArm(Robot):
+    """A backend of the bare interface: its runs are :meth:`Robot.run`'s own loop."""
+
+    backend = "step"
+
+    def __init__(self):
+        super().__init__(SPEC)
+        self.t, self.q = 0.0, np.zeros(5)
+
+    def read(self):
+        return JointState(self.t, self.q, self.q / 10, np.zeros(5))
+
+    def _send(self, q):
+        self.q = np.array(q)
+
+    def _now(self):
+        return self.t
+
+    def _advance(self, t):
+        self.t = max(self.t, t)
+
+
+@pytest.mark.parametrize("make", [lambda: SimRobot(realtime=True), StepArm], ids=["sim-realtime", "robot-run"])
+def test_on_record_sees_each_state_a_paced_run_records(make):
+    seen = []
+    tr = joint_trajectory(np.zeros(5), [0.2, -0.1, 0, 0, 0.1], 0.3)
+    with make() as robot:
+        robot.on_record = lambda t, p, v: seen.append((t, p.copy(), v.copy()))
+        start = robot.read().time
+        run = robot.run(tr, settle=0.1, record_rate=50.0)
+    t, p, v = (np.array(x) for x in zip(*seen))
+    assert len(seen) == len(run.measured) == 21  # 0.4 s at 50 Hz, both ends
+    np.testing.assert_array_equal(t - start, run.measured.times)
+    np.testing.assert_array_equal(p, run.measured.positions)
+    np.testing.assert_array_equal(v, run.measured.velocities)
+    assert np.abs(p[-1] - [0.2, -0.1, 0, 0, 0.1]).max() < 0.05  # the states of the move, not of the rest
 
 
 def red_tool_tip(image):

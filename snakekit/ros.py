@@ -1,0 +1,152 @@
+"""The arm as a ROS 1 node: ``snakekit ros``.
+
+The node ``/snakekit_arm`` publishes ``/joint_states`` (``sensor_msgs/JointState``: joint1..joint5
+as in the URDF, measured positions [rad] and velocities [rad/s]) at a steady rate, sets the
+parameter ``/robot_description`` to the kit's URDF (for ``robot_state_publisher``), and takes
+``trajectory_msgs/JointTrajectory`` goals on ``/arm/command``. A goal goes through the kit's
+own checks (:meth:`snakekit.Robot.run`: joint limits, speed, the start pose, self-collision on
+the servos' way) before anything moves; a refused goal moves nothing and the reason goes to
+``/rosout`` as an error. A goal whose first point is later than 0 s starts from where the arm
+is, as ROS's trajectory controllers do, so one point is a move there.
+
+ROS 1 is Debian's (``python3-rospy``, Noetic era): it is not on PyPI, and it lives in the
+system's Python. The node runs in the kit's Python, where the simulator, Pinocchio and the
+servo driver are, with Debian's ``dist-packages`` appended to the module path for this command
+only: the kit's own packages come first, and only what it lacks (rospy, genpy, the message
+modules) comes from Debian. Both are the same CPython (3.11 on Debian 12), so Debian's few
+compiled modules load too.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import sys
+import time
+
+import numpy as np
+
+from .errors import ConfigurationError, MissingDependencyError, SnakekitError, TrajectoryError
+from .model import SPEC, URDF_PATH, SnakeSpec
+from .robot import make_robot
+from .trajectory import Trajectory
+
+#: Where Debian keeps its Python modules (ROS 1's among them).
+DEBIAN_MODULES = "/usr/lib/python3/dist-packages"
+#: The Debian packages the node needs, and roscore's.
+APT_PACKAGES = "python3-rospy python3-sensor-msgs python3-trajectory-msgs python3-roslaunch python3-rostopic"
+NODE, JOINT_STATES, COMMAND = "snakekit_arm", "/joint_states", "/arm/command"
+
+#: The errors of the kit's checks before a goal moves anything (a goal refused).
+REFUSALS = (ConfigurationError, TrajectoryError, ValueError, TypeError)
+
+
+def import_ros():
+    """``(rospy, sensor_msgs.msg, trajectory_msgs.msg)``: Debian's ROS 1, appended to the path."""
+    if os.path.isdir(DEBIAN_MODULES) and DEBIAN_MODULES not in sys.path:
+        sys.path.append(DEBIAN_MODULES)  # last: the kit's own packages win
+    try:
+        import rosgraph
+        import rospy
+        from sensor_msgs import msg as sensor_msgs
+        from trajectory_msgs import msg as trajectory_msgs
+    except ImportError as e:
+        raise MissingDependencyError(
+            f"snakekit ros needs Debian's ROS 1 ({e}); on Debian 12: sudo apt-get install --no-install-recommends "
+            f"{APT_PACKAGES}") from None
+    return rosgraph, rospy, sensor_msgs, trajectory_msgs
+
+
+def goal_trajectory(names, times, positions, present, spec: SnakeSpec = SPEC) -> Trajectory:
+    """A :class:`Trajectory` in the arm's joint order from a JointTrajectory's ``joint_names``,
+    its points' ``time_from_start`` [s] and ``positions`` [rad]; when the first point is later
+    than 0 s, the arm's ``present`` position [rad] is put first, at 0 s.
+
+    >>> goal_trajectory(["joint2", "joint1", "joint3", "joint4", "joint5"], [2.0], [[0.1, 0.2, 0, 0, 0]],
+    ...                 np.zeros(5)).positions[-1].tolist()
+    [0.2, 0.1, 0.0, 0.0, 0.0]
+    """
+    names, want = list(names), list(spec.joint_names)
+    if sorted(names) != sorted(want):
+        raise ConfigurationError(f"the goal's joint_names are {names}; this arm's are {want} (each once, any order)")
+    if not len(times):
+        raise TrajectoryError("the goal has no points: send at least one, with its time_from_start")
+    bad = [i for i, p in enumerate(positions) if len(p) != len(names)]
+    if bad:
+        raise TrajectoryError(f"point {bad[0]} of the goal has {len(positions[bad[0]])} positions; each point "
+                              f"needs one per joint name ({len(names)})")
+    order = [names.index(n) for n in want]
+    times, positions = np.asarray(times, float), np.asarray(positions, float)[:, order]
+    if times[0] > 0:
+        times, positions = np.concatenate([[0.0], times]), np.vstack([present, positions])
+    return Trajectory(times, positions, n_joints=spec.n_joints)
+
+
+def serve(backend: str = "sim", *, rate: float = 50.0, topic: str = COMMAND, out=None, **options) -> None:
+    """Run the node until Ctrl-C or SIGTERM (the robot is closed on the way out, as its
+    :meth:`~snakekit.Robot.close` does: torque off or hold). ``rate``: how often
+    ``/joint_states`` is published [Hz]; ``options`` go to :func:`snakekit.make_robot`."""
+    out = out or sys.stdout
+    rosgraph, rospy, sensor_msgs, trajectory_msgs = import_ros()
+    master = rosgraph.get_master_uri()
+    if not rosgraph.is_master_online():
+        raise ConfigurationError(f"no ROS master answers at {master} (ROS_MASTER_URI): start one with roscore "
+                                 "(roscore -p PORT for another port), or set ROS_MASTER_URI to the one that runs")
+    if backend == "sim":
+        options.setdefault("realtime", True)  # the joint states follow the wall clock
+    goals: queue.Queue = queue.Queue()
+    with make_robot(backend, **options) as robot:
+        rospy.init_node(NODE, disable_signals=True)  # our own SIGINT/SIGTERM: the robot is closed first
+        try:
+            rospy.set_param("/robot_description", URDF_PATH.read_text())
+            states = rospy.Publisher(JOINT_STATES, sensor_msgs.JointState, queue_size=50)  # 1 s of a slow reader
+            rospy.Subscriber(topic, trajectory_msgs.JointTrajectory, goals.put, queue_size=10)
+            names = list(robot.spec.joint_names)
+
+            def publish(t, positions, velocities):
+                states.publish(sensor_msgs.JointState(
+                    header=rospy.Header(stamp=rospy.Time.now()), name=names,
+                    position=[float(v) for v in positions], velocity=[float(v) for v in velocities]))
+
+            robot.on_record = publish
+            print(f"snakekit ros: the {backend} arm is node /{NODE} at {master}: {JOINT_STATES} at {rate:g} Hz, "
+                  f"goals (trajectory_msgs/JointTrajectory) on {topic}; Ctrl-C stops it", file=out, flush=True)
+            rospy.loginfo(f"ready: {JOINT_STATES} at {rate:g} Hz, goals on {topic}")
+            period, tick = 1.0 / rate, time.monotonic()
+            while not rospy.is_shutdown():
+                try:
+                    goal = goals.get_nowait()
+                except queue.Empty:
+                    tick = _idle(robot, period, tick)
+                    s = robot.read()
+                    publish(s.time, s.positions, s.velocities)
+                    continue
+                _run_goal(robot, goal, rate, rospy)
+                tick = time.monotonic()
+        finally:
+            rospy.signal_shutdown("snakekit ros stopped")
+
+
+def _idle(robot, period: float, tick: float) -> float:
+    """Wait one publishing period: a real-time simulator simulates it (holding its goals),
+    a bus waits for it. The next tick [s, monotonic]."""
+    tick += period
+    if robot.backend == "sim":
+        robot.step(period)
+    else:
+        time.sleep(max(0.0, tick - time.monotonic()))
+    return max(tick, time.monotonic() - period)  # a stall is not caught up with a burst
+
+
+def _run_goal(robot, goal, rate: float, rospy) -> None:
+    """Run one JointTrajectory goal, or refuse it (nothing moves) and say why on /rosout."""
+    try:
+        trajectory = goal_trajectory(goal.joint_names, [p.time_from_start.to_sec() for p in goal.points],
+                                     [list(p.positions) for p in goal.points], robot.read().positions, robot.spec)
+        run = robot.run(trajectory, record_rate=rate)
+    except REFUSALS as e:
+        if not isinstance(e, SnakekitError):
+            raise
+        rospy.logerr(f"goal refused: {e}")
+        return
+    rospy.loginfo(f"goal done: {len(trajectory)} points, {run.robot_time:.2f} s")

@@ -1,0 +1,217 @@
+"""``snakekit ros``: the arm as a ROS 1 node, on a real ``roscore`` (Debian's ROS 1) on a free
+port. A small rospy client in the system's Python sends goals on ``/arm/command`` and reads
+``/joint_states`` and ``/rosout`` back: the Task 2 sweep (shortened) is run and the joint states
+follow the kit's own simulator run of it; an over-limit goal and a folding goal are refused in
+the kit's words and nothing moves; SIGTERM stops the node, closing the robot.
+"""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import snakekit
+from snakekit.ros import goal_trajectory
+from snakekit.sim import SimRobot
+from tests.conftest import need_program
+
+HANG = 120  # [s] a bound for a hang on a busy machine (a quiet one needs a few seconds for each wait)
+NAMES = [f"joint{i + 1}" for i in range(5)]
+SWEEP = snakekit.side_sweep(points=40, rate=10.0, sweeps=3, amplitude=0.2)  # 3.9 s, every joint swings
+# The sweep as the node gets it: ROS carries times in whole nanoseconds (rospy.Duration.from_sec
+# truncates), which moves the 50 Hz record grid's last row (4.4 s is 4.39999... s).
+AS_SENT = goal_trajectory(NAMES, [int(t) + int((t - int(t)) * 1e9) / 1e9 for t in SWEEP.times], SWEEP.positions,
+                          np.zeros(5))
+OVER_LIMIT = {"times": [3.0], "positions": [[2.0, 0.0, 0.0, 0.0, 0.0]]}
+FOLD = {"times": [4.0], "positions": [[1.57, 1.57, 1.57, 1.57, 0.0]]}  # joint 5 onto joint 1 (ROBOT.md)
+
+# Sends each goal of a plan in turn and waits for the node's word on /rosout about it; keeps
+# every /joint_states message, and the index of the first one received after each goal left.
+CLIENT = r"""
+import json, sys, time
+import rospy
+from rosgraph_msgs.msg import Log
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+plan = json.load(open(sys.argv[1]))
+states, logs = [], []
+rospy.init_node("sweep_client", disable_signals=True)
+state_sub = rospy.Subscriber("/joint_states", JointState, lambda m: states.append([list(m.position), list(m.name)]))
+log_sub = rospy.Subscriber("/rosout", Log, lambda m: logs.append((m.name, m.level, m.msg)))
+pub = rospy.Publisher("/arm/command", JointTrajectory, queue_size=10)
+
+def wait(what, ready):
+    end = time.monotonic() + plan["hang"]
+    while not ready():
+        if time.monotonic() > end:
+            sys.exit(f"client: no {what} within {plan['hang']} s")
+        time.sleep(0.01)
+
+def from_node(sub):
+    return any(c.callerid_pub == "/snakekit_arm" for c in sub.impl.connections)
+
+wait("joint states", lambda: states)
+wait("subscriber of goals", lambda: pub.get_num_connections())
+wait("/rosout from the node", lambda: from_node(log_sub))
+sent = []
+for goal in plan["goals"]:
+    said = len([m for m in logs if m[0] == "/snakekit_arm" and m[2].startswith("goal ")])
+    sent.append(len(states))
+    pub.publish(JointTrajectory(joint_names=plan["names"], points=[
+        JointTrajectoryPoint(positions=p, time_from_start=rospy.Duration.from_sec(t))
+        for t, p in zip(goal["times"], goal["positions"])]))
+    wait("word on /rosout about goal %d" % len(sent),
+         lambda: len([m for m in logs if m[0] == "/snakekit_arm" and m[2].startswith("goal ")]) > said)
+n = len(states)
+wait("joint states after the last goal", lambda: len(states) > n + 10)
+json.dump({"states": states, "logs": logs, "sent": sent}, open(sys.argv[2], "w"))
+"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def stop(process: subprocess.Popen) -> None:
+    """Stop a process group we started: SIGINT (roscore's way out), then SIGKILL."""
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGINT)
+        try:
+            process.wait(HANG)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory):
+    """A roscore on a free port, and the environment that points ROS clients to it."""
+    roscore = need_program("roscore")
+    need_program("rostopic")
+    home = tmp_path_factory.mktemp("ros")
+    port = free_port()
+    env = dict(os.environ, ROS_MASTER_URI=f"http://127.0.0.1:{port}", ROS_HOSTNAME="127.0.0.1",
+               ROS_HOME=str(home), ROS_LOG_DIR=str(home / "log"))
+    core = subprocess.Popen([roscore, "-p", str(port)], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        end = time.monotonic() + HANG
+        while subprocess.run(["/usr/bin/python3", "-c", "import rosgraph, sys; sys.exit(not rosgraph.is_master_online())"],
+                             env=env).returncode:
+            assert core.poll() is None and time.monotonic() < end, "roscore did not start"
+            time.sleep(0.2)
+        yield env, home
+    finally:
+        stop(core)
+
+
+@pytest.fixture(scope="module")
+def session(ros_env):
+    """The node on the simulator, the client's plan run against it, then SIGTERM to the node."""
+    env, home = ros_env
+    plan = {"names": NAMES, "hang": HANG, "goals": [
+        OVER_LIMIT, FOLD, {"times": SWEEP.times.tolist(), "positions": SWEEP.positions.tolist()}]}
+    (home / "plan.json").write_text(json.dumps(plan))
+    (home / "client.py").write_text(CLIENT)
+    node = subprocess.Popen([sys.executable, "-m", "snakekit.cli", "ros"], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    client = subprocess.Popen(["/usr/bin/python3", str(home / "client.py"), str(home / "plan.json"),
+                               str(home / "seen.json")], env=env, stderr=subprocess.PIPE, text=True,
+                              start_new_session=True)
+    try:
+        while client.poll() is None and node.poll() is None:  # a node that stops early fails at once
+            time.sleep(0.1)
+        node.send_signal(signal.SIGTERM)
+        out, err = node.communicate(timeout=HANG)
+        stop(client)  # when the node stopped first, the client would wait for it in vain
+        assert client.returncode == 0, client.stderr.read()[-2000:] + "\nthe node said:\n" + err[-2000:]
+    finally:
+        stop(client)
+        stop(node)
+    seen = json.loads((home / "seen.json").read_text())
+    return seen, node.returncode, out, err
+
+
+def refusal(goal, error) -> str:
+    """What the kit itself says (raising ``error``) about ``goal`` sent to an arm at home: the
+    node's words must be these."""
+    with SimRobot() as robot:
+        trajectory = goal_trajectory(NAMES, goal["times"], goal["positions"], robot.read().positions)
+        with pytest.raises(error) as e:
+            robot.run(trajectory)
+    return f"goal refused: {e.value}"
+
+
+def node_words(seen) -> list[str]:
+    return [msg for name, level, msg in seen["logs"] if name == "/snakekit_arm" and msg.startswith("goal ")]
+
+
+def test_refused_goals_say_why_in_the_kits_words(session):
+    seen, *_ = session
+    words = node_words(seen)
+    assert words[:2] == [refusal(OVER_LIMIT, snakekit.errors.LimitError), refusal(FOLD, snakekit.errors.CollisionError)]
+    assert "position +2.0000 rad (limit +1.5700)" in words[0]
+    errors = {msg for name, level, msg in seen["logs"] if level == 8}  # rosgraph_msgs/Log.ERROR
+    assert set(words[:2]) <= errors
+
+
+def test_refused_goals_move_nothing(session):
+    seen, *_ = session
+    before_sweep = np.array([p for p, _ in seen["states"][:seen["sent"][2]]])
+    assert len(before_sweep) > seen["sent"][1] > 0  # states were published while the refusals came in
+    # the arm rests at home from the start; refused goals leave it there to the last bit
+    assert np.abs(before_sweep).max() < 1e-9
+
+
+def test_joint_states_follow_the_sweep_as_the_kit_runs_it(session):
+    seen, *_ = session
+    with SimRobot() as robot:  # the run as the node makes it: recorded at 50 Hz, settling 0.5 s
+        assert node_words(seen)[2] == f"goal done: {len(SWEEP)} points, {robot.run(AS_SENT, record_rate=50.0).robot_time:.2f} s"
+    assert all(names == NAMES for _, names in seen["states"])
+    received = np.array([p for p, _ in seen["states"][seen["sent"][2]:]])
+    # The kit's own run of the same sweep on a fresh simulator, recorded at the node's rate and
+    # on past the run (the node goes on holding the last goal, as the run's settling does).
+    with SimRobot() as robot:
+        reference = robot.run(AS_SENT, record_rate=50.0, settle=3.0).measured.positions
+    # Both step the same model with the same controls from the same rest at home; only the
+    # solver's warm start differs (the node's run is paced, the reference one rollout), which
+    # left 1.4e-15 rad (measured). 1e-6 rad is far above that and far below what the arm moves between
+    # two samples (up to 0.2 rad * 2 pi / 1.3 s * 0.02 s = 0.02 rad).
+    distance = np.linalg.norm(received[:, None, :] - reference[None, :, :], axis=2)
+    assert distance.min(axis=1).max() < 1e-6
+    rows, row = [], 0  # each state matched to the first reference row from the last one's on: in order
+    for d in distance:
+        later = np.flatnonzero(d[row:] < 1e-6)
+        assert len(later), f"the state after reference row {row} is none of the rows that follow"
+        row += int(later[0])
+        rows.append(row)
+    run_rows = int(round(AS_SENT.duration * 50))
+    assert len(set(rows) & set(range(run_rows))) > 0.8 * run_rows  # followed, not jumped to the end
+    swing = reference[:, 0]
+    assert received[:, 0].max() == pytest.approx(swing.max(), abs=1e-6) and swing.max() > 0.15
+
+
+def test_sigterm_stops_the_node_closing_the_robot(session):
+    _, returncode, out, err = session
+    assert "goals (trajectory_msgs/JointTrajectory) on /arm/command" in out
+    assert returncode == 143
+    assert err.strip().splitlines()[-1] == "snakekit ros: terminated (SIGTERM); the robot was closed"
+
+
+def test_without_a_master_it_says_how_to_start_one(tmp_path):
+    need_program("roscore")
+    env = dict(os.environ, ROS_MASTER_URI=f"http://127.0.0.1:{free_port()}", ROS_HOME=str(tmp_path))
+    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "ros"], env=env, capture_output=True, text=True,
+                       timeout=HANG)
+    assert r.returncode == 1 and r.stderr == (
+        f"snakekit ros: no ROS master answers at {env['ROS_MASTER_URI']} (ROS_MASTER_URI): start one with roscore "
+        "(roscore -p PORT for another port), or set ROS_MASTER_URI to the one that runs\n")
