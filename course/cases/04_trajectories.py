@@ -30,12 +30,16 @@ def ex04_2_trapezoid_test(rng, spec):
     """trapezoid(distance, v_max, a_max): 8 moves, as many triangles as trapezoids and as many backwards as
     forwards (a triangle: |d| below v_max^2 / a_max, from 5 % of it; a trapezoid: 1.2 to 4 times it), no
     move at all, a move backwards, and one exactly on the border between triangle and trapezoid. Drawn at
-    random sizes alone, trapezoids would be most moves, and a trapezoid with no triangle nearly right."""
+    random sizes alone, trapezoids would be most moves, and a trapezoid with no triangle nearly right.
+    The first triangle is a long one at v_max above 1.25 rad/s: longer than v_max / a_max (the
+    visible check's 0.6 rad move is one too), so the border taken at v_max / a_max fails at every draw."""
     cases = []
-    for share, sign in ((0.05, 1.0), (0.05, -1.0), (0.05, 1.0), (0.05, -1.0),
-                        (1.2, 1.0), (1.2, -1.0), (1.2, 1.0), (1.2, -1.0)):
+    for k, (share, sign) in enumerate(((0.05, 1.0), (0.05, -1.0), (0.05, 1.0), (0.05, -1.0),
+                                       (1.2, 1.0), (1.2, -1.0), (1.2, 1.0), (1.2, -1.0))):
         v, a = float(rng.uniform(0.2, 3.0)), float(rng.uniform(0.5, 40.0))
         factor = rng.uniform(share, 0.95) if share < 1.0 else rng.uniform(share, 4.0)
+        if k == 0:  # a long triangle: 0.8 v^2 / a > v / a when v > 1.25
+            v, factor = float(rng.uniform(1.5, 3.0)), rng.uniform(0.8, 0.95)
         cases.append((float(sign * factor * v * v / a), v, a))
     v, a = float(rng.uniform(0.5, 2.0)), float(rng.uniform(1.0, 10.0))
     cases += [(0.0, v, a), (-float(rng.uniform(1.0, 2.0)) * v * v / a, v, a), (v * v / a, v, a)]

@@ -97,6 +97,24 @@ def test_every_hidden_move_of_4_3_is_not_a_whole_number_of_goal_periods_and_roun
     assert any(p < 0.5 for p in parts) and any(p > 0.5 for p in parts), parts
 
 
+@pytest.mark.parametrize("seed", range(50))
+def test_every_draw_of_4_2_fails_the_border_taken_at_v_max_over_a_max_as_the_visible_check_does(seed):
+    def right(d, v, a):
+        d = abs(d)
+        return [d / v + v / a, v] if d >= v * v / a else [2 * np.sqrt(d / a), np.sqrt(a * d)]
+
+    def slip(d, v, a):
+        d = abs(d)
+        return [d / v + v / a, v] if d >= v / a else [2 * np.sqrt(d / a), np.sqrt(a * d)]
+
+    wrong = [c for c in _cases("04_trajectories", "ex04_2_trapezoid_test", seed)
+             if not np.allclose(slip(*c), right(*c), rtol=1e-9, atol=1e-12)]
+    assert wrong, "no hidden case of 4.2 tells the two borders apart"
+    source = dict((gid, src) for _, gid, src in CELLS)["ex04_2_trapezoid_test"]
+    visible = [tuple(map(float, m)) for m in re.findall(r"ex\(trapezoid, (-?[\d.]+), ([\d.]+), ([\d.]+)\)", source)]
+    assert any(not np.allclose(slip(*c), right(*c)) for c in visible), visible
+
+
 def test_4_3s_visible_check_holds_durations_of_the_hidden_kind_both_ways():
     source = dict((gid, src) for _, gid, src in CELLS)["ex04_3_sample_10hz_test"]
     calls = re.findall(r"check_move\([^,]+, goal, ([\d.]+), ([\d.]+),", source)
