@@ -202,7 +202,8 @@ def test_no_page_of_the_class_loads_anything(graded):
     loads = {name: m.group(0) for name, page in result["pages"].items()
              if (m := re.search(r"<(script|link|iframe|img)[^>]+(src|href)=[\"'](?!data:)[^\"']*", page))}
     assert not loads, f"{len(loads)} pages load an address: {loads}"
-    assert not [name for name, page in result["pages"].items() if "http" in page]
+    # an address, in any form ("http" alone also turns up by chance inside a plot's base64 data)
+    assert not [name for name, page in result["pages"].items() if re.search(r"https?:/", page)]
 
 
 def _none(failures: list, what: str, result) -> None:
