@@ -37,8 +37,8 @@ def _near(a, b, tol: float) -> bool:
 
 def known_mistake(arr, mistakes, *, tol: float) -> str:
     """The hint of the known mistake (``mistakes``: hint -> the value, or :class:`either` of the
-    values, it gives) whose value ``arr`` is, whatever its shape (a forgotten ``abs`` leaves rows
-    out), "" when none is.
+    values, it gives) whose value ``arr`` is, even where its shape is not the expected one (a
+    forgotten ``abs`` leaves rows out), "" when none is.
 
     >>> known_mistake(np.zeros((0, 3)), {"the lower limit counts too: compare abs(q).": np.zeros((0, 3))}, tol=1e-9)
     'the lower limit counts too: compare abs(q).'

@@ -25,11 +25,14 @@ def ex03_1_two_link_ik_test(rng, spec):
     """two_link_ik(x, y, l1, l2): 10 cases; reachable targets of random links, two fully stretched
     arms (both elbows coincide), one of them where the cosine of q2 rounds above 1 (the visible check's
     (0.1, 0, 0.07, 0.03): an unclipped arccos is nan there, wrong graded as locally), and two targets
-    out of reach (too far, too near)."""
+    out of reach (too far, too near). The first target is always behind the base (x < 0), where
+    arctan(y / x) turns the wrong way round, at every draw (the visible check has one too)."""
     cases = []
-    for _ in range(6):
+    for k in range(6):
         l1, l2 = rng.uniform(0.05, 0.2, 2)
         a, b = rng.uniform(-3.0, 3.0), rng.uniform(0.05, 3.0)
+        if k == 0 and l1 * np.cos(a) + l2 * np.cos(a + b) >= 0:   # the whole arm turned half a turn
+            a += np.pi
         cases.append((float(l1 * np.cos(a) + l2 * np.cos(a + b)), float(l1 * np.sin(a) + l2 * np.sin(a + b)),
                       float(l1), float(l2)))
     l1, l2 = rng.uniform(0.05, 0.2, 2)

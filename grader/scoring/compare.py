@@ -24,15 +24,20 @@ import numpy as np
 from snakekit.model import SPEC, SnakeSpec
 from snakekit.trajectory import Trajectory
 
-__all__ = ["GUESSES", "Check", "falloff", "align", "tracking", "point_count", "rate", "limits", "sweep_count",
+__all__ = ["GUESSES", "TEN_TIMES", "STARTS_AT_1", "NOT_HOME", "TRANSPOSE", "Check", "falloff", "align", "tracking", "point_count", "rate", "limits", "sweep_count",
            "home", "smoothness", "count_sweeps"]
 
 
-#: The grader's own guesses at a mistake from the numbers of a hidden case: the hints of :func:`rate` and
-#: :func:`home` and the transpose of :func:`grader.scoring.score._compare_case`. Where the notebook's own
-#: check names the mistake, its hint is the one shown (:func:`grader.scoring.verdict.with_local_check`).
-GUESSES = re.compile(r" Hint: (?:this looks like \S+ Hz where \S+ Hz was asked: the time step is \S+ s|the time vector "
-                     r"starts at 1 instead of 0|the sweep does not return home)\.| \(the transpose\?\)")
+#: The grader's own guesses at a mistake from the numbers of a hidden case, as they end a message: the
+#: hints of :func:`rate` and :func:`home` and the transpose of :func:`grader.scoring.score._compare_case`.
+#: Where the notebook's own check names the mistake, its hint is the one shown, and :data:`GUESSES`
+#: (made from these) takes them out (:func:`grader.scoring.verdict.with_local_check`).
+TEN_TIMES = " Hint: this looks like {fast:g} Hz where {asked:g} Hz was asked: the time step is {step:g} s."
+STARTS_AT_1 = " Hint: the time vector starts at 1 instead of 0."
+NOT_HOME = " Hint: the sweep does not return home."
+TRANSPOSE = " (the transpose?)"
+GUESSES = re.compile("|".join(re.sub(r"\\\{\w+:g\\\}", r"\\S+", re.escape(g))   # a number in the text: any word
+                              for g in (TEN_TIMES, STARTS_AT_1, NOT_HOME, TRANSPOSE)))
 
 
 @dataclass(frozen=True)
@@ -158,14 +163,13 @@ def rate(traj: Trajectory, expected_hz: float, *, rel_tol: float = 0.01, weight:
     if f_rate < 1:
         hint = ""
         if abs(got - 10 * expected_hz) / (10 * expected_hz) < rel_tol:
-            hint = (f" Hint: this looks like {10 * expected_hz:g} Hz where {expected_hz:g} Hz was asked: "
-                    f"the time step is {step:g} s.")
+            hint = TEN_TIMES.format(fast=10 * expected_hz, asked=expected_hz, step=step)
         parts.append(f"{got:.4g} Hz between points, expected {expected_hz:g} Hz (tolerance {rel_tol:.0%}).{hint}")
     if f_uniform < 1:
         i = int(np.argmax(np.abs(dt - 1.0 / got)))
         parts.append(f"the step between points {i} and {i + 1} is {dt[i]:.4g} s, expected a steady {1 / got:.4g} s.")
     if f_start < 1:
-        hint = " Hint: the time vector starts at 1 instead of 0." if abs(t0 - 1) < 1e-6 else ""
+        hint = STARTS_AT_1 if abs(t0 - 1) < 1e-6 else ""
         parts.append(f"the first point is at t={t0:.4g} s, expected 0 s.{hint}")
     if not parts:
         return Check("rate", 1.0, f"rate: {got:.4g} Hz, steady, from t=0 s.", weight)
@@ -234,7 +238,7 @@ def home(traj: Trajectory, spec: SnakeSpec = SPEC, *, tol: float = 1e-3, weight:
                          f"{spec.home[j]:+.4f} rad: off by {_deg(d[j])} (tolerance {tol:g} rad).")
     if not parts:
         return Check("home", 1.0, f"home: starts and ends at home (within {tol:g} rad).", weight)
-    hint = " Hint: the sweep does not return home." if len(parts) == 1 and "ends" in parts[0] else ""
+    hint = NOT_HOME if len(parts) == 1 and "ends" in parts[0] else ""
     return Check("home", f, "home: " + " ".join(parts) + hint, weight)
 
 

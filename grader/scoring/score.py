@@ -215,7 +215,7 @@ def _compare_case(what: str, got: dict, want: dict, tol: dict) -> str:
         g = np.asarray(got[name], dtype=float)
         e = np.asarray(e, dtype=float)
         if g.shape != e.shape:
-            hint = " (the transpose?)" if g.ndim == 2 and g.shape == e.shape[::-1] else ""
+            hint = compare.TRANSPOSE if g.ndim == 2 and g.shape == e.shape[::-1] else ""
             return f"{part} has shape {g.shape}, expected {e.shape}{hint}."
         if not np.isfinite(g).all():
             idx = tuple(int(i) for i in np.argwhere(~np.isfinite(g))[0])
