@@ -115,6 +115,14 @@ def test_every_draw_of_4_2_fails_the_border_taken_at_v_max_over_a_max_as_the_vis
     assert any(not np.allclose(slip(*c), right(*c)) for c in visible), visible
 
 
+@pytest.mark.parametrize("seed", range(200))
+def test_every_draw_of_3_1_holds_a_target_behind_the_base_where_arctan_of_y_over_x_turns_the_wrong_way(seed):
+    reachable = [c for c in _cases("03_inverse_kinematics", "ex03_1_two_link_ik_test", seed)
+                 if abs(c[2] - c[3]) < np.hypot(c[0], c[1]) < c[2] + c[3]]
+    # arctan(y / x) and arctan2(y, x) differ by half a turn exactly where x < 0
+    assert any(c[0] < 0 and not np.isclose(np.arctan(c[1] / c[0]), np.arctan2(c[1], c[0])) for c in reachable), reachable
+
+
 def test_4_3s_visible_check_holds_durations_of_the_hidden_kind_both_ways():
     source = dict((gid, src) for _, gid, src in CELLS)["ex04_3_sample_10hz_test"]
     calls = re.findall(r"check_move\([^,]+, goal, ([\d.]+), ([\d.]+),", source)
