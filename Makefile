@@ -20,25 +20,22 @@ setup:
 lab: setup
 	$(VENV)/bin/snakekit start --ip=$(LAB_IP) --port=$(LAB_PORT)
 
-# The suite in two parts. First in parallel (pytest-xdist), one worker per core, since most of its
-# time is spent waiting on subprocesses, the Docker engine and browsers (TEST_WORKERS=0: one
-# process); tests that share an expensive module fixture, or the Docker engine, stay on one worker
-# (tests/conftest.py). Then the `serial` tests, one at a time: their checks ride on the wall clock
-# (the emulated bus and the arm's lab in real time). Each run's durations: artifacts/test-durations.txt.
+# The suite in two parts at once (tools/run-tests): the tests marked `serial`, whose checks ride on
+# the wall clock (the emulated bus and the arm's lab in real time), one at a time at a higher
+# priority; beside them the rest in parallel (pytest-xdist, one worker per core: most of its time
+# is spent waiting on subprocesses, the Docker engine and browsers; TEST_WORKERS=0: one process).
+# Tests that share an expensive module fixture, or the Docker engine, stay on one worker
+# (tests/conftest.py). Each run's durations: artifacts/test-durations.txt.
 TEST_WORKERS ?= $(shell getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
-PARALLEL := -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder
+export TEST_WORKERS
 
 test: setup
-	$(PY) -m pytest -q $(PARALLEL) -m "not serial" $(PYTEST_ARGS); a=$$?; [ $$a != 2 ] || exit 2; \
-	SNAKEKIT_DURATIONS_APPEND=1 $(PY) -m pytest -q -m serial $(PYTEST_ARGS); b=$$?; \
-	{ [ $$a = 0 ] || [ $$a = 5 ]; } && { [ $$b = 0 ] || [ $$b = 5 ]; }
+	PY=$(PY) tools/run-tests "" $(PYTEST_ARGS)
 
 # The contributor's loop: everything but the `system` tests (Docker, Binder, the hub, browsers,
-# the lock's resolution, other platforms; tests/system/), the serial ones after the rest.
+# the lock's resolution, other platforms; tests/system/).
 test-quick: setup
-	$(PY) -m pytest -q $(PARALLEL) -m "not system and not serial" $(PYTEST_ARGS); a=$$?; [ $$a != 2 ] || exit 2; \
-	SNAKEKIT_DURATIONS_APPEND=1 $(PY) -m pytest -q -m "serial and not system" $(PYTEST_ARGS); b=$$?; \
-	{ [ $$a = 0 ] || [ $$a = 5 ]; } && { [ $$b = 0 ] || [ $$b = 5 ]; }
+	PY=$(PY) tools/run-tests "not system" $(PYTEST_ARGS)
 
 # Every benchmark under bench/, into bench/RESULTS.md and its plots (BENCH_ARGS: e.g. --only sim).
 bench: setup

@@ -8,6 +8,9 @@ One place decides what differs between Linux, macOS and Windows:
   it, so it happens before MuJoCo is loaded. A value the user set is kept.
 - :func:`missing`: what this system lacks to run the lessons natively, each with what to
   install on this system. ``snakekit start`` (what ``make lab`` runs) prints them.
+- :func:`realtime`: the threads that keep the arm's timing (the loop that sends goals to the
+  servos, the watchdog's keep-alive, the emulated servos' responder) run under Linux's
+  ``SCHED_FIFO`` where the system allows it, so other work on the computer does not delay them.
 
 The platform table in README.md says which system runs what; ``tests/system/test_platform.py``
 keeps it true. Only the standard library is used here, so the checks run even when the
@@ -19,7 +22,8 @@ from __future__ import annotations
 import importlib.util
 import os
 import sys
-from collections.abc import Callable, MutableMapping
+from collections.abc import Callable, Iterator, MutableMapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 #: the oldest Python the kit runs on (pyproject.toml's requires-python)
@@ -195,3 +199,39 @@ def missing(*, platform: str | None = None, machine_name: str | None = None, pyt
                               f"on Debian or Ubuntu: `sudo apt-get install {packages}` (`make setup` does it "
                               "as root); elsewhere, your distribution's packages of the same libraries"))
     return needs
+
+
+#: the real-time priority (``SCHED_FIFO``, 1-99) of the threads that keep the arm's timing: low,
+#: so the kernel's own real-time threads (interrupts, watchdogs) come first
+REALTIME_PRIORITY = 10
+
+
+@contextmanager
+def realtime() -> Iterator[bool]:
+    """Run the calling thread under ``SCHED_FIFO`` while the block runs; yields whether it does.
+
+    A thread of the arm's timing (the goals' 100 Hz loop, the watchdog's keep-alive, the
+    emulated servos' responder) waits most of the time and works a few milliseconds when it
+    wakes; other work on the computer (a browser, a build, a class's notebooks being graded) must
+    not hold it back past the Bus Watchdog's 0.5 s or the servos' reply timeout. Under
+    ``SCHED_FIFO`` it runs as soon as it wakes. Processes it starts do not inherit the policy
+    (``SCHED_RESET_ON_FORK``), and the thread's policy is put back when the block ends.
+
+    Linux only, and only with the right to: root (``CAP_SYS_NICE``), or ``RLIMIT_RTPRIO`` (``ulimit
+    -r``, ``rtprio`` in ``/etc/security/limits.conf``) of at least :data:`REALTIME_PRIORITY`.
+    Elsewhere nothing changes and it yields False; the kit's timing checks still hold on a quiet
+    computer.
+    """
+    try:
+        before = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(REALTIME_PRIORITY))
+    except (AttributeError, OSError):  # not Linux, or no right to
+        yield False
+        return
+    try:
+        yield True
+    finally:
+        try:
+            os.sched_setscheduler(0, *before)
+        except OSError:
+            pass

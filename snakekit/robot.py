@@ -15,6 +15,7 @@ off (or holds) when closed, even after an exception.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import time
 from abc import ABC, abstractmethod
@@ -22,6 +23,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from .errors import BackendError, InputTypeError, LimitError, ShapeError, SnakekitError
+from .host import realtime as _realtime
 from .model import SPEC, SnakeSpec
 from .progress import LONG_RUN, TextProgress
 from .run import JointState, Run  # noqa: F401  (snakekit.robot.Run: where the robot interface names them)
@@ -43,6 +45,9 @@ class Robot(ABC):
     #: whether :meth:`run` is paced by the wall clock (a real or emulated bus, a real-time
     #: simulator) rather than stepped as fast as possible
     realtime = True
+    #: whether :meth:`run`'s loop keeps a bus's timing (goals to servos, whose Bus Watchdog stops
+    #: them when the loop stalls): it then runs under ``SCHED_FIFO`` where allowed (``host.realtime``)
+    keeps_bus_time = False
     #: How far [rad] a trajectory's first point may be from the present position.
     start_tolerance = 0.05
     #: How late [s] a run's goal or record may come before the rest of the run is moved later
@@ -212,27 +217,28 @@ class Robot(ABC):
         k = r = 0
         complete = False
         try:
-            while k < n_goals or r < n_rec:
-                t_goal = times[k] if k < n_goals else np.inf
-                t_rec = record_at[r] if r < n_rec else np.inf
-                due = t0 + shift + min(t_goal, t_rec)
-                self._advance(due)
-                late = self._now() - due
-                if late > self.late_goal:  # the host stalled: go on from here, never catch up
-                    shift += late
-                    self.late_shifts += 1
-                if k < n_goals and t_goal <= t_rec:
-                    self._send(goals[k])
-                    sent_t[k] = self._now() - t0  # when it really left, delays included
-                    k += 1
-                    if bar is not None:
-                        bar.update(t_goal)
-                else:
-                    t, rec_p[r], rec_v[r], rec_e[r] = self._record()
-                    rec_t[r] = t - t0
-                    if self.on_record is not None:
-                        self.on_record(t, rec_p[r], rec_v[r])
-                    r += 1
+            with _realtime() if self.keeps_bus_time else contextlib.nullcontext():  # the bus's timing
+                while k < n_goals or r < n_rec:
+                    t_goal = times[k] if k < n_goals else np.inf
+                    t_rec = record_at[r] if r < n_rec else np.inf
+                    due = t0 + shift + min(t_goal, t_rec)
+                    self._advance(due)
+                    late = self._now() - due
+                    if late > self.late_goal:  # the host stalled: go on from here, never catch up
+                        shift += late
+                        self.late_shifts += 1
+                    if k < n_goals and t_goal <= t_rec:
+                        self._send(goals[k])
+                        sent_t[k] = self._now() - t0  # when it really left, delays included
+                        k += 1
+                        if bar is not None:
+                            bar.update(t_goal)
+                    else:
+                        t, rec_p[r], rec_v[r], rec_e[r] = self._record()
+                        rec_t[r] = t - t0
+                        if self.on_record is not None:
+                            self.on_record(t, rec_p[r], rec_v[r])
+                        r += 1
             complete = True
         finally:
             if k:  # the next command's path starts at the last goal that was sent

@@ -136,15 +136,15 @@ def _last_durations() -> dict[str, float]:
 
 #: Tests whose check rides on the wall clock of this machine: the emulated servos and the arm's lab
 #: in real time (a stall past the Bus Watchdog's 0.5 s, or past the lab's stall bound, is a fault),
-#: and the adversarial batch's 10 s cell clock. Marked ``serial``: `make test` runs them after the
-#: parallel part, one at a time, on a machine that has only them to do.
+#: and the adversarial batch's 10 s cell clock. Marked ``serial``: `make test` (tools/run-tests)
+#: runs them one at a time, in a process of their own at a higher priority, beside the rest.
 SERIAL_FILES = {"tests/grader/test_arm_lab.py", "tests/grader/test_lab_safety.py", "tests/grader/test_return_lab.py",
                 "tests/grader/test_grader_adversarial.py", "tests/kit/test_bridge.py", "tests/kit/test_emulator.py",
                 "tests/kit/test_hardware.py", "tests/kit/test_late_replies.py", "tests/kit/test_servo_path.py",
                 "tests/kit/test_safety.py", "tests/kit/test_bus_protocol.py"}
 #: ...and every test of lesson 07 (the real robot's lesson runs on the emulated bus in real time),
 #: and the references' check
-SERIAL_IDS = ("07_real_robot",
+SERIAL_IDS = ("07_real_robot", "[lesson07",  # the latter: the mutation and hint tests' lesson 07
               # each lesson's instructor notebook run again (lesson 00's took 611 s beside the
               # engine tests in the parallel part, 8 s alone)
               "test_course_references_are_current")
@@ -197,7 +197,7 @@ FAILURES = os.path.join(ROOT, "artifacts", "test-failures.txt")
 
 
 def pytest_sessionstart(session):
-    if not hasattr(session.config, "workerinput") and not os.environ.get("SNAKEKIT_DURATIONS_APPEND"):
+    if not hasattr(session.config, "workerinput") and not os.environ.get("SNAKEKIT_DURATIONS_PART"):
         if os.path.exists(FAILURES):
             os.remove(FAILURES)
 
@@ -227,10 +227,10 @@ def pytest_sessionfinish(session, exitstatus):
              "# seconds phase test"]
     lines += [f"{d:.2f}s {when:<8} {nodeid}" for d, when, nodeid, _ in sorted(_reports, key=lambda r: -r[0])]
     os.makedirs(os.path.dirname(DURATIONS), exist_ok=True)
-    if os.environ.get("SNAKEKIT_DURATIONS_APPEND") and os.path.exists(DURATIONS):  # make test's second part
-        with open(DURATIONS, "a") as f:
-            f.write("\n".join(lines) + "\n")
-        return
-    with open(DURATIONS + ".tmp", "w") as f:
+    # a part of `make test` (tools/run-tests) writes its own file, which the script appends when
+    # both parts have ended
+    part = os.environ.get("SNAKEKIT_DURATIONS_PART")
+    path = DURATIONS.replace(".txt", f".{part}.txt") if part else DURATIONS
+    with open(path + ".tmp", "w") as f:
         f.write("\n".join(lines) + "\n")
-    os.replace(DURATIONS + ".tmp", DURATIONS)
+    os.replace(path + ".tmp", path)

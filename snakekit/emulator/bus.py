@@ -23,6 +23,7 @@ import time
 import traceback
 
 from ..errors import ConfigurationError, InputTypeError
+from ..host import realtime
 from ..model import SPEC, SnakeSpec
 from ..validate import as_configuration, check_count, check_flag, check_spec, length_of, number, quote
 from . import protocol as p
@@ -230,7 +231,12 @@ class BusEmulator:
         return self
 
     def serve(self) -> None:
-        """Answer packets until :meth:`stop` (or Ctrl-C in the foreground)."""
+        """Answer packets until :meth:`stop` (or Ctrl-C in the foreground), under ``SCHED_FIFO``
+        where allowed (``host.realtime``): the servos' processors answer whatever else runs."""
+        with realtime():
+            self._serve()
+
+    def _serve(self) -> None:
         advance = getattr(self.motion, "advance", None)
         line = self._line
         listened = self.now()

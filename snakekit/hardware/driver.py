@@ -103,6 +103,7 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
 
     backend = "hardware"
     realtime = True
+    keeps_bus_time = True
 
     def __init__(self, port: str | None = None, baudrate: int = 4_000_000, ids=None, *,
                  spec: SnakeSpec = SPEC, on_close: str = "torque_off",

@@ -16,6 +16,7 @@ import time
 import weakref
 
 from ..errors import BackendError, PortLostError
+from ..host import realtime
 from .bus import describe, sdk
 from .registers import BUS_WATCHDOG, TORQUE_ENABLE, WATCHDOG_UNIT, to_signed
 
@@ -43,6 +44,10 @@ class KeepAlive:
         self._thread.start()
 
     def _loop(self) -> None:
+        with realtime():  # a busy computer must not hold it back past the Bus Watchdog
+            self._keep_alive()
+
+    def _keep_alive(self) -> None:
         while not self._stop.wait(self.interval / 2):
             robot = self._robot()
             if robot is None or robot.closed:
