@@ -33,6 +33,7 @@ import pytest
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(1, str(HERE.parent))  # tests/conftest.py, also when run as a script
 
 from class_submissions import exercise_of, hand_in, points, score_range  # noqa: E402
 from class_submissions import lesson02, lesson03, lesson04, lesson06  # noqa: E402
