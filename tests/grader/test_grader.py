@@ -159,7 +159,7 @@ def test_values_scored_case_by_case_naming_the_call(xy_cases):
     s = score_exercise("ex1_tool_xy_test", good, xy_cases, 2.0)
     q = xy_cases.cases[2][0]
     assert s.score == 1.5 and s.message.startswith("1 of 4 hidden cases wrong; the first: tool_xy([")
-    assert f"{q[0]:.6f}" in s.message and "at index [1]" in s.message and "off by 0.001" in s.message
+    assert f"{q[0]:.6f}" in s.message and "the result[1] is " in s.message and "off by 0.001" in s.message
 
 
 def test_a_forgotten_return_and_an_error_are_said_in_plain_words(xy_cases):
