@@ -50,11 +50,11 @@ import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import ReturnedNone, encode_results, fetch_cases
-from .mistakes import either, known_mistake, mistake_hint, shape_hint
+from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
 from .watch import calls_to, forgot_return, returns_none
 
-__all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "quick",
-           "waiting_for"]
+__all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "pose_mistakes",
+           "quick", "waiting_for"]
 
 _HERE = os.path.abspath(__file__)
 

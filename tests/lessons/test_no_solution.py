@@ -403,7 +403,7 @@ MISTAKES = {
          "    raise ValueError('no solution')"), "clamp q after every step"),
         ("ex03_3_ik_loop_test", "def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n"
          "    return snakekit.inverse_kinematics(target)", "`snakekit.inverse_kinematics` was called", True),
-        ("ex03_4_task1_test", _TASK1.format("run.measured.positions[-1]"), "are joint angles"),
+        ("ex03_4_task1_test", _TASK1.format("run.measured.positions[-1]"), "looks like joint angles"),
         ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])"),
          "raise a ValueError there", True),
         ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n" + _IK2 +
