@@ -48,7 +48,7 @@ from grader.course.gradebook import NOT_CARRIED, keep_release_files, late_penalt
 from grader.feedback import scores
 from grader.scoring.references import course_references, expected
 from grader.sandbox.runner import Runner
-from grader.scoring.verdict import SubmissionResult, Verdicts
+from grader.scoring.verdict import SubmissionResult, Verdicts, busy_machine, real_time
 from grader.scoring.score import read_handin
 from grader.course.restore import release_order, restore
 
@@ -282,6 +282,8 @@ class Grader:
             except InstructorReferenceError as e:
                 detail = "" if outcome.returncode == 0 else f" (its sandbox ended with {outcome.returncode}" + \
                     (", timed out" if outcome.timed_out else "") + ")"
+                busy = busy_machine() if real_time(a) else ""
+                detail += f"; {busy}" if busy else ""
                 raise GradingError(f"{e}{detail}; nothing was graded") from e
         finally:
             shutil.rmtree(work, ignore_errors=True)

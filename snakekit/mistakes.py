@@ -71,3 +71,23 @@ def mistake_hint(arr, exp, unit, mistakes, *, tol: float) -> str:
         if "m" in units and near(arr, exp / 1000):
             return "this looks like metres divided by 1000 again: the link lengths are already in metres."
     return ""
+
+
+#: A result that should hold one tool pose (x, y, θ) per move, of another kind: what it looks like, and what to do.
+JOINT_ANGLES_FOR_POSES = ("this looks like joint angles (5 numbers a move), and the exercise asks for tool poses "
+                          "(x, y, θ), 3 numbers a move: turn the arm's last angles into its tool pose with "
+                          "snakekit.tool_pose_2d(run.measured.positions[-1]).")
+POINTS_FOR_POSES = ("this looks like tool points (x, y) without the heading, and the exercise asks for tool poses "
+                    "(x, y, θ): keep the heading too, all three numbers of snakekit.tool_pose_2d(...).")
+
+
+def pose_mistakes(final_q, poses) -> dict:
+    """The known mistakes (:func:`known_mistake`) of a result asked as one tool pose (x, y, θ) per move: the
+    moves' last joint angles ``final_q`` (n, 5) returned as they are, or their tool ``poses`` (n, 3) without
+    the heading.
+
+    >>> q = np.zeros((1, 5)); known_mistake(q, pose_mistakes(q, [[0.3315, 0.0, 0.0]]), tol=1e-9)[:33]
+    'this looks like joint angles (5 n'
+    """
+    return {JOINT_ANGLES_FOR_POSES: np.asarray(final_q, dtype=float),
+            POINTS_FOR_POSES: np.asarray(poses, dtype=float)[..., :2]}

@@ -146,10 +146,10 @@ def without_numbers(message: str) -> str:
     return _RUN.sub("#", text).strip()
 
 
-_CALL = r"\w+\([^()]*\):? "
+_CALL = r"\w+(?: at the hidden case )?\([^()]*\):? "   # sweep_times(4, 10.0): / estimate_lag at the hidden case (...):
 _CASE = re.compile(r"^(?:# of # hidden cases (?:wrong|gave no trajectory)(?: \(some in part\))?; the first: )?(?:" + _CALL + ")?")
 #: where a message goes on to another case or check, or to what the notebook's own check said
-_NEXT = re.compile(r" (?:\w+\([^()]*\): |# of # hidden cases|[\w ]+: right in every hidden case|" + re.escape(LOCAL) + ")")
+_NEXT = re.compile(r" (?:\w+(?: at the hidden case )?\([^()]*\): |# of # hidden cases|[\w ]+: right in every hidden case|" + re.escape(LOCAL) + ")")
 
 
 def mistake_of(message: str) -> str:
@@ -163,6 +163,9 @@ def mistake_of(message: str) -> str:
     'sweeps: #, expected # (off by #).'
     >>> mistake_of("5 of 5 hidden cases wrong; the first: f([ 0.  , 0.1, ..., 28.0..., 1, 0.08): 'q' is 1 at index [2]")
     "'q' is # at index [#]"
+    >>> mistake_of("3 of 3 hidden cases wrong; the first: estimate_lag at the hidden case (151, 10.0, 4, 0.05, 3): "
+    ...            "lag of joint is 0.2 s, expected 0.178 s: off by 22 ms.")
+    'lag of joint is # s, expected # s: off by # ms.'
     """
     first = without_numbers(message.strip().splitlines()[0] if message.strip() else "")
     first = _CASE.sub("", first)

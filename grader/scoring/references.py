@@ -30,6 +30,7 @@ from grader.scoring.cases import Draw, cases_path, checked_tolerances, draw, exe
 from grader.errors import CasesError
 from grader.scoring.rules import RULES
 from grader.scoring.score import DEFAULT_TOLERANCES, Expected, handed_in_function, kind_of, score_exercise
+from grader.scoring.wording import wording
 
 FORMAT = 2
 GRADER = Path(__file__).resolve().parents[1]
@@ -176,7 +177,9 @@ def expected(ref: Reference, batch: Draw, handins: dict[str, list], *, where: st
             tol = checked_tolerances(ex["tolerances"], f"{batch.assignment}'s reference: {gid}")
         except CasesError as bad:
             raise InstructorReferenceError(f"{bad}; record it again (`python -m grader.scoring.references {batch.assignment}`)") from None
-        e = Expected(gid, kind, list(cases), results, tol, handed_in_function(gid, (sources or {}).get(gid, "")))
+        source = (sources or {}).get(gid, "")
+        handed = handed_in_function(gid, source)
+        e = Expected(gid, kind, list(cases), results, tol, handed, wording(gid, source, handed) if source else None)
         own = score_exercise(gid, results, e, 1.0)
         if own.score < 1.0:
             raise InstructorReferenceError(f"{where}: {gid} scores {own.score:g} of 1 against itself at the cases of seed "

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from snakekit.mistakes import known_mistake, pose_mistakes
 from snakekit.model import SPEC
 
 __all__ = ["RULES"]
@@ -98,6 +99,8 @@ def task1(args, result, tol):
     Where each move ended is the recorded run's last angles (``final_q``: the grader computes
     the tool from them); the poses the function returned (``poses``, one (x, y, heading) per
     move) must say the same."""
+    from snakekit.kinematics import tool_pose_2d
+
     targets = np.atleast_2d(np.asarray(args[0], dtype=float))
     name = "final_q" if "final_q" in result else "value"
     q, why = _value(result, (len(targets), SPEC.n_joints), "the moves (their final angles)", name)
@@ -113,8 +116,10 @@ def task1(args, result, tol):
                        f"{tol['atol'] * 1000:.3g} mm).")
     if "poses" in result:
         poses, why = _value(result, (len(targets), 3), "task1", "poses")
-        if poses is None:
-            return False, why + " One tool pose (x, y, heading) per move."
+        if poses is None:   # what it looks like, in the words of the notebook's check
+            kind = known_mistake(np.asarray(result["poses"], dtype=float),
+                                 pose_mistakes(q, [tool_pose_2d(row) for row in q]), tol=1e-9)
+            return False, why + " " + (kind[0].upper() + kind[1:] if kind else "One tool pose (x, y, heading) per move.")
         off = np.abs(poses[:, :2] - tool).max(axis=1)
         if (off > tol["atol"]).any():
             k = int(np.argmax(off))

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from snakekit.checks import _fmt_diff, _fmt_pair
 from snakekit.errors import SnakekitError
 from snakekit.handin import decode_results
 from snakekit.watch import forgot_return
@@ -31,6 +32,7 @@ from snakekit.trajectory import Trajectory
 from grader.scoring import compare
 from grader.scoring.cases import describe
 from grader.scoring.rules import RULES
+from grader.scoring.wording import Wording
 
 __all__ = ["ExerciseScore", "Expected", "kind_of", "read_handin", "score_exercise"]
 
@@ -75,6 +77,8 @@ class Expected:
         tolerances: ``rtol``/``atol`` (values), ``max``/``rms`` (trajectories; a run's
             measured angles), ``commanded_max``/``commanded_rms`` (a run's commanded trajectory).
         function: the name of the function the test cell hands in (see :func:`handed_in_function`).
+        wording: how messages name the student's function, its arguments and each value, in the words of
+            the notebook's check (:func:`grader.scoring.wording.wording`); default: the names handed in.
     """
 
     grade_id: str
@@ -82,7 +86,11 @@ class Expected:
     cases: list
     results: list = field(repr=False)
     tolerances: dict = field(default_factory=dict)
-    function: str = ""  # what the test cell hands in (its name in feedback); default: from the grade id
+    function: str = ""  # what the test cell hands in; default: from the grade id
+    wording: Wording | None = None
+
+    def words(self) -> Wording:
+        return self.wording or Wording(self.function or label(self.grade_id))
 
 
 def kind_of(results) -> str:
@@ -143,9 +151,14 @@ def handed_in_function(grade_id: str, source: str) -> str:
     return m.group(1) if m else ""
 
 
-def call(name: str, args) -> str:
-    """The case as a call a student recognises: ``sweep_times(4, 10.0)``."""
-    return f"{name}({', '.join(describe(a, 48) for a in args)})"
+def call(name: str | Wording, args) -> str:
+    """The case as a call a student recognises: ``sweep_times(4, 10.0)``; where the test cell's hand-in builds
+    the student's arguments from the case's (a run from a sweep's values), the case's values:
+    ``estimate_lag at the hidden case (150, 10.0, 3, 0.07, 2)``."""
+    w = name if isinstance(name, Wording) else Wording(name)
+    if w.params:
+        return f"{w.function} at the hidden case ({', '.join(describe(a, 48) for a in args)})"
+    return f"{w.function}({', '.join(describe(a, 48) for a in args)})"
 
 
 def explain_error(text: str, name: str = "your function") -> str:
@@ -197,54 +210,59 @@ def score_exercise(grade_id: str, handin: list | None, expected: Expected, max_s
     return _score_motion(grade_id, handin, expected, max_score)
 
 
-def _raised_as_expected(fn, args, got, want: str) -> tuple[bool, str]:
+def _raised_as_expected(w: Wording, args, got, want: str) -> tuple[bool, str]:
     """An instructor exception at a case: the student must raise the same type there."""
     etype = want.split(":", 1)[0]
     if isinstance(got, str) and got.split(":", 1)[0] == etype:
         return True, ""
-    did = explain_error(got, fn) if isinstance(got, str) else "your function returned a result"
-    return False, f"{call(fn, args)} must raise {etype} (the exercise asks for it there); {did}"
+    did = explain_error(got, w.function) if isinstance(got, str) else "your function returned a result"
+    return False, f"{call(w, args)} must raise {etype} (the exercise asks for it there); {did}"
 
 
-def _compare_case(what: str, got: dict, want: dict, tol: dict) -> str:
-    """Why a case's results differ from the instructor's ("" when they agree)."""
+def _compare_case(w: Wording, got: dict, want: dict, tol: dict) -> str:
+    """Why a case's results differ from the instructor's ("" when they agree), worded as the notebook's
+    check words it: the value's name and unit, the numbers with the check's digits (:mod:`snakekit.checks`)."""
     for name, e in want.items():
-        part = what if name == "value" else f"'{name}'"
+        part = w.part(name)
         if name not in got:
-            return f"no {part} in your result (it has {', '.join(sorted(got)) or 'nothing'})."
-        g = np.asarray(got[name], dtype=float)
-        e = np.asarray(e, dtype=float)
+            return f"your result has no {part.what}."
+        g, e = np.asarray(got[name]), np.asarray(e)
+        if e.dtype.kind == "b" and g.shape == e.shape and not np.array_equal(g.astype(bool), e):
+            return f"{part.what} is {bool(np.all(g))}, expected {bool(np.all(e))}."
+        g, e = g.astype(float), e.astype(float)
         if g.shape != e.shape:
             hint = compare.TRANSPOSE if g.ndim == 2 and g.shape == e.shape[::-1] else ""
-            return f"{part} has shape {g.shape}, expected {e.shape}{hint}."
+            return f"{part.what} has shape {g.shape}, expected {e.shape}{hint}."
         if not np.isfinite(g).all():
             idx = tuple(int(i) for i in np.argwhere(~np.isfinite(g))[0])
-            return f"{part} holds {g[idx]} at index {idx}: every value must be a finite number."
-        bad = ~(np.abs(g - e) <= tol["atol"] + tol["rtol"] * np.abs(e))
+            return f"{part.what} holds {g[idx]} at index {idx}: every value must be a finite number."
+        bound = tol["atol"] + tol["rtol"] * np.abs(e)
+        bad = ~(np.abs(g - e) <= bound)
         if bad.any():
             idx = tuple(int(i) for i in np.argwhere(bad)[0])
-            at = f" at index {list(idx)}" if idx else ""
-            return (f"{part} is {g[idx]:.6g}{at}, expected {e[idx]:.6g}: off by {g[idx] - e[idx]:.3g} "
-                    f"(tolerance {tol['atol'] + tol['rtol'] * abs(e[idx]):.2g}).")
+            unit = part.unit_at(idx)
+            shown, wanted = _fmt_pair(float(g[idx]), float(e[idx]), unit)
+            return (f"{part.name_at(idx, g.ndim)} is {shown}, expected {wanted}: off by "
+                    f"{_fmt_diff(abs(float(g[idx] - e[idx])), unit)} (tolerance {_fmt_diff(float(bound[idx]), unit)}).")
     return ""
 
 
 def _score_values(gid, handin, expected: Expected, max_score) -> ExerciseScore:
     tol = {**DEFAULT_TOLERANCES["values"], **expected.tolerances}
-    fn = expected.function or label(gid)
+    w = expected.words()
     rule = RULES.get(gid)
     ok, why = [], []
     for args, got, want in zip(expected.cases, handin, expected.results):
         if isinstance(want, str):
-            right, msg = _raised_as_expected(fn, args, got, want)
+            right, msg = _raised_as_expected(w, args, got, want)
         elif isinstance(got, str):
-            right, msg = False, f"{call(fn, args)}: {explain_error(got, fn)}"
+            right, msg = False, f"{call(w, args)}: {explain_error(got, w.function)}"
         elif rule is not None:  # judged by a property (grader.scoring.rules), not closeness
             right, msg = rule(args, got, tol)
-            msg = f"{call(fn, args)}: {msg}" if msg else ""
+            msg = f"{call(w, args)}: {msg}" if msg else ""
         else:
-            msg = _compare_case(fn, got, want, tol)
-            right, msg = not msg, f"{call(fn, args)}: {msg}" if msg else ""
+            msg = _compare_case(w, got, want, tol)
+            right, msg = not msg, f"{call(w, args)}: {msg}" if msg else ""
         ok.append(right)
         if msg:
             why.append(msg)
@@ -323,18 +341,18 @@ def _motion_checks(got: dict, want: dict, kind: str, tol: dict):
 def _score_motion(gid, handin, expected: Expected, max_score) -> ExerciseScore:
     """Each check's credit is its mean over the cases (a case that failed to run: 0 for all)."""
     tol = {**DEFAULT_TOLERANCES["trajectory"], **expected.tolerances}
-    fn = expected.function or label(gid)
+    w = expected.words()
     rows, raised, curves, per_case = [], [], {}, []
     for args, got, want in zip(expected.cases, handin, expected.results):
-        where = call(fn, args)
+        where = call(w, args)
         if isinstance(want, str):
-            raised.append(_raised_as_expected(fn, args, got, want))
+            raised.append(_raised_as_expected(w, args, got, want))
             per_case.append((case_kind(args, want), raised[-1]))
             continue
         per_case.append((case_kind(args, want), len(rows)))
         try:
             if isinstance(got, str):
-                raise ValueError(explain_error(got, fn))
+                raise ValueError(explain_error(got, w.function))
             checks, c = _motion_checks(got, want, expected.kind, tol)
         except ValueError as e:
             rows.append((where, f"{where}: {e}"))

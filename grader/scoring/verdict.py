@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import re
 import shutil
 import time
@@ -170,6 +171,9 @@ class Verdicts:
         elif runs > 1:
             detail = (detail + "; " if detail else "") + ("graded on its second run: the first was stopped by the "
                                                            "clock, so it ran once more from the start")
+        if (status == "timeout" or runs > 1 or errors & REAL_TIME_FAULTS) and real_time(a):
+            busy = busy_machine()
+            detail = "; ".join(x for x in (detail, busy) if x)
         score = round(sum(s.score for s in scores), 4)
         result = SubmissionResult(student, a.name, score, a.max_score, status, detail, tuple(scores),
                                   time.monotonic() - t0)
@@ -208,6 +212,35 @@ class Verdicts:
             bases[name] = nb
         self.pending[result.student] = bases
         return result
+
+
+#: The errors a run on the arm's bus emulator raises when a reply comes too late (the emulated servos answer
+#: in real time): on a busy machine the student's code is not their cause.
+REAL_TIME_FAULTS = frozenset({"CommunicationError", "PortLostError"})
+
+
+def real_time(a) -> bool:
+    """Whether the assignment's test cells run the arm's bus emulator (or the arm): in real time, so a busy
+    machine can stop them by the clock or make a reply late, whatever the student wrote."""
+    return any(re.search(r"make_robot\(\s*[\"'](emulator|hardware)", cell.source) for cell in a.tests.values())
+
+
+def busy_machine(load=None, cores=None) -> str:
+    """The TA's note when the grading machine was busier than its cores (the last minute's load average,
+    ``os.getloadavg``), "" when it was not.
+
+    >>> busy_machine(load=7.9, cores=2)[:65]
+    "the grading machine's load was 7.9 on 2 cores (more than one task"
+    >>> busy_machine(load=1.5, cores=2)
+    ''
+    """
+    load = os.getloadavg()[0] if load is None else load
+    cores = len(os.sched_getaffinity(0)) if cores is None else cores
+    if load <= cores:
+        return ""
+    return (f"the grading machine's load was {load:.1f} on {cores} cores (more than one task a core): this "
+            "assignment runs the arm's bus emulator in real time, which a busy machine slows, so the load may be "
+            "the cause; grade it again on a quiet machine (`--student` for this one)")
 
 
 def kernel_score(gid, cell, nb) -> ExerciseScore:

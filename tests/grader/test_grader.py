@@ -159,7 +159,7 @@ def test_values_scored_case_by_case_naming_the_call(xy_cases):
     s = score_exercise("ex1_tool_xy_test", good, xy_cases, 2.0)
     q = xy_cases.cases[2][0]
     assert s.score == 1.5 and s.message.startswith("1 of 4 hidden cases wrong; the first: tool_xy([")
-    assert f"{q[0]:.6f}" in s.message and "at index [1]" in s.message and "off by 0.001" in s.message
+    assert f"{q[0]:.6f}" in s.message and "the result[1] is " in s.message and "off by 0.001" in s.message
 
 
 def test_a_forgotten_return_and_an_error_are_said_in_plain_words(xy_cases):
@@ -591,6 +591,11 @@ def test_task1_judged_by_where_each_move_ends():
     assert score_exercise(e.grade_id, [{"final_q": finals, "poses": poses}], e, 2).score == 2
     angles = score_exercise(e.grade_id, [{"final_q": finals, "poses": finals}], e, 2)   # angles for poses
     assert angles.score == 0 and "returned shape (2, 5), expected (2, 3)" in angles.message
+    # ...said as the notebook's check says it: what the result looks like, and what the exercise asks
+    assert "This looks like joint angles (5 numbers a move), and the exercise asks for tool poses (x, y, θ)" \
+        in angles.message
+    points = score_exercise(e.grade_id, [{"final_q": finals, "poses": poses[:, :2]}], e, 2)
+    assert "This looks like tool points (x, y) without the heading" in points.message
     lied = score_exercise(e.grade_id, [{"final_q": finals, "poses": poses[::-1]}], e, 2)
     assert lied.score == 0 and "but that move ended with the tool at" in lied.message
 

@@ -137,3 +137,55 @@ def test_4_3s_visible_check_holds_durations_of_the_hidden_kind_both_ways():
 def test_the_hidden_cases_hold_the_visible_case_where_a_missing_clip_gives_nan(lesson, grade_id, pick):
     for seed in range(5):
         assert any(pick(c) for c in _cases(lesson, grade_id, seed)), seed
+
+
+def _arange_to_the_end(points, rate):
+    """6.1's slip: steps of 1/rate up to points/rate, which floating point may end just short of."""
+    return np.arange(0, points / rate, 1 / rate)
+
+
+@pytest.mark.parametrize("seed", range(100))
+def test_every_draw_of_6_1_holds_a_rate_where_arange_to_points_over_rate_gives_a_time_too_many(seed):
+    cases = _cases("06_coded_sweep", "ex06_1_sweep_times_test", seed)
+    assert any(_arange_to_the_end(n, f).shape != (n,) for n, f in cases), cases
+
+
+def test_6_1s_visible_check_holds_a_rate_where_arange_to_points_over_rate_gives_a_time_too_many():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex06_1_sweep_times_test"]
+    visible = [(int(n), float(f)) for n, f in re.findall(r"ex\(sweep_times, (\d+), ([\d.]+)\)", source)]
+    assert any(_arange_to_the_end(n, f).shape != (n,) for n, f in visible), visible
+
+
+def _lag(run, joint, step):
+    """6.4 as the lesson asks (lags 0 to 0.5 s, ``step`` apart; samples from 0.5 s after the first goal)."""
+    t, measured = run.measured.times, run.measured.positions[:, joint]
+    ct, cq = run.commanded.times, run.commanded.positions[:, joint]
+    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])
+    lags = np.arange(0, 0.5 + 1e-9, step)
+    rms = [np.sqrt(np.mean((measured[inside] - np.interp(t[inside] - lag, ct, cq)) ** 2)) for lag in lags]
+    return float(lags[int(np.argmin(rms))])
+
+
+def _coarse_misses(points, rate, sweeps, amplitude, joint) -> bool:
+    """Whether lags tried 50 ms apart miss the lag of this sweep on the simulator by more than 6.4's tolerance."""
+    import snakekit
+
+    with snakekit.make_robot("sim") as robot:
+        run = robot.run(snakekit.side_sweep(points=points, rate=rate, sweeps=sweeps, amplitude=amplitude))
+    tol = runpy.run_path(str(COURSE / "cases" / "06_coded_sweep.py"))["TOLERANCES"]["ex06_4_phase_lag_test"]["atol"]
+    return abs(_lag(run, joint, 0.05) - _lag(run, joint, 0.001)) > tol
+
+
+# 40 draws, a simulator run each (the first case that tells the grids apart ends a draw): about 12 s
+@pytest.mark.parametrize("seed", range(40))
+def test_every_draw_of_6_4_holds_a_sweep_whose_lag_lies_between_the_steps_of_a_50_ms_grid(seed):
+    cases = _cases("06_coded_sweep", "ex06_4_phase_lag_test", seed)
+    assert any(_coarse_misses(*c) for c in cases), cases
+
+
+def test_6_4s_visible_check_holds_a_run_whose_lag_lies_between_the_steps_of_a_50_ms_grid():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex06_4_phase_lag_test"]
+    runs = re.findall(r"side_sweep\(points=(\d+), sweeps=(\d+), amplitude=([\d.]+)\)", source)
+    joints = [int(j) for j in re.findall(r"\(\w+_run, (\d), 0\.\d+,", source)]
+    assert len(runs) == len(joints) - 1, (runs, joints)     # Task 2 (the defaults) is the first run
+    assert any(_coarse_misses(int(n), 10.0, int(k), float(a), j) for (n, k, a), j in zip(runs, joints[1:])), runs

@@ -403,7 +403,7 @@ MISTAKES = {
          "    raise ValueError('no solution')"), "clamp q after every step"),
         ("ex03_3_ik_loop_test", "def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n"
          "    return snakekit.inverse_kinematics(target)", "`snakekit.inverse_kinematics` was called", True),
-        ("ex03_4_task1_test", _TASK1.format("run.measured.positions[-1]"), "are joint angles"),
+        ("ex03_4_task1_test", _TASK1.format("run.measured.positions[-1]"), "looks like joint angles"),
         ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])"),
          "raise a ValueError there", True),
         ("ex03_1_two_link_ik_test", "def two_link_ik(x, y, l1, l2):\n" + _IK2 +
@@ -520,6 +520,8 @@ MISTAKES = {
          "np.linspace"),
         ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(points) / 10.0",
          "the rate is an argument"),
+        ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(0, points / rate, 1 / rate)",
+         "one time too many"),
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
          "    angle = amplitude * np.cos(2 * np.pi * sweeps * times / times[-1])\n"
          "    return np.repeat(angle[:, None], 5, axis=1)", "use sin"),
@@ -545,7 +547,12 @@ MISTAKES = {
          "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
          "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 501)\n"
          "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag / 1000, ct, cq)) ** 2)) for lag in lags]\n"
-         "    return float(lags[int(np.argmin(rms))])", "in milliseconds")],
+         "    return float(lags[int(np.argmin(rms))])", "in milliseconds"),
+        ("ex06_4_phase_lag_test", "def estimate_lag(run, joint=0):\n    t = run.measured.times\n"
+         "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
+         "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 0.5 + 1e-9, 0.05)\n"
+         "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag, ct, cq)) ** 2)) for lag in lags]\n"
+         "    return float(lags[int(np.argmin(rms))])", "between your grid's steps")],
     "07_real_robot": [
         ("ex07_1_ticks_test", "def to_ticks(q):\n"
          "    return (2048 + np.asarray(q, dtype=float) * 4096 / (2 * np.pi)).astype(int)", "astype(int) cuts toward zero"),
