@@ -14,8 +14,9 @@
 # (docker/ros/check-stack.py): a folding goal refused on /rosout with nothing moving, the Task 2
 # sweep (shortened) followed by /joint_states as the kit's own simulator runs it, `rosbag play`
 # of a kit .bag publishing its joint states, and the arm left in another pose; RViz screenshotted
-# again (the arm drawn, the picture changed); `rostopic echo` and `rosbag record` from a terminal
-# (`exec arm bash`); `down`: no container, network or volume left of the profile. On exit the
+# again (the arm drawn, its links elsewhere); `rostopic echo` and `rosbag record` from a terminal
+# (`exec arm bash`), the bag copied out as docs/ros.md says; docs/ros.md's `rostopic pub` of the
+# sweep, run to its end; `down`: no container, network or volume left of the profile. On exit the
 # engine stops and the host is checked and restored (engine_stop), as after docker/test.sh.
 # Screenshots in artifacts/ros/. Figures on lines starting with "figure:".
 set -euo pipefail
@@ -120,7 +121,29 @@ import sys, yaml
 topics = {t["topic"]: t["messages"] for t in yaml.safe_load(sys.stdin.read().split("=== rosbag info", 1)[1])}
 assert topics == {"/joint_states": 100, "/tf": 100}, topics
 print(", ".join(f"{k} {v}" for k, v in sorted(topics.items())))' <<<"$out") || die "rosbag record: $out"
-say "a terminal in the arm's container (exec arm bash): rostopic echo /joint_states names joint1..joint5; rosbag record -l 100: $recorded messages ($(since "$t") s)"
+# kept on the host as docs/ros.md says (exec -T arm cat), and read there by another reader (rosbags)
+"${COMPOSE[@]}" exec -T arm cat recorded.bag > "$RUN/recorded.bag" || die "could not copy recorded.bag out as docs/ros.md says"
+kept=$("$VENV_BIN/python" -c 'import sys
+from rosbags.rosbag1 import Reader
+with Reader(sys.argv[1]) as r: print(r.message_count)' "$RUN/recorded.bag") || die "recorded.bag, copied out, does not read"
+[ "$kept" = 200 ] || die "recorded.bag, copied out, holds $kept messages (200 recorded)"
+say "a terminal in the arm's container (exec arm bash): rostopic echo /joint_states names joint1..joint5; rosbag record -l 100: $recorded messages, copied out (exec -T arm cat) and read on the host ($(since "$t") s)"
+# the sweep as docs/ros.md sends it from that terminal (rostopic pub), run to its end
+t=$(now)
+sed -n '/^rostopic pub -1 \/arm\/command trajectory_msgs\/JointTrajectory "\$(python/,/^```$/p' docs/ros.md | sed '$d' > "$RUN/pub.sh"
+[ -s "$RUN/pub.sh" ] || die "docs/ros.md has no rostopic pub of the sweep"
+# (from home, where the sweep starts: the arm's node started again, the rest of the stack running on)
+"${COMPOSE[@]}" restart arm >/dev/null 2>&1 || die "could not restart the arm's service"
+until "${COMPOSE[@]}" exec -T arm bash -l -c 'timeout 10 rostopic echo -n 1 /joint_states/name' >/dev/null 2>&1; do
+  [ "$(since "$t" | cut -d. -f1)" -lt "$HANG" ] || die "the arm's node did not come back within $HANG s"
+  sleep 1
+done
+"${COMPOSE[@]}" exec -T arm bash -l -c "$(cat "$RUN/pub.sh")" >"$RUN/pub.log" 2>&1 || die "docs/ros.md's rostopic pub failed: $(tail -5 "$RUN/pub.log")"
+until "${COMPOSE[@]}" exec -T roscore bash -c 'grep -h "goal done: 100 points" ~/.ros/log/latest/rosout.log' >"$RUN/done.log" 2>&1; do
+  [ "$(since "$t" | cut -d. -f1)" -lt "$HANG" ] || die "the sweep docs/ros.md sends was not done within $HANG s"
+  sleep 1
+done
+say "docs/ros.md's rostopic pub of the sweep: the arm says $(grep -o 'goal done: [^]]*' "$RUN/done.log" | head -1) ($(since "$t") s)"
 
 # --- down: nothing of the profile left ------------------------------------------------------------
 t=$(now)

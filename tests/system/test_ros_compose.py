@@ -32,8 +32,9 @@ def test_ros_profile_moves_the_arm_refuses_a_fold_plays_a_bag_and_shows_the_arm_
                      r"\d+ received, equal to the run's measured positions", out), out[-3000:]
     # RViz in noVNC: the arm drawn at home, and drawn elsewhere after the pose goal
     shots = re.findall(r"rviz-check: \S+/artifacts/ros/(home|pose)\.png: noVNC's canvas \d+x\d+, \d+ colours, "
-                       r"(\d+) pixels of the arm's links(?:, (\d+) pixels changed)?", out)
+                       r"(\d+) pixels of the arm's links(?:, (\d+) pixels of the links moved)?", out)
     assert [s[0] for s in shots] == ["home", "pose"], out[-3000:]
     assert int(shots[1][2]) > 2000, shots
-    assert "rosbag record -l 100: /joint_states 100, /tf 100 messages" in out
+    assert "rosbag record -l 100: /joint_states 100, /tf 100 messages, copied out" in out
+    assert re.search(r"docs/ros\.md's rostopic pub of the sweep: the arm says goal done: 100 points, 1\d\.\d\d s", out), out[-3000:]
     assert "no container, network or volume of the ros profile left" in out
