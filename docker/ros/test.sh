@@ -8,7 +8,8 @@
 # that test built is reused); the base and the students' image (built only when missing or
 # stale); hadolint docker/ros/Dockerfile; compose.yaml valid with the profile; the ROS image
 # built with the user's command (`docker compose --profile ros build`), its size and what it adds
-# to the students' image; `docker compose --profile ros up -d` as docs/ros.md gives it, the
+# to the students' image; the arm's service started alone first (it waits for roscore); then
+# `docker compose --profile ros up -d` as docs/ros.md gives it, the
 # printed URL; RViz in noVNC in headless Chromium with the arm at home (docker/ros/rviz-check:
 # the arm drawn); then, inside the stack, a small node in the arm's container
 # (docker/ros/check-stack.py): a folding goal refused on /rosout with nothing moving, the Task 2
@@ -72,6 +73,12 @@ export SNAKEKIT_ROS_PORT SNAKEKIT_LAB_PORT
 SNAKEKIT_ROS_PORT=$(free_port)
 SNAKEKIT_LAB_PORT=$(free_port)  # (the lab, which has no profile, comes up beside the ROS services)
 URL="http://127.0.0.1:$SNAKEKIT_ROS_PORT"
+# the arm first, without the master (--no-deps): it must wait for roscore, not die
+"${COMPOSE[@]}" up -d --no-deps arm >"$RUN/up-arm.log" 2>&1 || { cat "$RUN/up-arm.log" >&2; die "up arm failed"; }
+arm_id=$("${COMPOSE[@]}" ps -q arm)
+sleep 5
+[ "$($DOCKER inspect -f '{{.State.Running}} {{.RestartCount}}' "$arm_id")" = "true 0" ] \
+  || die "the arm's node, started before roscore, did not wait for it: $("${COMPOSE[@]}" logs arm 2>&1 | tail -5)"
 t=$(now)
 "${COMPOSE[@]}" up -d >"$RUN/up.log" 2>&1 || { cat "$RUN/up.log" >&2; die "docker compose --profile ros up failed"; }
 printed=""
@@ -85,6 +92,9 @@ until curl -s --max-time 2 "$URL/vnc.html" | grep -q noVNC; do
   sleep 0.2
 done
 figure "up: roscore healthy, the arm, robot_state_publisher and RViz started, noVNC answering in $(since "$t") s; the rviz service prints: $printed"
+[ "$("${COMPOSE[@]}" ps -q arm)" = "$arm_id" ] && "${COMPOSE[@]}" logs arm 2>&1 | grep -q "snakekit ros: the sim arm is node" \
+  || die "the arm's node, started 5 s before roscore, is not the one running: $("${COMPOSE[@]}" logs arm 2>&1 | tail -5)"
+say "the arm's node, started 5 s before roscore, waited for it and runs (no restart)"
 for s in roscore arm state-publisher rviz; do
   [ "$("${COMPOSE[@]}" ps -q "$s" | wc -l)" = 1 ] || die "the $s service is not running: $("${COMPOSE[@]}" logs "$s" 2>&1 | tail -5)"
 done

@@ -21,6 +21,7 @@ def test_ros_profile_moves_the_arm_refuses_a_fold_plays_a_bag_and_shows_the_arm_
     assert size and float(size.group(1)) <= 1.5 and float(size.group(2)) < float(size.group(1)), out[-3000:]
     assert re.search(r"the rviz service prints: open http://127\.0\.0\.1:\d+/vnc\.html\?autoconnect=1&resize=scale",
                      out), out[-3000:]
+    assert "the arm's node, started 5 s before roscore, waited for it and runs (no restart)" in out
     # the refusal in the kit's own words, and nothing moved
     assert re.search(r"ros-test: the folding goal is refused on /rosout \(goal refused: the trajectory would fold "
                      r"the arm onto itself: .*\); the arm stays at home \(\d+ joint states, all 0 rad\)", out), out[-3000:]
