@@ -12,7 +12,9 @@ in ``ros2 bag``, ``rosbag``, RViz (played back), Foxglove and Lichtblick. The to
 | ``/robot_description`` | ``std_msgs/String`` | the URDF (latched; transient local in ROS 2) |
 | ``/snakekit/run`` | ``std_msgs/String`` | the run's backend, wall time and real-time flag (JSON) |
 
-Times are the robot's clock, in nanoseconds: a run that starts at t = 0 s starts at the epoch.
+Times are the robot's clock, in nanoseconds, from 1 s after the epoch (:data:`ORIGIN_NS`, kept in
+``/snakekit/run``): ROS 1 takes a time of 0 as unset, and Debian's ``rosbag`` would play neither a
+run's first sample nor its latched topics.
 :meth:`snakekit.Run.save` and :meth:`snakekit.Run.load` use this module by the file's suffix.
 """
 
@@ -42,9 +44,14 @@ _TRAJECTORY, _TF_MESSAGE = "trajectory_msgs/msg/JointTrajectory", "tf2_msgs/msg/
 _FIX = "save runs with Run.save (.npz, .mcap or .bag)"
 
 
+#: the ROS time [ns] of the robot clock's t = 0 s: 1 s after the epoch, since ROS 1 takes a time of 0
+#: as unset (``rosbag`` loads no message stamped 0)
+ORIGIN_NS = 1_000_000_000
+
+
 def _ns(t) -> np.ndarray:
-    """Robot times [s] as ROS times [ns] (rounded to the nanosecond)."""
-    return np.rint(np.asarray(t, dtype=float) * 1e9).astype(np.int64)
+    """Robot times [s] as ROS times [ns] (rounded to the nanosecond, from :data:`ORIGIN_NS`)."""
+    return np.rint(np.asarray(t, dtype=float) * 1e9).astype(np.int64) + ORIGIN_NS
 
 
 @functools.lru_cache(maxsize=None)
@@ -140,7 +147,7 @@ def _messages(run, ros: int):
                                     points=points)
     first = int(min(t_meas[0], t_cmd[0]))
     info = json.dumps({"backend": run.backend, "wall_time": run.wall_time, "realtime": run.realtime,
-                       "format": "snakekit run 1"})
+                       "time_origin_ns": ORIGIN_NS, "format": "snakekit run 2"})
     return [
         (DESCRIPTION, _STRING, True, [(first, types[_STRING](data=urdf(spec)))]),
         (RUN_INFO, _STRING, True, [(first, types[_STRING](data=info))]),
@@ -218,13 +225,14 @@ def read(path: Path) -> dict:
     try:
         info = json.loads(found[RUN_INFO][-1].data)
         fields = {"backend": info["backend"], "wall_time": info["wall_time"], "realtime": info["realtime"]}
+        origin = int(info.get("time_origin_ns", 0))  # 0 in the first format's bags
     except (ValueError, KeyError, TypeError) as e:
         raise FileFormatError(f"{path} is not a snakekit run: its {RUN_INFO} message is not the run's "
                               f"information ({type(e).__name__}); {_FIX}") from None
-    start = ns(trajectory.header.stamp)
+    start = ns(trajectory.header.stamp) - origin
     return dict(
         commanded=Trajectory(np.array([(start + ns(p.time_from_start)) * 1e-9 for p in trajectory.points]),
                              np.array([p.positions for p in trajectory.points])),
-        measured=Trajectory(np.array([ns(m.header.stamp) * 1e-9 for m in states]),
+        measured=Trajectory(np.array([(ns(m.header.stamp) - origin) * 1e-9 for m in states]),
                             np.array([m.position for m in states]), np.array([m.velocity for m in states])),
         efforts=np.array([m.effort for m in states]), **fields)

@@ -143,21 +143,20 @@ played = subprocess.run(["rosbag", "play", "--delay", "2", str(bag)], capture_ou
                         timeout=HANG)
 if played.returncode:
     fail(f"rosbag play {bag} failed: {played.stderr[-500:]}")
-# The bag's times are the robot's clock from the epoch (snakekit.bags), and Debian's rosbag loads
-# no message stamped at time 0 ("Index entry ... contains invalid time"): the run's first sample,
-# at t = 0 s, is not played; every later one is.
-recorded = run.measured.positions[run.measured.times > 0]
+# The bag's times are the robot's clock from 1 s after the epoch (snakekit.bags.ORIGIN_NS): Debian's
+# rosbag loads no message stamped 0 ("Index entry ... contains invalid time"), and plays every one
+# of these, the run's first sample (t = 0 s) included.
+recorded = run.measured.positions
 end = time.monotonic() + HANG
 while len(players) < len(recorded) and time.monotonic() < end:
     time.sleep(0.01)
 time.sleep(1.0)  # none more comes
 got = np.array([p for _, p, _ in players])
 if got.shape != recorded.shape or not np.array_equal(got, recorded):
-    fail(f"rosbag play: {len(got)} joint states received; the run recorded {len(recorded)} after t = 0 s, "
+    fail(f"rosbag play: {len(got)} joint states received; the run recorded {len(recorded)}, "
          f"and they {'differ' if got.shape == recorded.shape else 'are not as many'}")
 say(f"rosbag play of {bag.name} (written by Run.save) published its joint states: {len(got)} received, equal to "
-    f"the run's measured positions (float64, exactly) after t = 0 s (of {len(run.measured.times)}; rosbag "
-    f"loads nothing stamped 0), from {players[0][0]}")
+    f"the run's measured positions (float64, exactly), its first sample at t = 0 s included, from {players[0][0]}")
 
 # 4. a pose other than home, held for the second screenshot
 level, msg, first = send(*POSE)

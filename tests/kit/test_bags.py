@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import snakekit
-from snakekit.bags import quaternions
+from snakekit.bags import ORIGIN_NS, quaternions
 from snakekit.model import SPEC, urdf
 from snakekit.run import Run
 from tests.conftest import IN_CI, need, need_program
@@ -57,13 +57,16 @@ def check_against_run(run, got):
     states = got["/joint_states"]
     assert len(states) == len(run.measured.times)
     assert all(s["name"] == names for s in states)
-    assert np.allclose([s["stamp"] for s in states], run.measured.times, rtol=0, atol=NS)
+    origin = ORIGIN_NS * 1e-9  # the run's t = 0 s: ROS 1 takes a time of 0 as unset
+    assert origin > 0 and all(s["stamp"] > 0 for s in states)
+    assert np.allclose(np.array([s["stamp"] for s in states]) - origin, run.measured.times, rtol=0, atol=NS)
     assert np.array_equal([s["position"] for s in states], run.measured.positions)
     assert np.array_equal([s["velocity"] for s in states], run.measured.velocities)
     assert np.array_equal([s["effort"] for s in states], run.efforts)
     (traj,) = got["/joint_trajectory"]
     assert traj["joint_names"] == names
-    assert np.allclose(traj["stamp"] + np.array(traj["time_from_start"]), run.commanded.times, rtol=0, atol=2 * NS)
+    assert np.allclose(traj["stamp"] - origin + np.array(traj["time_from_start"]), run.commanded.times, rtol=0,
+                       atol=2 * NS)
     assert np.array_equal(traj["positions"], run.commanded.positions)
     (description,) = got["/robot_description"]
     assert description == urdf(SPEC)
@@ -78,7 +81,7 @@ def check_against_run(run, got):
     assert len(tfs) == len(run.measured.times)
     for k in range(0, len(tfs), 7):
         assert [(t["parent"], t["child"]) for t in tfs[k]] == chain
-        assert all(abs(t["stamp"] - run.measured.times[k]) <= NS for t in tfs[k])
+        assert all(abs(t["stamp"] - origin - run.measured.times[k]) <= NS for t in tfs[k])
         T = np.eye(4)
         for t in tfs[k] + static:
             assert abs(np.linalg.norm(t["rotation"]) - 1) < 1e-12

@@ -30,7 +30,8 @@ def test_ros_profile_moves_the_arm_refuses_a_fold_plays_a_bag_and_shows_the_arm_
                      r"0\.2000 rad, each within [\d.e+-]+ rad of the kit's own simulator run \(tolerance 1e-06 rad\)",
                      out), out[-3000:]
     assert re.search(r"ros-test: rosbag play of sweep\.bag \(written by Run\.save\) published its joint states: "
-                     r"\d+ received, equal to the run's measured positions", out), out[-3000:]
+                     r"\d+ received, equal to the run's measured positions \(float64, exactly\), its first sample at t = 0 s "
+                     r"included", out), out[-3000:]
     # RViz in noVNC: the arm drawn at home, and drawn elsewhere after the pose goal
     shots = re.findall(r"rviz-check: \S+/artifacts/ros/(home|pose)\.png: noVNC's canvas \d+x\d+, \d+ colours, "
                        r"(\d+) pixels of the arm's links(?:, (\d+) pixels of the links moved)?", out)
