@@ -21,6 +21,7 @@ from grader.scoring.references import Reference
 
 @dataclass
 class TestCell:
+    __test__ = False  # a graded cell, not a test class for pytest to collect
     grade_id: str
     notebook: str
     max_score: float
