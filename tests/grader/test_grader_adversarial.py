@@ -7,10 +7,12 @@ the gradebook survived, no connection reached the host, the feedback carries no 
 from __future__ import annotations
 
 import os
+import shutil
 import socket
 import sqlite3
 import subprocess
 import sys
+import tempfile
 import threading
 from pathlib import Path
 
@@ -74,8 +76,9 @@ def batch(tmp_path_factory):
         pytest.skip("the full sandbox (separate user) is tested as root, as in CI")
     tmp = tmp_path_factory.mktemp("adversarial")
     course = make_course(tmp)
-    work = tmp / "work"
-    work.mkdir()
+    # the batch's working folder (its TMPDIR): short, so the cases' Unix socket path fits (107 bytes)
+    # under any pytest folder, xdist's worker folders included
+    work = Path(tempfile.mkdtemp(prefix="adv-"))
     listener = _Listener()
     ctx = {
         "secrets": [f"{course}/gradebook.db", f"{course}/source/**/*.ipynb", f"{course}/submitted/good/**/*.ipynb",
@@ -99,6 +102,7 @@ def batch(tmp_path_factory):
            "listener": listener, "tmp": tmp}
     for t in ctx["targets"]:
         Path(t).unlink(missing_ok=True)
+    shutil.rmtree(work, ignore_errors=True)
 
 
 def test_the_batch_completes_with_exit_code_0(batch):
