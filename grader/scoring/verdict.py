@@ -282,6 +282,8 @@ def with_local_check(sc: ExerciseScore, cell) -> ExerciseScore:
     ...              evalue="exercise 1.1 planar_fk: tool x is 331.5 m, expected 0.3315 m.\\nHint: millimetres?")]
     >>> print(with_local_check(ExerciseScore("ex01_1_planar_fk_test", 0.0, 3.0, "scored", "0 of 6 right."), c).message)
     0 of 6 right. Your notebook's check fails too: tool x is 331.5 m, expected 0.3315 m. Hint: millimetres?
+    >>> print(with_local_check(ExerciseScore("ex01_1_planar_fk_test", 0.0, 3.0, "scored", "planar_fk returned a str"), c).message)
+    planar_fk returned a str. Your notebook's check fails too: tool x is 331.5 m, expected 0.3315 m. Hint: millimetres?
     """
     err = next((o for o in (cell or {}).get("outputs", []) if o.get("output_type") == "error"), None)
     if err is None or err.get("ename") not in ("CheckFailed", "ShortcutError"):
@@ -295,6 +297,8 @@ def with_local_check(sc: ExerciseScore, cell) -> ExerciseScore:
         checks = tuple(dataclasses.replace(c, message=GUESSES.sub("", c.message)) for c in checks)
     flat = " ".join(message.split())
     told = [part for part in (said, f"Hint: {hint}" if hint else "") if part and part.removeprefix("Hint: ") not in flat]
+    if told and message.strip() and not message.rstrip().endswith((".", "!", "?", ":", ")")):
+        message = message.rstrip() + "."   # the grader's sentence ends before the check's begins
     return dataclasses.replace(sc, message=" ".join([message, LOCAL + " ".join(told)] if told else [message]),
                                checks=checks)
 
