@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs a command (bench/container.py) with the private Docker engine of docker/engine.sh up and
-# the image snakekit-lab built (or reused from the engine's cache), as docker/test.sh does; then
+# the image snakekit-lab built (or reused from the engine's cache; with SNAKEKIT_BENCH_ROS=1 the
+# ROS image snakekit-ros too, as bench/ros.py needs), as docker/test.sh does; then
 # always stops the engine and restores the host's iptables, ip_forward and bridge state.
 #
 #   bench/container-engine.sh COMMAND [ARG...]     (as root, with Debian's docker.io installed)
@@ -38,6 +39,12 @@ else
 fi
 build_s=$(since "$t")
 say "image $IMAGE $([ "$built" = 1 ] && echo "built in $build_s s ($([ "$ENGINE_COLD" = 1 ] && echo cold || echo "warm cache"))" || echo reused)"
+if [ "${SNAKEKIT_BENCH_ROS:-0}" = 1 ]; then  # bench/ros.py: the ROS image too, FROM the students' (docs/ros.md)
+  t=$(now)
+  (cd "$ROOT" && "$VENV_BIN/docker-compose" -f docker/compose.yaml --profile ros build roscore) >"$RUN/build-ros.log" 2>&1 \
+    || { tail -30 "$RUN/build-ros.log" >&2; die "docker compose --profile ros build failed"; }
+  say "image snakekit-ros:latest built in $(since "$t") s"
+fi
 
 export SNAKEKIT_DOCKER=$DOCKER SNAKEKIT_COMPOSE="$VENV_BIN/docker-compose" SNAKEKIT_IMAGE=$IMAGE
 export SNAKEKIT_BENCH_ENGINE="{\"engine_start_s\": $ENGINE_START_S, \"build_s\": $build_s, \"built\": $built, \"cold\": $ENGINE_COLD}"

@@ -71,6 +71,8 @@ def steps(submissions: int) -> list[Step]:
              ["run.py", "--grading-step", str(submissions)], 30 + 7 * submissions),
         Step("container", "the container and compose set-ups (starts the private Docker engine if needed)",
              ["container.py"], 330),
+        Step("ros", "the study's multi-container ROS set-up (compose's ros profile, RViz through noVNC): "
+             "Tasks 1 and 2, start, image size (the private Docker engine)", ["ros.py", "--repeats", "3"], 480),
         Step("memory", "memory per user: the single-user server idle, with a lesson kernel, with the 3D view; "
              "users per 24 GB node", ["memory.py", "--repeats", "3"], 150),
         Step("hub", "the class's JupyterHub: spawns, the hub and proxy under 50 users, grading 20 "
@@ -237,7 +239,43 @@ def plots(results: dict, out: Path) -> list[tuple[str, str]]:
             fig.savefig(out / name)
             plt.close(fig)
             made.append((name, f"{title}: {label}"))
+    ros = results.get("ros") or {}
+    if ros.get("task1"):
+        made.append(ros_plot(results, out, plt))
     return made
+
+
+def ros_plot(results: dict, out: Path, plt) -> tuple[str, str]:
+    """The ROS stack's CPU and memory over Tasks 1 and 2 (its four containers summed, from their
+    cgroups), beside the kit's compose services for scale."""
+    ros = results["ros"]
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6), dpi=110)
+    compose = (results.get("container") or {}).get("compose") or {}
+    for row, (task, title) in enumerate((("task1", "Task 1 (three goal changes)"),
+                                         ("task2", "Task 2 (the sweep, 500 points at 10 Hz)"))):
+        lines = [("ROS stack: roscore, arm, robot_state_publisher, RViz + noVNC (cgroups)", ros[task]["series"], "C3")]
+        if compose.get(f"{task}_series"):
+            lines.append(("snakekit, compose services (the lesson's processes)", compose[f"{task}_series"], "C2"))
+        for col, (key, label) in enumerate((("cpu", "CPU [% of one core]"), ("rss", "memory [MB]"))):
+            ax = axes[row][col]
+            for name, s, color in lines:
+                if key == "cpu":
+                    ax.plot(s["t"], s["cpu"], ".", color=color, alpha=0.35, ms=4)
+                    ax.plot(s["t"], moving_mean(s["cpu"], 4), "-", color=color, lw=1.6, label=name)
+                else:
+                    ax.plot(s["t"], s["rss"], "-", color=color, lw=1.6, marker=".", ms=3, label=name)
+            ax.set_title(f"{title}: {label.split(' [')[0]}", fontsize=9)
+            ax.set_xlabel("time since the task started [s]", fontsize=8)
+            ax.set_ylabel(label, fontsize=8)
+            ax.set_ylim(bottom=0)
+            ax.set_xlim(left=0)
+            ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(out / "ros_tasks.png")
+    plt.close(fig)
+    return "ros_tasks.png", ("The multi-container ROS set-up in Tasks 1 and 2 (CPU: mean over 2 s, dots: 0.5 s samples; "
+                             "memory: working set), beside the kit's compose services")
 
 
 def moving_mean(values, n: int) -> list[float]:
@@ -334,6 +372,7 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     for row in STUDY:
         add("| " + " | ".join(row) + " |")
     add("")
+    ros_rows(results.get("ros"), add, info)
 
     # --- targets
     add("### Targets for this kit's own set-ups (the local venv here)")
@@ -360,7 +399,9 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     add("## CPU and memory over time (like the study's figures 4-1 to 4-4)")
     add("")
     add("Sampled every 0.5 s with psutil from the task's start; one line per set-up measured. "
-        "The dotted line is the target.")
+        "The dotted line is the target."
+        + (" The ROS set-up's plot (the last) is sampled from its containers' cgroups, every 0.5 s too."
+           if any(name == "ros_tasks.png" for name, _ in figures) else ""))
     add("")
     for name, title in figures:
         add(f"![{title}]({name})")
@@ -519,6 +560,14 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     if sim:
         add(f"  - Task 2 as fast as possible: medians of {sim['repeats']} runs; Task 2 in real time: one run of "
             f"{sim['realtime']['wall']:.1f} s (its CPU averages 100 samples).")
+    ros = results.get("ros")
+    if ros and ros.get("task1"):
+        add(f"  - ROS set-up (bench/ros.py): {ros['repeats']} starts (down between) and {ros['repeats']} runs of "
+            f"each task on the last; start to the arm's node answering {spread_text(ros['start_arm_s'], ' s', '{:.1f}')} "
+            f"(noVNC's page answering {spread_text(ros['start_novnc_s'], ' s', '{:.1f}')}); Task 1 CPU "
+            f"{spread_text(ros['task1']['cpu'], ' %')}, peak RAM {spread_text(ros['task1']['ram'], ' MB', '{:.0f}')}, "
+            f"length {spread_text(ros['task1']['wall'], ' s', '{:.1f}')}; Task 2 CPU {spread_text(ros['task2']['cpu'], ' %')}, "
+            f"peak RAM {spread_text(ros['task2']['ram'], ' MB', '{:.0f}')}, length {spread_text(ros['task2']['wall'], ' s', '{:.1f}')}.")
     if b:
         add(f"  - Bus: {b['repeats']} interleaved measurements of {b['seconds']:g} s each; snakekit "
             f"{spread_text(b['ours_hz'], ' Hz', '{:.0f}')}, bare SDK {spread_text(b['bare_hz'], ' Hz', '{:.0f}')}.")
@@ -562,6 +611,16 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
         + (f" In this run the private engine answered {eng['engine_start_s']:.1f} s after it was started, and the "
            f"image was {'built in ' + format(eng['build_s'], '.0f') + ' s (' + ('cold' if eng['cold'] else 'warm engine cache') + ')' if eng['built'] else 'reused'}; "
            "neither is in the table's times." if eng else ""))
+    if ros and ros.get("task1"):
+        add("  - *The ROS set-up* (bench/ros.py): `docker compose --profile ros up -d rviz` (the ROS services, "
+            "not the lab) on a running engine or the private one of docker/engine.sh, images cached. *Start to a working shell*: "
+            "from `up` to the arm's node saying it is up (`snakekit ros: the sim arm is node ...` in its log; the "
+            "master healthy before it); noVNC's page answering is given beside it. Each container's CPU time "
+            f"(cgroup {ros['cgroup']}: `cpuacct.usage`, v2 `cpu.stat`) and memory (usage less inactive file "
+            "pages, as `docker stats`) are read on the host every 0.5 s (the memory's peak every 0.1 s) and summed "
+            "over roscore, arm, state-publisher and rviz; the node that sends the goals runs in the arm's "
+            "container (`docker compose exec`) and is counted; the headless Chromium on noVNC runs on the host "
+            "and is not. RViz draws in software GL (Mesa, no GPU), at most 15 frames a second (docker/ros/arm.rviz).")
     add("- **The study's figures** come from ROBOT.md: other hardware, other software (ROS, RViz, Gazebo, "
         "a desktop in a VM); they frame ours, they are not measured here.")
     add("")
@@ -574,11 +633,56 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
     for s in plan:
         state = ("figures given, targets met" if s.code == 0 else "figures given, a target MISSED" if s.result
                  else f"FAILED (exit code {s.code})")
-        if s.name in ("container", "memory") and s.result and s.result.get("not_measured"):
+        if s.name in ("container", "memory", "ros") and s.result and s.result.get("not_measured"):
             state = s.result["not_measured"]
         add(f"| {s.name} | {s.what} | {fmt(s.seconds)} | {state} |")
     add("")
     out.write_text("\n".join(L))
+
+
+def ros_rows(ros: dict | None, add, info: dict) -> None:
+    """The study's third framework rebuilt on our arm (bench/ros.py): its table and what it counts."""
+    if not ros:
+        return
+    add("### The study's multi-container ROS set-up, rebuilt on our arm and measured here")
+    add("")
+    if ros.get("not_measured"):
+        add(f"compose's `ros` profile: {ros['not_measured']}.")
+        add("")
+        return
+    t1, t2 = ros["task1"], ros["task2"]
+    add("Compose's `ros` profile (docs/ros.md): roscore, the arm as a ROS 1 node (`snakekit ros`, the simulator "
+        "in real time), robot_state_publisher and RViz on a virtual display served by noVNC, each in its own "
+        "container on one network, with headless Chromium connected to noVNC all along (RViz really drawing "
+        "and served). CPU and RAM are **the four containers together**, from their cgroups: CPU in percent of "
+        f"one core averaged over the task, RAM the peak of their summed memory as `docker stats` counts it "
+        f"(usage less inactive file pages). Medians of {ros['repeats']}; spread in the methodology below.")
+    m = ros.get("machine")
+    if m:
+        add("")
+        add(f"Measured on {m['date']} on {m['cores']} cores ({m['cpu'] or 'CPU model unknown'}), load average "
+            f"{m['load'][0]:.2f} (1 min), {m['load'][1]:.2f} (5 min) before it"
+            + (": other work shared the cores, so its CPU figures are likely higher than on an idle machine"
+               if m["load"][0] > 0.5 else "") + "."
+            + (f" The kit's rows above were measured on {info['date']} on another machine ({info['cpu']})."
+               if (m["cpu"], m["date"][:10]) != (info["cpu"], info["date"][:10]) else ""))
+    add("")
+    add("| set-up | start to a working shell | image size | Task 1 CPU | Task 1 peak RAM | Task 2 CPU | Task 2 peak RAM |")
+    add("|---|---|---|---|---|---|---|")
+    add(f"| ROS 1 (Debian's), several containers (`docker compose --profile ros up`) | "
+        f"{med(ros['start_arm_s']):.1f} s (engine running) | {ros['image_bytes'] / 1e9:.2f} GB (image) | "
+        f"{med(t1['cpu']):.2f} % | {med(t1['ram']):.0f} MB | {med(t2['cpu']):.2f} % | {med(t2['ram']):.0f} MB |")
+    add("")
+    each = lambda t: ", ".join(f"{n} {med(c['cpu']):.1f} %" for n, c in t["by_container"].items())  # noqa: E731
+    add(f"By container (CPU, medians): Task 1: {each(t1)}; Task 2: {each(t2)}. "
+        f"Task 1 here is three single-point `JointTrajectory` goals sent from a node in the stack, each 2 s "
+        "after the arm said the last was done, and 2 s on the last pose (bench/interactive.py's three tool targets, solved by the kit's IK "
+        "beforehand): the study dragged a goal in RViz with MoveIt, which Debian's ROS 1 does not have. Task 2 "
+        "is `snakekit.side_sweep()` (500 points at 10 Hz, 50 sweeps, back home) as ONE `JointTrajectory` "
+        f"on /arm/command. The image is the students' ({ros['lab_image_bytes'] / 1e9:.2f} GB) with Debian's "
+        "ROS 1, RViz, Xvfb, x11vnc and noVNC. The study's figures beside it (above) were **taken on other "
+        "hardware** and with other software (ROS Melodic, Gazebo, a Windows host).")
+    add("")
 
 
 def spread_text(d: dict, unit: str, f: str = "{:.2f}") -> str:
