@@ -259,7 +259,10 @@ def ros1_messages():
 def ros1_bytes(message) -> bytes:
     """``message`` (of :func:`ros1_messages`) in ROS 1's wire format; a field of the wrong type raises
     :class:`~snakekit.FileFormatError` naming the message."""
-    kind = message.__msgtype__
+    kind = getattr(message, "__msgtype__", None)
+    if not isinstance(kind, str):
+        raise FileFormatError(f"expected a ROS message (a class of snakekit.bags.ros1_messages()), got "
+                              f"{type(message).__name__}")
     try:
         return bytes(_typestore(1).serialize_ros1(message, kind))
     except (TypeError, ValueError, AttributeError, KeyError, OverflowError, struct_error) as e:
@@ -288,5 +291,6 @@ def write_joint_states(path: Path, stamps_ns, positions, names, *, description: 
               for k, (ns, q) in enumerate(zip(stamps, positions))]
     topics = [(JOINT_STATES, _JOINT_STATE, False, states)]
     if description is not None:
-        topics.insert(0, (DESCRIPTION, _STRING, True, [(stamps[0], ts.types[_STRING](data=description))]))
+        first = stamps[0] if stamps else ORIGIN_NS
+        topics.insert(0, (DESCRIPTION, _STRING, True, [(first, ts.types[_STRING](data=description))]))
     return _write_topics(topics, path)
