@@ -15,6 +15,11 @@ servo driver are, with Debian's ``dist-packages`` appended to the module path fo
 only: the kit's own packages come first, and only what it lacks (rospy, genpy, the message
 modules) comes from Debian. Both are the same CPython (3.11 on Debian 12), so Debian's few
 compiled modules load too.
+
+For a notebook (lesson 8), :func:`live_arm` starts a master and the node of its own on a free port and
+joins them from the notebook's process: :meth:`LiveArm.send` publishes a goal and waits for the node's
+word, :meth:`LiveArm.recording` runs ``rosbag record`` while a block runs. :func:`ros_missing` says, in
+one line, what to use on a machine without Debian's ROS 1.
 """
 
 from __future__ import annotations
