@@ -77,5 +77,6 @@ use_safe_grading(c)
 
 # What a run of an instructor notebook writes beside it (a 3D scene, a saved run, a plot, a
 # table) is never released, nor part of what a reference was recorded from (grader/course/folder.py,
-# source_hash): an instructor may run the notebook in its folder.
-c.CourseDirectory.ignore = [".ipynb_checkpoints", "*.pyc", "__pycache__", "feedback", "*.html", "*.npz", "*.png", "*.csv"]
+# source_hash): an instructor may run the notebook in its folder (lesson 8 records a bag there).
+c.CourseDirectory.ignore = [".ipynb_checkpoints", "*.pyc", "__pycache__", "feedback", "*.html", "*.npz", "*.png", "*.csv",
+                              "*.bag", "*.mcap"]

@@ -24,6 +24,7 @@ import functools
 import json
 import shutil
 import tempfile
+from struct import error as struct_error
 from pathlib import Path
 
 import numpy as np
@@ -169,9 +170,13 @@ def _latched_qos():
 
 def write(run, path: Path) -> Path:
     """Write ``run`` to ``path`` (``.mcap`` or ``.bag``): the whole file or none of it."""
+    return _write_topics(_messages(run, 2 if path.suffix == ".mcap" else 1), path)
+
+
+def _write_topics(topics, path: Path) -> Path:
+    """Write ``(topic, type, latched, [(ns, message), ...])`` to ``path`` (``.mcap``: ROS 2, else ROS 1)."""
     ros = 2 if path.suffix == ".mcap" else 1
     ts = _typestore(ros)
-    topics = _messages(run, ros)
     tmp = Path(tempfile.mkdtemp(prefix=".run-", dir=path.parent))
     try:
         if ros == 2:
@@ -236,3 +241,56 @@ def read(path: Path) -> dict:
         measured=Trajectory(np.array([(ns(m.header.stamp) - origin) * 1e-9 for m in states]),
                             np.array([m.position for m in states]), np.array([m.velocity for m in states])),
         efforts=np.array([m.effort for m in states]), **fields)
+
+
+def ros1_messages():
+    """ROS 1 message classes without a ROS install (``rosbags``'s Noetic definitions): a namespace with
+    ``JointTrajectory``, ``JointTrajectoryPoint``, ``JointState``, ``Header``, ``Time`` and ``Duration``
+    (``sec``, ``nanosec``). Their wire format is ROS 1's (:func:`ros1_bytes`), so a message built of
+    them is the one ``rospy`` sends."""
+    from types import SimpleNamespace
+
+    types = _typestore(1).types
+    return SimpleNamespace(JointTrajectory=types[_TRAJECTORY], JointTrajectoryPoint=types[
+        "trajectory_msgs/msg/JointTrajectoryPoint"], JointState=types[_JOINT_STATE], Header=types["std_msgs/msg/Header"],
+        Time=types["builtin_interfaces/msg/Time"], Duration=types["builtin_interfaces/msg/Duration"])
+
+
+def ros1_bytes(message) -> bytes:
+    """``message`` (of :func:`ros1_messages`) in ROS 1's wire format; a field of the wrong type raises
+    :class:`~snakekit.FileFormatError` naming the message."""
+    kind = getattr(message, "__msgtype__", None)
+    if not isinstance(kind, str):
+        raise FileFormatError(f"expected a ROS message (a class of snakekit.bags.ros1_messages()), got "
+                              f"{type(message).__name__}")
+    try:
+        return bytes(_typestore(1).serialize_ros1(message, kind))
+    except (TypeError, ValueError, AttributeError, KeyError, OverflowError, struct_error) as e:
+        raise FileFormatError(f"this {kind.replace('/msg/', '/')} cannot be sent: a field has the wrong type or value "
+                              f"({type(e).__name__}: {str(e)[:160]}); float64[] fields take numpy float arrays, "
+                              "a Duration's sec and nanosec whole numbers") from None
+
+
+def ros1_message(data: bytes, kind: str):
+    """The message of type ``kind`` (``trajectory_msgs/msg/JointTrajectory``) in ROS 1's wire format ``data``."""
+    return _typestore(1).deserialize_ros1(data, kind)
+
+
+def write_joint_states(path: Path, stamps_ns, positions, names, *, description: str | None = None) -> Path:
+    """A bag of ``/joint_states`` alone, as ``rosbag record /joint_states`` writes one: a
+    ``sensor_msgs/JointState`` per row of ``positions`` [rad], stamped ``stamps_ns`` [ns, ROS time],
+    joints named ``names`` in that order; ``.bag`` (ROS 1) or ``.mcap`` (ROS 2), by the suffix. With
+    ``description``, a latched ``/robot_description`` message first."""
+    path = Path(path)
+    ros = 2 if path.suffix == ".mcap" else 1
+    ts = _typestore(ros)
+    stamps = [int(s) for s in stamps_ns]
+    states = [(ns, ts.types[_JOINT_STATE](header=_header(ts, ns, "", k, ros), name=list(names),
+                                          position=np.array(q, dtype=np.float64), velocity=np.zeros(0),
+                                          effort=np.zeros(0)))
+              for k, (ns, q) in enumerate(zip(stamps, positions))]
+    topics = [(JOINT_STATES, _JOINT_STATE, False, states)]
+    if description is not None:
+        first = stamps[0] if stamps else ORIGIN_NS
+        topics.insert(0, (DESCRIPTION, _STRING, True, [(first, ts.types[_STRING](data=description))]))
+    return _write_topics(topics, path)

@@ -15,18 +15,31 @@ servo driver are, with Debian's ``dist-packages`` appended to the module path fo
 only: the kit's own packages come first, and only what it lacks (rospy, genpy, the message
 modules) comes from Debian. Both are the same CPython (3.11 on Debian 12), so Debian's few
 compiled modules load too.
+
+For a notebook (lesson 8), :func:`live_arm` starts a master and the node of its own on a free port and
+joins them from the notebook's process: :meth:`LiveArm.send` publishes a goal and waits for the node's
+word, :meth:`LiveArm.recording` runs ``rosbag record`` while a block runs. :func:`ros_missing` says, in
+one line, what to use on a machine without Debian's ROS 1.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
+import shutil
+import signal
+import socket
+import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
-from .errors import ConfigurationError, MissingDependencyError, SnakekitError, TrajectoryError
+from .bags import ros1_bytes
+from .errors import BackendError, ConfigurationError, MissingDependencyError, SnakekitError, TrajectoryError
 from .model import SPEC, URDF_PATH, SnakeSpec
 from .robot import make_robot
 from .trajectory import Trajectory
@@ -150,3 +163,155 @@ def _run_goal(robot, goal, rate: float, rospy) -> None:
         rospy.logerr(f"goal refused: {e}")
         return
     rospy.loginfo(f"goal done: {len(trajectory)} points, {run.robot_time:.2f} s")
+
+
+#: What a machine without Debian's ROS 1 uses for the live parts (one line).
+NO_ROS = ("no ROS 1 here (Debian's roscore and python3-rospy): run the live part in compose's ros profile "
+          "(docs/ros.md: docker compose -f docker/compose.yaml --profile ros up); the rest runs here")
+#: ROS 1 lets a process be one node, on one master: the master this process joined, once it has.
+_JOINED: list[str] = []
+
+
+def ros_missing() -> str | None:
+    """None where Debian's ROS 1 (``roscore``, ``rosbag``, rospy and the messages) is here; else
+    :data:`NO_ROS`, what to use instead."""
+    if not (shutil.which("roscore") and shutil.which("rosbag")):
+        return NO_ROS
+    try:
+        import_ros()
+    except MissingDependencyError:
+        return NO_ROS
+    return None
+
+
+class LiveArm:
+    """The arm's node (``snakekit ros``) on a ``roscore`` of its own, and this process a node on the
+    same master (:func:`live_arm` makes it): send it goals, record what it publishes."""
+
+    def __init__(self, master: str, env: dict, hang: float, node: subprocess.Popen):
+        self.master, self.env, self.hang, self._node = master, env, hang, node
+        _, self._rospy, _, trajectory_msgs = import_ros()
+        from rosgraph_msgs.msg import Log
+
+        self._JointTrajectory, self._words = trajectory_msgs.JointTrajectory, []
+        self._rospy.Subscriber("/rosout", Log, self._heard, queue_size=100)
+        self._goals = self._rospy.Publisher(COMMAND, trajectory_msgs.JointTrajectory, queue_size=10)
+        self._wait("the arm's node on the master", lambda: self._goals.get_num_connections() > 0
+                   and "/" + NODE in self._publishers(JOINT_STATES))
+
+    def _heard(self, log) -> None:
+        if log.name == "/" + NODE and log.msg.startswith("goal "):
+            self._words.append(log.msg)
+
+    def _publishers(self, topic: str) -> list[str]:
+        import rosgraph
+
+        publishers = rosgraph.Master("/snakekit_lesson").getSystemState()[0]
+        return next((nodes for name, nodes in publishers if name == topic), [])
+
+    def _subscribers(self, topic: str) -> list[str]:
+        import rosgraph
+
+        subscribers = rosgraph.Master("/snakekit_lesson").getSystemState()[1]
+        return next((nodes for name, nodes in subscribers if name == topic), [])
+
+    def _wait(self, what: str, ready) -> None:
+        end = time.monotonic() + self.hang
+        while not ready():
+            if self._node.poll() is not None:
+                raise BackendError(f"the arm's node (snakekit ros) stopped (exit status {self._node.returncode}) "
+                                   f"while waiting for {what}; run it in a terminal to see why")
+            if time.monotonic() > end:
+                raise BackendError(f"no {what} within {self.hang:g} s: the machine may be very busy; run the cell again")
+            time.sleep(0.05)
+
+    def send(self, message) -> str:
+        """Publish a ``trajectory_msgs/JointTrajectory`` (:func:`snakekit.bags.ros1_messages`' or rospy's)
+        on :data:`COMMAND` and wait for the node's word on ``/rosout``: ``goal done: ...`` is returned,
+        ``goal refused: <why>`` raises :class:`~snakekit.TrajectoryError` (nothing moved)."""
+        if not isinstance(message, self._JointTrajectory):
+            message = self._JointTrajectory().deserialize(ros1_bytes(message))
+        said = len(self._words)
+        self._goals.publish(message)
+        duration = message.points[-1].time_from_start.to_sec() if message.points else 0.0
+        self.hang += duration
+        try:
+            self._wait("word from the arm about the goal on /rosout", lambda: len(self._words) > said)
+        finally:
+            self.hang -= duration
+        word = self._words[said]
+        if word.startswith("goal refused"):
+            raise TrajectoryError(f"the arm's node refused the goal; nothing moved: {word}")
+        return word
+
+    @contextlib.contextmanager
+    def recording(self, path, topics=(JOINT_STATES,)):
+        """``rosbag record -O path topics`` while the block runs (stopped with Ctrl-C's signal, as from a
+        terminal); the bag's path."""
+        path = Path(path).resolve()
+        rosbag = subprocess.Popen(["rosbag", "record", "-O", str(path), *topics], env=self.env, cwd=path.parent,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            self._wait("rosbag record on the master", lambda: any(
+                n.startswith("/record") for n in self._subscribers(topics[0])))
+            yield path
+        finally:
+            _stop(rosbag, signal.SIGINT, self.hang)
+        if not path.exists():
+            raise BackendError(f"rosbag record wrote no {path.name}: nothing was published on {', '.join(topics)}")
+
+
+def _stop(process: subprocess.Popen, sig: int, hang: float) -> None:
+    """Stop a process group this module started: ``sig``, then SIGKILL after ``hang`` s."""
+    if process.poll() is None:
+        os.killpg(process.pid, sig)
+        try:
+            process.wait(hang)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+
+
+@contextlib.contextmanager
+def live_arm(backend: str = "sim", *, hang: float = 60.0):
+    """A ``roscore`` on a free port and the arm's node on it (``snakekit ros --backend backend``); this
+    process joins it as a node. Both are stopped after the block. ``hang``: how long a start or a word
+    may take on a busy machine [s]. ROS 1 makes a process one node on one master: a second live arm in
+    the same process (a notebook's kernel) raises :class:`~snakekit.ConfigurationError`."""
+    missing = ros_missing()
+    if missing:
+        raise MissingDependencyError(missing)
+    if _JOINED:
+        raise ConfigurationError(f"this process already joined the ROS master at {_JOINED[0]}; ROS 1 lets a process be "
+                                 "one node: restart the kernel to start another live arm")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    home = tempfile.mkdtemp(prefix="snakekit-ros-")
+    master = f"http://127.0.0.1:{port}"
+    env = dict(os.environ, ROS_MASTER_URI=master, ROS_HOSTNAME="127.0.0.1", ROS_HOME=home,
+               ROS_LOG_DIR=os.path.join(home, "log"))
+    started = []
+    try:
+        started.append(subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.STDOUT, start_new_session=True))
+        rosgraph, rospy, _, _ = import_ros()
+        os.environ.update({k: env[k] for k in ("ROS_MASTER_URI", "ROS_HOSTNAME", "ROS_HOME", "ROS_LOG_DIR")})
+        end = time.monotonic() + hang
+        while not rosgraph.is_master_online(master):
+            if started[0].poll() is not None or time.monotonic() > end:
+                raise BackendError(f"roscore did not start on port {port} within {hang:g} s")
+            time.sleep(0.2)
+        started.append(subprocess.Popen([sys.executable, "-m", "snakekit.cli", "ros", "--backend", backend], env=env,
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, start_new_session=True))
+        _JOINED.append(master)
+        rospy.init_node("snakekit_lesson", anonymous=True, disable_signals=True)
+        yield LiveArm(master, env, hang, started[1])
+    finally:
+        if _JOINED:
+            import_ros()[1].signal_shutdown("the live arm stopped")  # this process's node leaves with the master
+        if len(started) > 1:
+            _stop(started[1], signal.SIGTERM, hang)  # the node closes the robot on SIGTERM
+        if started:
+            _stop(started[0], signal.SIGINT, hang)   # roscore's way out
+        shutil.rmtree(home, ignore_errors=True)

@@ -115,6 +115,9 @@ SAMPLE = {
     "ex07_1_ticks": ["transpose"],
     "ex07_2_safe_move": ["no_return"],
     "ex07_3_fault": ["scale_1000"],
+    "ex08_1_sweep_message": ["off_by_one"],
+    "ex08_2_read_joint_states": ["sign"],
+    "ex08_3_compare_runs": ["no_clip"],
 }
 
 

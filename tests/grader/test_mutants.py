@@ -102,9 +102,9 @@ def every_variant():
     return [m for lesson in LESSONS for m in variants(ROOT / "course", lesson)[0]]
 
 
-def test_the_course_has_26_exercises_and_every_operator_applies_somewhere(every_variant):
+def test_the_course_has_29_exercises_and_every_operator_applies_somewhere(every_variant):
     found = [gid for lesson in LESSONS for gid, _, _ in exercises(ROOT / "course" / "source" / lesson / f"{lesson}.ipynb")]
-    assert len(found) == 26 and len(set(found)) == 26
+    assert len(found) == 29 and len(set(found)) == 29
     made = every_variant
     assert {m.operator for m in made} == set(OPERATORS)
     assert {m.grade_id for m in made} == set(found)

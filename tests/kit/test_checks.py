@@ -136,3 +136,14 @@ def test_a_demonstration_that_stops_on_a_wrong_answer_points_to_its_check():
             print(f"{distance_mm(0, (0, 0)):.2f} mm")
     assert str(e.value).startswith("this cell uses your answer to exercise 0.1, and it stopped with TypeError: ")
     assert str(e.value).endswith("Run exercise 0.1's check cell first: it says what is wrong.")
+
+
+def test_the_live_part_is_left_out_while_graded_and_in_quick_mode_and_only_then(monkeypatch):
+    for switch in ("SNAKEKIT_CASES", "SNAKEKIT_QUICK", "SNAKEKIT_TEST"):
+        monkeypatch.delenv(switch, raising=False)
+    assert checks.live_off() is None
+    monkeypatch.setenv("SNAKEKIT_QUICK", "1")
+    assert checks.live_off() == "quick mode leaves the live arm out"
+    monkeypatch.delenv("SNAKEKIT_QUICK")
+    monkeypatch.setenv("SNAKEKIT_CASES", "/tmp/grader.sock")   # the grader's socket: the notebook is being graded
+    assert checks.live_off().startswith("a graded run leaves the live arm out")

@@ -157,6 +157,21 @@ CLAIMS = {
         ("About the same: within about 10 % of the simulator's",
          "(run.tracking_error() / sim_run.tracking_error()).mean()", (0.85, 1.15), None),
     ],
+    "08_ros": [
+        ("point 1 is at `sec=0, nanosec=100000000`", "[sweep_message(snakekit.side_sweep()).points[1].time_from_start."
+         "sec, sweep_message(snakekit.side_sweep()).points[1].time_from_start.nanosec]", [0, 100000000], 0),
+        ("the last, point 499, at `sec=49, nanosec=900000000`", "[sweep_message(snakekit.side_sweep()).points[499]."
+         "time_from_start.sec, sweep_message(snakekit.side_sweep()).points[499].time_from_start.nanosec]",
+         [49, 900000000], 0),
+        ("40 goals at 10 Hz, 4 sweeps: the last goal at 3.9 s", "[len(sweep), sweep.times[-1]]", [40, 3.9], 1e-12),
+        ("all 40 points, 2634 bytes on the wire", "[len(goal.points), len(ros1_bytes(goal))]", [40, 2634], 0),
+        # without the live arm (under test), the bag is the simulator's run at the node's rate
+        ("a `JointState` on `/joint_states` 50 times a second", "(len(times) - 1) / times[-1]", 50, 0.5),
+        ("$\\sqrt{0.05^2 / 3} = 0.0289$ rad", "compare_runs([0.0, 0.5, 1.0], one, ramp_t, ramp)['rms'][0]", 0.0289, 5e-5),
+        ("its largest error is 0.05 rad, on joint 1 at 0.5 s", "[compare_runs([0.0, 0.5, 1.0], one, ramp_t, ramp)[k] "
+         "for k in ('largest', 'joint', 'when')]", [0.05, 1, 0.5], 1e-12),
+        ("its samples are among the reference's, and every error is 0", "result['largest']", 0.0, 1e-12),
+    ],
 }
 # names the expressions use, defined in the kernel after the lesson has run
 PRELUDE = "Q5 = np.array([0.3, 0.5, -0.4, 0.6, 0.2])\nTASK1 = [(0.25, 0.10, 0.3), (0.12, 0.22, 1.6), (0.28, -0.08, -0.4)]\n"

@@ -212,6 +212,21 @@ _LIMITS = ("def limit_violations(trajectory):\n    t, p = trajectory.times, traj
            "    speed = np.abs(np.diff(p, axis=0)) / np.diff(t)[:, None]\n"
            "    rows += [[t[k + 1], j + 1, 1] for k, j in zip(*np.nonzero(speed > spec.velocity_limit))]\n"
            "    return np.array(sorted(rows), dtype=float).reshape(-1, 3)")
+# lesson 08's compare_runs, with one of its parts written as a student may slip
+COMPARE = ("def compare_runs(times, positions, ref_times, ref_positions):\n"
+           "    times, positions = np.asarray(times, dtype=float), np.asarray(positions, dtype=float)\n"
+           "    ref_times, ref_positions = np.asarray(ref_times, dtype=float), np.asarray(ref_positions, dtype=float)\n"
+           "    inside = {inside}\n"
+           "    if not inside.any():\n        raise ValueError('no overlap')\n"
+           "    t = times[inside]\n"
+           "    reference = np.column_stack([np.interp(t, ref_times, ref_positions[:, j]) for j in range(5)])\n"
+           "    error = positions[inside] - reference\n"
+           "    k, j = np.unravel_index(np.argmax(np.abs(error)), error.shape)\n"
+           "    result = {{'rms': {rms}, 'largest': {largest}, 'joint': {joint}}}\n"
+           "    result['when'] = float(t[k])\n    return result")
+COMPARE_RIGHT = {"inside": "(times >= ref_times[0]) & (times <= ref_times[-1])", "rms": "np.sqrt(np.mean(error ** 2, axis=0))",
+                 "largest": "float(np.abs(error[k, j]))", "joint": "int(j) + 1"}
+
 MISTAKES = {
     "00_meet_the_arm": [
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
@@ -573,6 +588,49 @@ MISTAKES = {
          "    return robot.move_to(q, max(1.875 * d / 1.5, 0.2))", "raise snakekit.LimitError"),
         ("ex07_3_fault_test", "def recover(robot):\n    for i in robot.ids:\n        robot.reboot(i)\n"
          "    robot.torque_on()\n    return list(robot.ids)", "reboot only the servos")],
+    "08_ros": [
+        ("ex08_1_sweep_message_test", "def sweep_message(trajectory):\n"
+         "    empty = np.zeros(0)\n"
+         "    points = [msgs.JointTrajectoryPoint(positions=np.array(q, dtype=float), velocities=empty, accelerations=empty, effort=empty,\n"
+         "                                        time_from_start=msgs.Duration(sec=int(t), nanosec=0))\n"
+         "              for t, q in zip(trajectory.times, trajectory.positions)]\n"
+         "    return msgs.JointTrajectory(header=msgs.Header(seq=0, stamp=msgs.Time(sec=0, nanosec=0), frame_id=''),\n"
+         "                                joint_names=JOINTS, points=points)", "the fraction of a second is lost"),
+        ("ex08_1_sweep_message_test", "def sweep_message(trajectory):\n"
+         "    empty = np.zeros(0)\n"
+         "    points = [msgs.JointTrajectoryPoint(positions=np.array(q, dtype=float), velocities=empty, accelerations=empty, effort=empty,\n"
+         "                                        time_from_start=msgs.Duration(sec=int(t), nanosec=int(round(t % 1 * 1e6))))\n"
+         "              for t, q in zip(trajectory.times, trajectory.positions)]\n"
+         "    return msgs.JointTrajectory(header=msgs.Header(seq=0, stamp=msgs.Time(sec=0, nanosec=0), frame_id=''),\n"
+         "                                joint_names=JOINTS, points=points)",
+         "nanosec is in nanoseconds"),
+        ("ex08_1_sweep_message_test", "def sweep_message(trajectory):\n"
+         "    empty = np.zeros(0)\n"
+         "    points = [msgs.JointTrajectoryPoint(positions=np.degrees(np.array(q, dtype=float)), velocities=empty, accelerations=empty, effort=empty,\n"
+         "                                        time_from_start=msgs.Duration(*divmod(int(round(t * 1e9)), 1000000000)))\n"
+         "              for t, q in zip(trajectory.times, trajectory.positions)]\n"
+         "    return msgs.JointTrajectory(header=msgs.Header(seq=0, stamp=msgs.Time(sec=0, nanosec=0), frame_id=''),\n"
+         "                                joint_names=JOINTS, points=points)",
+         "the positions are in degrees"),
+        ("ex08_2_read_joint_states_test", "def read_joint_states(path):\n    with AnyReader([Path(path)]) as bag:\n"
+         "        wanted = [c for c in bag.connections if c.topic == '/joint_states']\n"
+         "        messages = [bag.deserialize(raw, c.msgtype) for c, _, raw in bag.messages(connections=wanted)]\n"
+         "    if not wanted or not messages:\n        raise ValueError('no /joint_states')\n"
+         "    ns = np.array([m.header.stamp.sec * 1000000000 + m.header.stamp.nanosec for m in messages])\n"
+         "    positions = np.array([[m.position[list(m.name).index(f'joint{j}')] for j in range(1, 6)] for m in messages])\n"
+         "    return ns * 1e-9, positions", "the times start at the first message's stamp"),
+        ("ex08_2_read_joint_states_test", "def read_joint_states(path):\n    with AnyReader([Path(path)]) as bag:\n"
+         "        wanted = [c for c in bag.connections if c.topic == '/joint_states']\n"
+         "        messages = [bag.deserialize(raw, c.msgtype) for c, _, raw in bag.messages(connections=wanted)]\n"
+         "    if not wanted or not messages:\n        raise ValueError('no /joint_states')\n"
+         "    ns = np.array([m.header.stamp.sec * 1000000000 + m.header.stamp.nanosec for m in messages])\n"
+         "    return (ns - ns[0]) * 1e-9, np.array([m.position for m in messages])", "in its own order"),
+    ] + [("ex08_3_compare_runs_test", COMPARE.format(**{**COMPARE_RIGHT, **slip}), hint) for slip, hint in (
+        ({"rms": "np.mean(error ** 2, axis=0)"}, "take its square root"),
+        ({"rms": "np.full(5, np.sqrt(np.mean(error ** 2)))"}, "over all five joints together"),
+        ({"inside": "np.ones(len(times), dtype=bool)"}, "after the reference ends there is nothing to compare with"),
+        ({"largest": "float(error[k, j])"}, "the largest |e| (its size)"),
+        ({"joint": "int(j)"}, "the joints count from 1"))],
 }
 
 

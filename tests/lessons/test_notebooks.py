@@ -25,7 +25,7 @@ ANSI = re.compile(r"\x1b\[[0-9;]*m")
 def test_there_are_lessons():
     names = [p.name for p in LESSONS]
     for n in ("00_meet_the_arm", "01_forward_kinematics", "02_jacobian", "03_inverse_kinematics", "04_trajectories",
-              "05_simulation", "06_coded_sweep", "07_real_robot"):
+              "05_simulation", "06_coded_sweep", "07_real_robot", "08_ros"):
         assert f"{n}.ipynb" in names
 
 

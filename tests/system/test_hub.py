@@ -11,6 +11,7 @@ import pytest
 from tests.system._engine import on_engine, run_on_engine
 
 ROOT = Path(__file__).resolve().parents[2]
+LESSONS = len(list((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb")))  # the students' lessons, as listed
 pytestmark = pytest.mark.system  # the class's JupyterHub, on the private Docker engine: not in `make test-quick`
 
 
@@ -75,7 +76,7 @@ def test_hub_week_of_a_class(capsys):
                     "the teacher's formgrader answers 200"):
         assert refusal in out, refusal
     # a student logged in on the hub's page reaches lesson 00 with the arm drawn, and it moves
-    assert "browser: the hub's log-in page as s01, then /user/s01/lab lists the 8 lessons" in out, out[-3000:]
+    assert f"browser: the hub's log-in page as s01, then /user/s01/lab lists the {LESSONS} lessons" in out, out[-3000:]
     assert re.search(r"the 3D view /user/s01/proxy/\d+/static/ \(through the lab's port\) draws the arm", out), out[-3000:]
     assert "browser: the motion cell moved the arm" in out, out[-3000:]
     assert "went to the lab's port 127.0.0.1:18000" in out, out[-3000:]

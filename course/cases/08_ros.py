@@ -1,0 +1,85 @@
+"""Lesson 08's hidden cases, drawn by the grader anew for every grading batch.
+
+One function per handed-in grade id, taking ``(rng, spec)`` and returning the cases: each a
+tuple of the positional arguments the test cell's hand-in calls (see grader/README.md, "Cases").
+No case needs a ROS master: the messages and bags are ROS's own formats, written without ROS.
+"""
+
+import numpy as np
+
+TOLERANCES = {
+    # a time_from_start is whole nanoseconds: the nearest one or the one below it (t * 1e9 cut, not rounded) is
+    # as right; the positions are copied as they are
+    "ex08_1_sweep_message_test": {"rtol": 0.0, "atol": 2e-9},
+    # a wall-clock stamp (1.7e9 s) in float seconds keeps about 2.4e-7 s: times subtracted after that
+    # conversion are as right as those subtracted in whole nanoseconds
+    "ex08_2_read_joint_states_test": {"rtol": 0.0, "atol": 1e-6},
+}
+
+#: A wall clock's stamp [ns]: about when a live recording is made (ROS time is the Unix time).
+WALL = 1_700_000_000_000_000_000
+
+
+def _task2():
+    """The study's Task 2, as ``snakekit.side_sweep()`` builds it: 500 goals at 10 Hz, 50 sweeps of 0.2 rad."""
+    times = np.arange(500) / 10.0
+    angle = 0.2 * np.sin(2 * np.pi * 50 * times / times[-1])
+    angle[-1] = 0.0
+    return times, np.repeat(angle[:, None], 5, axis=1)
+
+
+def ex08_1_sweep_message_test(rng, spec):
+    """sweep_message(trajectory), handed its (times, positions): Task 2 itself; sweeps at 3, 7 and 12 Hz, whose
+    send times are not whole milliseconds; one goal alone, past a whole second; goals at uneven times."""
+    cases = [_task2()]
+    for rate in rng.permutation([3.0, 7.0, 12.0]):
+        n = int(rng.integers(5, 60))
+        cases.append((np.arange(n) / rate, rng.uniform(spec.lower, spec.upper, (n, spec.n_joints))))
+    cases.append((np.array([float(rng.uniform(1.01, 9.99))]), rng.uniform(spec.lower, spec.upper, (1, spec.n_joints))))
+    n = int(rng.integers(3, 12))
+    uneven = np.concatenate([[0.0], np.cumsum(rng.uniform(0.05, 1.5, n - 1))])
+    return cases + [(uneven, rng.uniform(spec.lower, spec.upper, (n, spec.n_joints)))]
+
+
+def _states(rng, n, start, period_ns, jitter_ns=0):
+    """n stamps [ns] from ``start``, ``period_ns`` apart (each moved by up to ``jitter_ns``), and n rows of angles."""
+    stamps = start + np.arange(n, dtype=np.int64) * period_ns
+    if jitter_ns:
+        stamps = stamps + rng.integers(-jitter_ns, jitter_ns + 1, n)
+    return stamps, rng.uniform(-1.5, 1.5, (n, 5))
+
+
+def ex08_2_read_joint_states_test(rng, spec):
+    """read_joint_states(path), handed (suffix, stamps, positions, order): ROS 1 and ROS 2 bags stamped from 1 s
+    (the kit's own bags), the joints in the arm's order and shuffled, a wall clock's stamps 50 Hz apart with a
+    little jitter (a live recording), and a bag without joint states (it must raise ValueError)."""
+    in_order = np.arange(5)
+    cases = []
+    for suffix in (".bag", ".mcap"):
+        stamps, positions = _states(rng, int(rng.integers(5, 80)), 1_000_000_000, 10_000_000)
+        cases.append((suffix, stamps, positions, in_order))
+    for suffix in (".bag", ".mcap"):
+        stamps, positions = _states(rng, int(rng.integers(5, 80)), WALL + int(rng.integers(0, 10**15)), 20_000_000,
+                                    jitter_ns=2_000_000)
+        cases.append((suffix, stamps, positions, rng.permutation(5)))
+    return cases + [(".bag", np.zeros(0, dtype=np.int64), np.zeros((0, 5)), in_order)]
+
+
+def ex08_3_compare_runs_test(rng, spec):
+    """compare_runs(times, positions, ref_times, ref_positions): a reference sweep at 100 Hz and recordings of it
+    at 50 Hz that lag it by 0.05 to 0.2 s with noise: one inside it, one that starts before it, one that ends
+    after it, one on the reference's own times, and one that never overlaps it (it must raise ValueError)."""
+    cases = []
+    for kind in ("inside", "before", "after", "same", "apart"):
+        duration = float(rng.uniform(2.0, 6.0))
+        ref_t = np.arange(0.0, duration, 0.01)
+        sweeps, amplitude = int(rng.integers(1, 5)), rng.uniform(0.05, 0.4, 5)
+        def sweep(t):
+            return amplitude * np.sin(2 * np.pi * sweeps * np.clip(t, 0, duration) / duration)[:, None]
+        start, end = {"inside": (0.3, duration - 0.3), "before": (-0.7, duration - 0.5), "after": (0.4, duration + 0.8),
+                      "same": (0.0, duration), "apart": (duration + 1.0, duration + 3.0)}[kind]
+        t = ref_t if kind == "same" else np.arange(start, end, 0.02) + float(rng.uniform(0, 0.02))
+        lag = float(rng.uniform(0.05, 0.2))
+        recorded = sweep(t - lag) + rng.normal(0, 0.002, (len(t), 5))
+        cases.append((t, recorded, ref_t, sweep(ref_t)))
+    return cases

@@ -1,0 +1,111 @@
+"""What lesson 8 uses of the kit: ROS 1 messages without ROS (``snakekit.bags.ros1_messages``), their
+wire format read by Debian's own message classes, bags of ``/joint_states`` alone read back by
+Debian's ``rosbag`` and by ``mcap_ros2``, and the live arm (``snakekit.ros.live_arm``: a roscore and
+the arm's node of its own) taking a sweep that ``rosbag record`` records and a goal it refuses.
+"""
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+import snakekit
+from snakekit.bags import ros1_bytes, ros1_messages, write_joint_states
+from snakekit.errors import FileFormatError
+from tests.conftest import need, need_program
+from tests.kit.test_bags import ROS1_READER, decoded_mcap
+
+NAMES = ["joint3", "joint1", "joint2", "joint5", "joint4"]  # another publisher's order
+STAMPS = 1_700_000_000_000_000_000 + np.arange(7) * 33_333_333  # wall-clock stamps [ns], 30 Hz
+POSITIONS = np.random.default_rng(3).uniform(-1.5, 1.5, (7, 5))
+
+# Debian's genpy message class (system Python) decodes the wire format the kit wrote.
+GENPY_READER = r"""
+import json, sys
+from trajectory_msgs.msg import JointTrajectory
+m = JointTrajectory().deserialize(open(sys.argv[1], "rb").read())
+print(json.dumps({"names": list(m.joint_names), "secs": [p.time_from_start.secs for p in m.points],
+                  "nsecs": [p.time_from_start.nsecs for p in m.points], "positions": [list(p.positions) for p in m.points]}))
+"""
+
+
+def system_python(script, *args):
+    python = need_program("/usr/bin/python3")  # where Debian's ROS 1 lives
+    r = subprocess.run([python, "-c", script, *map(str, args)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return json.loads(r.stdout)
+
+
+def trajectory_message(times_ns, positions):
+    m = ros1_messages()
+    empty = np.zeros(0)
+    return m.JointTrajectory(
+        header=m.Header(seq=0, stamp=m.Time(sec=0, nanosec=0), frame_id=""), joint_names=NAMES,
+        points=[m.JointTrajectoryPoint(positions=np.array(q, float), velocities=empty, accelerations=empty, effort=empty,
+                                       time_from_start=m.Duration(*divmod(int(t), 1_000_000_000)))
+                for t, q in zip(times_ns, positions)])
+
+
+def test_a_trajectory_built_without_ros_is_the_message_debians_rospy_decodes(tmp_path):
+    times = [0, 333_333_333, 1_666_666_667, 12_000_000_001]
+    (tmp_path / "goal").write_bytes(ros1_bytes(trajectory_message(times, POSITIONS[:4])))
+    got = system_python(GENPY_READER, tmp_path / "goal")
+    assert got["names"] == NAMES
+    assert [s * 1_000_000_000 + n for s, n in zip(got["secs"], got["nsecs"])] == times
+    np.testing.assert_array_equal(got["positions"], POSITIONS[:4])
+
+
+def test_a_field_of_the_wrong_type_is_named_before_anything_is_sent():
+    m = ros1_messages()
+    bad = trajectory_message([0], POSITIONS[:1])
+    bad.points[0].positions = [0.0] * 5  # a list where ROS's float64[] is asked
+    with pytest.raises(FileFormatError, match="cannot be sent.*float64\\[\\] fields take numpy float arrays"):
+        ros1_bytes(bad)
+    bad.points[0] = m.JointTrajectoryPoint(positions=np.zeros(5), velocities=np.zeros(0), accelerations=np.zeros(0),
+                                           effort=np.zeros(0), time_from_start=m.Duration(sec=0.5, nanosec=0))
+    with pytest.raises(FileFormatError, match="Duration's sec and nanosec whole numbers"):
+        ros1_bytes(bad)
+
+
+def test_a_joint_states_bag_is_read_back_by_debians_rosbag(tmp_path):
+    path = write_joint_states(tmp_path / "states.bag", STAMPS, POSITIONS, NAMES, description="<robot/>")
+    got = system_python(ROS1_READER, path)
+    assert got["types"] == {"/joint_states": "sensor_msgs/JointState", "/robot_description": "std_msgs/String"}
+    assert got["latched"]["/robot_description"] == "1" and got["messages"]["/robot_description"] == ["<robot/>"]
+    states = got["messages"]["/joint_states"]
+    assert [s["name"] for s in states] == [NAMES] * len(STAMPS)
+    assert [s["seq"] for s in states] == list(range(len(STAMPS)))
+    np.testing.assert_allclose([s["stamp"] for s in states], STAMPS * 1e-9, rtol=0, atol=1e-6)  # float seconds
+    np.testing.assert_array_equal([s["position"] for s in states], POSITIONS)
+
+
+def test_a_joint_states_mcap_is_read_back_by_mcap_ros2(tmp_path):
+    need("mcap_ros2")
+    got, _ = decoded_mcap(write_joint_states(tmp_path / "states.mcap", STAMPS, POSITIONS, NAMES))
+    assert set(got) == {"/joint_states"}
+    assert [s["name"] for s in got["/joint_states"]] == [NAMES] * len(STAMPS)
+    np.testing.assert_array_equal([s["position"] for s in got["/joint_states"]], POSITIONS)
+
+
+def test_the_live_arm_runs_a_sweep_rosbag_records_and_refuses_a_goal_beyond_the_limits(tmp_path):
+    need_program("roscore"), need_program("rosbag")
+    from rosbags.highlevel import AnyReader
+    from snakekit.ros import live_arm
+
+    sweep = snakekit.side_sweep(points=20, rate=10.0, sweeps=2, amplitude=0.2)
+    goal = trajectory_message(np.rint(sweep.times * 1e9), sweep.positions)
+    goal.joint_names = [f"joint{i}" for i in range(1, 6)]
+    with live_arm() as arm:
+        with arm.recording(tmp_path / "sweep.bag") as path:
+            assert arm.send(goal).startswith("goal done: 20 points")
+        over = trajectory_message([3_000_000_000], [[2.0, 0, 0, 0, 0]])
+        with pytest.raises(snakekit.TrajectoryError, match="refused the goal; nothing moved.*limit"):
+            arm.send(over)
+    with AnyReader([path]) as bag:
+        assert set(bag.topics) == {"/joint_states"}
+        states = [bag.deserialize(raw, c.msgtype) for c, _, raw in bag.messages()]
+    q = np.array([s.position for s in states])
+    # the sweep swung every joint both ways by most of its 0.2 rad, and came home
+    assert (q.max(0) > 0.12).all() and (q.min(0) < -0.12).all(), (q.max(0), q.min(0))
+    np.testing.assert_allclose(q[-1], 0.0, atol=0.02)

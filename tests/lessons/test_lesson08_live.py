@@ -1,0 +1,45 @@
+"""Lesson 8's live part, run once: the instructor version with ROS 1 here and quick mode off starts its own
+master and the arm's node, sends the student's sweep message, records a bag with ``rosbag record``, reads it
+back with 8.2 and compares it with the simulator's reference with 8.3. Every other run of the lesson (the
+suite's, the grader's) leaves the live arm out (``checks.live_off``), so this is where the live cells are run.
+"""
+
+import json
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from tests.conftest import need, need_program
+
+ROOT = Path(__file__).resolve().parents[2]
+LESSON = ROOT / "course" / "source" / "08_ros"
+PROBE = ("import json\nprint(json.dumps({'rms': result['rms'].tolist(), 'swing': [positions.min(0).tolist(), "
+         "positions.max(0).tolist()], 'rate': (len(times) - 1) / times[-1], 'bag': sorted(AnyReader([Path("
+         "'sweep_recorded.bag')]).__enter__().topics)}))")
+
+
+def test_the_live_part_sends_the_sweep_records_it_and_it_follows_the_reference(tmp_path, monkeypatch):
+    need_program("roscore"), need_program("rosbag")
+    nbformat, nbclient = need("nbformat"), need("nbclient")
+    shutil.copytree(LESSON, tmp_path / "lesson", ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.bag"))
+    for switch in ("SNAKEKIT_TEST", "SNAKEKIT_QUICK", "SNAKEKIT_CASES", "SNAKEKIT_HANDIN_DIR"):
+        monkeypatch.delenv(switch, raising=False)
+    monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    nb = nbformat.read(tmp_path / "lesson" / "08_ros.ipynb", as_version=4)
+    nb.cells.append(nbformat.v4.new_code_cell(PROBE))
+    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
+                            resources={"metadata": {"path": str(tmp_path / "lesson")}}).execute()
+    said = {c.id: "".join(o.get("text", "") for o in c.outputs if o.output_type == "stream") for c in nb.cells
+            if c.cell_type == "code"}
+    assert "goal done: 40 points" in said["08-code-07"] and "left out" not in said["08-code-07"], said["08-code-07"]
+    got = json.loads(said[nb.cells[-1].id].strip().splitlines()[-1])
+    assert got["bag"] == ["/joint_states"]                      # what rosbag record was asked for
+    assert abs(got["rate"] - 50) < 5, got["rate"]                 # the node's 50 Hz
+    low, high = np.array(got["swing"])
+    assert (high > 0.12).all() and (low < -0.12).all(), got["swing"]    # every joint swung both ways
+    # the same simulator in real time against its own run: timing alone (0.005 rad on a quiet machine)
+    assert (np.array(got["rms"]) < 0.05).all(), got["rms"]
