@@ -62,8 +62,9 @@ services=$("${COMPOSE[@]}" config --services | sort | tr '\n' ' ')
 [ "$services" = "arm lab roscore rviz state-publisher " ] || die "the ros profile's services: $services"
 say "docker/ros/Dockerfile is up to date and hadolint-clean; compose.yaml is valid with the ros profile ($services)"
 # a new student's engine has neither image: the ROS image's build must not need the students'
+# (--no-prune: their parent layers stay, the classic builder's cache, so a cached run stays short)
 for image in snakekit-ros:latest snakekit-lab:latest; do
-  ! $DOCKER image inspect "$image" >/dev/null 2>&1 || $DOCKER image rm "$image" >/dev/null || die "could not untag $image"
+  ! $DOCKER image inspect "$image" >/dev/null 2>&1 || $DOCKER image rm --no-prune "$image" >/dev/null || die "could not untag $image"
 done
 
 # --- up, as docs/ros.md gives it ----------------------------------------------------------------
