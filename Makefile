@@ -46,14 +46,16 @@ lock:
 
 generate: setup
 	$(VENV)/bin/snakekit generate
+	$(PY) docker/ros/make-dockerfile
 
 # The student versions in notebooks/ from the instructor versions in course/source/ (nbgrader).
 student: setup
 	$(PY) tools/generate_student
 
-# Fails when a generated file (URDF, MJCF) is out of date with the spec it comes from.
+# Fails when a generated file (URDF, MJCF; the ROS image's Dockerfile) is out of date with its sources.
 check-generated: setup
 	$(VENV)/bin/snakekit generate --check
+	$(PY) docker/ros/make-dockerfile --check
 
 references: setup
 	$(PY) -m grader.scoring.references

@@ -400,8 +400,8 @@ def missing() -> str | None:
     if why:
         return why
     if docker("image", "inspect", ROS_IMAGE, check=False).returncode != 0:
-        return (f"not measured: no image {ROS_IMAGE} (build it: docker compose -f docker/compose.yaml build lab, "
-                "then docker compose -f docker/compose.yaml --profile ros build roscore)")
+        return (f"not measured: no image {ROS_IMAGE} (build it: "
+                "docker compose -f docker/compose.yaml --profile ros build roscore)")
     return None
 
 

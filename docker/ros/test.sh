@@ -4,20 +4,25 @@
 #
 #   docker/ros/test.sh            (as root; tests/system/test_ros_compose.py runs it within `make test`)
 #
-# Steps: the engine (its own data root, the same cache as docker/test.sh, so the students' image
-# that test built is reused); the base and the students' image (built only when missing or
-# stale); hadolint docker/ros/Dockerfile; compose.yaml valid with the profile; the ROS image
-# built with the user's command (`docker compose --profile ros build`), its size and what it adds
-# to the students' image; the arm's service started alone first (it waits for roscore); then
-# `docker compose --profile ros up -d` as docs/ros.md gives it, the
-# printed URL; RViz in noVNC in headless Chromium with the arm at home (docker/ros/rviz-check:
+# Steps: the engine (its own data root, the same cache as docker/test.sh, so the layers that test
+# built are reused); the base; docker/ros/Dockerfile up to date (docker/ros/make-dockerfile --check)
+# and hadolint-clean; compose.yaml valid with the profile; the tags snakekit-lab and snakekit-ros
+# removed (their layers stay in the cache), so the first `up` meets an engine without either image
+# as a new student's does and must build the ROS image without the students' (a cold engine runs
+# the same steps, uncached); the arm's service started alone first (it builds the image; it waits
+# for roscore); then `docker compose --profile ros up rviz` as docs/ros.md gives it, attached: the
+# lab not started, rviz's log the only one shown and its last line the URL; the ROS image's size,
+# the students' image built after it (`build lab`: the same layers, from the cache); RViz in noVNC
+# in headless Chromium with the arm at home (docker/ros/rviz-check:
 # the arm drawn); then, inside the stack, a small node in the arm's container
 # (docker/ros/check-stack.py): a folding goal refused on /rosout with nothing moving, the Task 2
 # sweep (shortened) followed by /joint_states as the kit's own simulator runs it, `rosbag play`
 # of a kit .bag publishing its joint states, and the arm left in another pose; RViz screenshotted
 # again (the arm drawn, its links elsewhere); `rostopic echo` and `rosbag record` from a terminal
 # (`exec arm bash`), the bag copied out as docs/ros.md says; docs/ros.md's `rostopic pub` of the
-# sweep, run to its end; `down`: no container, network or volume left of the profile. On exit the
+# sweep, run to its end; its `rosnode list` and its record-and-play block (`rosbag record` stopped
+# by Ctrl-C, `rosbag info`, `snakekit sweep --out`, `rosbag play`), each line as written; `down`: no
+# container, network or volume left of the profile. On exit the
 # engine stops and the host is checked and restored (engine_stop), as after docker/test.sh.
 # Screenshots in artifacts/ros/. Figures on lines starting with "figure:".
 set -euo pipefail
@@ -38,51 +43,52 @@ source "$ROOT/docker/engine.sh"
 engine_packages || die "could not install docker.io, debootstrap, curl"
 COMPOSE=("$VENV_BIN/docker-compose" -p "$PROJECT" -f "$ROOT/docker/compose.yaml" --profile ros)
 engine_lock 1800
-engine_on_stop() { "${COMPOSE[@]}" down --volumes --remove-orphans >/dev/null 2>&1; }
+UP_PID=""
+engine_on_stop() {
+  "${COMPOSE[@]}" down --volumes --remove-orphans >/dev/null 2>&1
+  [ -z "$UP_PID" ] || kill "$UP_PID" 2>/dev/null || true
+}
 trap engine_exit EXIT
 trap 'exit 130' INT TERM
 t_all=$(now)
 engine_start
 engine_base
 
-# --- lint, validate, build ----------------------------------------------------------------
+# --- lint, validate ----------------------------------------------------------------------------
+"$VENV_BIN/python" docker/ros/make-dockerfile --check || die "docker/ros/Dockerfile is out of date"
 "$VENV_BIN/hadolint" docker/ros/Dockerfile || die "hadolint found problems in docker/ros/Dockerfile"
 "${COMPOSE[@]}" config -q || die "compose.yaml is invalid with the ros profile"
 services=$("${COMPOSE[@]}" config --services | sort | tr '\n' ' ')
 [ "$services" = "arm lab roscore rviz state-publisher " ] || die "the ros profile's services: $services"
-say "hadolint: docker/ros/Dockerfile is clean; compose.yaml is valid with the ros profile ($services)"
-t=$(now)
-engine_build snakekit-lab:latest "$RUN/build-lab.log" || { tail -30 "$RUN/build-lab.log" >&2; die "docker compose build lab failed"; }
-lab_s=$(since "$t")
-t=$(now)
-"${COMPOSE[@]}" build >"$RUN/build-ros.log" 2>&1 || { tail -40 "$RUN/build-ros.log" >&2; die "docker compose --profile ros build failed"; }
-figure "build: the students' image $lab_s s, then the ROS image $(since "$t") s ($([ "$ENGINE_COLD" = 1 ] && echo "cold: empty engine cache" || echo "engine cache kept"))"
-ros_size=$($DOCKER image inspect -f '{{.Size}}' snakekit-ros:latest)
-lab_size=$($DOCKER image inspect -f '{{.Size}}' snakekit-lab:latest)
-# the ROS image is the students' plus its own layers (the kit and its venv shared, not copied)
-lab_layers=$($DOCKER image inspect -f '{{join .RootFS.Layers " "}}' snakekit-lab:latest)
-ros_layers=$($DOCKER image inspect -f '{{join .RootFS.Layers " "}}' snakekit-ros:latest)
-[ "${ros_layers#"$lab_layers"}" != "$ros_layers" ] || die "the ROS image is not built on the students' image's layers"
-gb() { awk -v b="$1" 'BEGIN { printf "%.2f", b / 1e9 }'; }
-figure "ROS image $(gb "$ros_size") GB (snakekit-lab $(gb "$lab_size") GB; $(( (ros_size - lab_size) / 1000000 )) MB added: Debian's ROS 1, RViz, Xvfb, x11vnc, noVNC) (target <= 1.5 GB)"
-[ "$ros_size" -le 1500000000 ] || die "the ROS image is $(gb "$ros_size") GB, above the 1.5 GB target"
+say "docker/ros/Dockerfile is up to date and hadolint-clean; compose.yaml is valid with the ros profile ($services)"
+# a new student's engine has neither image: the ROS image's build must not need the students'
+# (--no-prune: their parent layers stay, the classic builder's cache, so a cached run stays short)
+for image in snakekit-ros:latest snakekit-lab:latest; do
+  ! $DOCKER image inspect "$image" >/dev/null 2>&1 || $DOCKER image rm --no-prune "$image" >/dev/null || die "could not untag $image"
+done
 
 # --- up, as docs/ros.md gives it ----------------------------------------------------------------
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
-export SNAKEKIT_ROS_PORT SNAKEKIT_LAB_PORT
+export SNAKEKIT_ROS_PORT
 SNAKEKIT_ROS_PORT=$(free_port)
-SNAKEKIT_LAB_PORT=$(free_port)  # (the lab, which has no profile, comes up beside the ROS services)
 URL="http://127.0.0.1:$SNAKEKIT_ROS_PORT"
-# the arm first, without the master (--no-deps): it must wait for roscore, not die
-"${COMPOSE[@]}" up -d --no-deps arm >"$RUN/up-arm.log" 2>&1 || { cat "$RUN/up-arm.log" >&2; die "up arm failed"; }
+# the arm first, without the master (--no-deps): it builds the ROS image, and must wait for roscore, not die
+t=$(now)
+"${COMPOSE[@]}" up -d --no-deps arm >"$RUN/up-arm.log" 2>&1 || { tail -40 "$RUN/up-arm.log" >&2; die "the first up (the arm's service) failed"; }
+steps=$(grep -c '^Step ' "$RUN/up-arm.log" || true)
+cached=$(grep -c 'Using cache' "$RUN/up-arm.log" || true)
+figure "build: the ROS image by the first up, on an engine without the students' image, $(since "$t") s ($cached of $steps steps from the engine's cache; $([ "$ENGINE_COLD" = 1 ] && echo "cold: empty engine cache" || echo "engine cache kept"))"
 arm_id=$("${COMPOSE[@]}" ps -q arm)
 sleep 5
 [ "$($DOCKER inspect -f '{{.State.Running}} {{.RestartCount}}' "$arm_id")" = "true 0" ] \
   || die "the arm's node, started before roscore, did not wait for it: $("${COMPOSE[@]}" logs arm 2>&1 | tail -5)"
+# docs/ros.md's command, attached as a student runs it (it ends when the stack is taken down)
 t=$(now)
-"${COMPOSE[@]}" up -d >"$RUN/up.log" 2>&1 || { cat "$RUN/up.log" >&2; die "docker compose --profile ros up failed"; }
+"${COMPOSE[@]}" up rviz >"$RUN/up.log" 2>&1 </dev/null &
+UP_PID=$!
 printed=""
-until printed=$("${COMPOSE[@]}" logs rviz 2>/dev/null | grep -o "open http://[^ ]*" | head -1) && [ -n "$printed" ]; do
+until printed=$(grep -o "open http://[^ ]*" "$RUN/up.log" | head -1) && [ -n "$printed" ]; do
+  kill -0 "$UP_PID" 2>/dev/null || die "docker compose --profile ros up rviz ended: $(tail -5 "$RUN/up.log")"
   [ "$(since "$t" | cut -d. -f1)" -lt "$HANG" ] || die "the rviz service printed no URL within $HANG s: $("${COMPOSE[@]}" logs rviz 2>&1 | tail -5)"
   sleep 0.2
 done
@@ -98,8 +104,31 @@ say "the arm's node, started 5 s before roscore, waited for it and runs (no rest
 for s in roscore arm state-publisher rviz; do
   [ "$("${COMPOSE[@]}" ps -q "$s" | wc -l)" = 1 ] || die "the $s service is not running: $("${COMPOSE[@]}" logs "$s" 2>&1 | tail -5)"
 done
-ports=$($DOCKER ps --format '{{.Names}} {{.Ports}}' --filter "label=com.docker.compose.project=$PROJECT" | grep -v -- '-lab-' | grep -c -- '->' || true)
+[ -z "$("${COMPOSE[@]}" ps -q lab)" ] || die "up rviz started the lab too"
+ports=$($DOCKER ps --format '{{.Names}} {{.Ports}}' --filter "label=com.docker.compose.project=$PROJECT" | grep -c -- '->' || true)
 [ "$ports" = 1 ] || die "the ROS services publish $ports ports (one wanted: RViz's noVNC)"
+# what the student reads: compose's own lines, then rviz's log alone, whose last line is the URL
+shown=$(grep -c -- ' | ' "$RUN/up.log" || true)
+[ "$(grep -- ' | ' "$RUN/up.log" | grep -v -c '^rviz-1 ' || true)" = 0 ] || die "up rviz shows other services' logs: $(grep -- ' | ' "$RUN/up.log" | grep -v '^rviz-1 ' | head -3)"
+[ "$(tail -1 "$RUN/up.log")" = "rviz-1  | RViz in your browser: $printed" ] \
+  || die "the URL is not the last line up rviz shows; it ends: $(tail -3 "$RUN/up.log")"
+say "up rviz (docs/ros.md): the lab not started; the only service log shown is rviz's ($shown line), the URL its last line"
+
+# the students' image, built after the ROS image: the same layers, from the engine's cache
+t=$(now)
+engine_build snakekit-lab:latest "$RUN/build-lab.log" || { tail -30 "$RUN/build-lab.log" >&2; die "docker compose build lab failed"; }
+lab_steps=$(grep -c '^Step ' "$RUN/build-lab.log" || true)
+lab_cached=$(grep -c 'Using cache' "$RUN/build-lab.log" || true)
+figure "build: the students' image after it, $(since "$t") s ($lab_cached of $lab_steps steps from the engine's cache)"
+ros_size=$($DOCKER image inspect -f '{{.Size}}' snakekit-ros:latest)
+lab_size=$($DOCKER image inspect -f '{{.Size}}' snakekit-lab:latest)
+# the ROS image is the students' plus its own layers (the kit and its venv shared, not copied)
+lab_layers=$($DOCKER image inspect -f '{{join .RootFS.Layers " "}}' snakekit-lab:latest)
+ros_layers=$($DOCKER image inspect -f '{{join .RootFS.Layers " "}}' snakekit-ros:latest)
+[ "${ros_layers#"$lab_layers"}" != "$ros_layers" ] || die "the ROS image is not built on the students' image's layers"
+gb() { awk -v b="$1" 'BEGIN { printf "%.2f", b / 1e9 }'; }
+figure "ROS image $(gb "$ros_size") GB (snakekit-lab $(gb "$lab_size") GB; $(( (ros_size - lab_size) / 1000000 )) MB added: Debian's ROS 1, RViz, Xvfb, x11vnc, noVNC) (target <= 1.5 GB)"
+[ "$ros_size" -le 1500000000 ] || die "the ROS image is $(gb "$ros_size") GB, above the 1.5 GB target"
 
 # --- RViz in the browser, the arm at home ------------------------------------------------------
 rm -rf "$SHOTS" && mkdir -p "$SHOTS"
@@ -155,6 +184,36 @@ until "${COMPOSE[@]}" exec -T roscore bash -c 'grep -h "goal done: 100 points" ~
 done
 say "docs/ros.md's rostopic pub of the sweep: the arm says $(grep -o 'goal done: [^]]*' "$RUN/done.log" | head -1) ($(since "$t") s)"
 
+# docs/ros.md's record-and-play block, each line as written: rosbag record stopped by Ctrl-C (SIGINT
+# to its process group, as a terminal sends it), rosbag info, snakekit sweep --out, rosbag play (its
+# /joint_states beside the arm's, as the page says: rostopic info lists both; stopped by Ctrl-C)
+t=$(now)
+sed -n '/^rosbag record -O sweep-recorded.bag/,/^```$/p' docs/ros.md | sed '$d' | sed 's/ *#.*$//' > "$RUN/block.sh"
+mapfile -t block < "$RUN/block.sh"
+[ "${#block[@]}" = 4 ] && [[ ${block[0]} == "rosbag record "* ]] && [[ ${block[1]} == "rosbag info "* ]] \
+  && [[ ${block[2]} == "snakekit sweep "* ]] && [[ ${block[3]} == "rosbag play "* ]] \
+  || die "docs/ros.md's record-and-play block is not record, info, sweep, play: $(cat "$RUN/block.sh")"
+out=$("${COMPOSE[@]}" exec -T arm bash -l -c "cd ~/work
+rosnode list
+timeout -s INT 4 ${block[0]} >record.log 2>&1; echo \"record ended: \$?\"
+${block[1]} && ${block[2]} >sweep.log 2>&1 && echo 'sweep written'
+(sleep 4; rostopic info /joint_states >info.log 2>&1) &
+timeout -s INT 8 ${block[3]} >play.log 2>&1; echo \"play ended: \$?\"
+wait; cat info.log" 2>&1) || die "docs/ros.md's record-and-play block failed: $out"
+# (and the page's rosnode list: the four nodes of the stack)
+for node in /robot_state_publisher /rosout /snakekit_arm; do grep -q -x "$node" <<<"$out" || die "rosnode list lacks $node: $out"; done
+grep -q "^/rviz_" <<<"$out" || die "rosnode list lacks RViz's node: $out"
+grep -q "^record ended: 124$" <<<"$out" || die "rosbag record, stopped by Ctrl-C: $out"
+info_js=$(grep -oE '/joint_states +[0-9]+ msgs' <<<"$out" | awk '{print $2}')
+info_tf=$(grep -oE '/tf +[0-9]+ msgs' <<<"$out" | awk '{print $2}')
+[ "${info_js:-0}" -gt 0 ] && [ "${info_tf:-0}" -gt 0 ] || die "rosbag info of sweep-recorded.bag lists no /joint_states and /tf messages: $out"
+grep -q "^sweep written$" <<<"$out" || die "snakekit sweep --out kit-sweep.bag failed: $out"
+publishers=$(sed -n '/^Publishers:/,/^$/p' <<<"$out" | grep -c '^ \* ' || true)
+[ "$publishers" = 2 ] && grep -q '^ \* /snakekit_arm ' <<<"$out" && grep -q '^ \* /play_' <<<"$out" \
+  || die "while kit-sweep.bag plays, rostopic info /joint_states does not list the arm and rosbag play: $out"
+grep -q "^play ended: 124$" <<<"$out" || die "rosbag play, stopped by Ctrl-C: $out"
+say "docs/ros.md's rosnode list (the four nodes) and its record-and-play block as written: rosbag record (Ctrl-C after 4 s) kept /joint_states $info_js, /tf $info_tf messages (rosbag info); snakekit sweep --out kit-sweep.bag; rosbag play of it published beside the arm (rostopic info /joint_states: 2 publishers) ($(since "$t") s)"
+
 # --- down: nothing of the profile left ------------------------------------------------------------
 t=$(now)
 "${COMPOSE[@]}" down >"$RUN/down.log" 2>&1 || { cat "$RUN/down.log" >&2; die "docker compose down failed"; }
@@ -162,11 +221,12 @@ left=$($DOCKER ps -aq --filter "label=com.docker.compose.project=$PROJECT")
 [ -z "$left" ] || die "containers left after down: $left"
 left=$($DOCKER network ls -q --filter "label=com.docker.compose.project=$PROJECT")
 [ -z "$left" ] || die "networks left after down: $left"
-# the lab's work volume is the students' (kept on purpose, docker/README.md); the ROS services make none
-left=$($DOCKER volume ls -q --filter "label=com.docker.compose.project=$PROJECT" | grep -v -x "${PROJECT}_work" || true)
-anonymous=$($DOCKER volume ls -q --filter dangling=true | grep -v -x "${PROJECT}_work" || true)
+# the ROS services make no volume (the lab, which makes the work volume, was not started)
+left=$($DOCKER volume ls -q --filter "label=com.docker.compose.project=$PROJECT")
+anonymous=$($DOCKER volume ls -q --filter dangling=true)
 [ -z "$left$anonymous" ] || die "volumes left after down: $left $anonymous"
-"${COMPOSE[@]}" down --volumes >/dev/null 2>&1
-say "down in $(since "$t") s: no container, network or volume of the ros profile left (the lab's work volume is kept, as always)"
+wait "$UP_PID" 2>/dev/null || true  # up rviz ends with the stack
+UP_PID=""
+say "down in $(since "$t") s: no container, network or volume of the ros profile left"
 figure "the whole ROS test: $(since "$t_all") s"
 say "passed"
