@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
-from .handin import ReturnedNone, encode_results, fetch_cases
+from .handin import Returned, ReturnedNone, encode_results, fetch_cases
 from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
 from .watch import calls_to, forgot_return, returns_none
 
@@ -207,6 +207,8 @@ class Exercise:
         """The arguments of a call, as a message shows them."""
         if where is not None:
             return str(where)
+        if not args:
+            return "no arguments (its defaults)"
         def shown(a):   # an object without a readable repr (a ControlPanel, a robot) by its type
             text = repr(a)
             return f"a {type(a).__name__}" if text.startswith("<") and " at 0x" in text else text
@@ -335,14 +337,18 @@ class Exercise:
             warnings.simplefilter("ignore")  # a warning on stderr would fail the cell in nbgrader
             if forbid:
                 stack.enter_context(globals()["forbid"](*forbid, what=what or self.name))
+            student = _student_function(self.name)
             for args in cases:
                 try:
-                    with returns_none(_student_function(self.name)) as none:
+                    with returns_none(student) as none:
                         results.append(fn(*args))
                 except BaseException as e:  # noqa: BLE001 - a student's SystemExit is a result too
                     if isinstance(e, KeyboardInterrupt):
                         raise
                     results.append(e)
+                    if none.returned and fn is not student and _raised_in(e, fn):
+                        # the test cell's own code stumbled on what the student's function gave back
+                        results[-1] = Returned(self.name, none.returned)
                 if none:   # named as the forgotten `return` it is, whatever the wrapper made of the None
                     results[-1] = ReturnedNone(self.name)
         path = Path(folder) / f"{grade_id}.npz"
@@ -354,6 +360,14 @@ class Exercise:
         """Print that the checks passed (the last line of a test cell)."""
         _VERDICTS[self.number] = True
         print(f"exercise {self.number} {self.name}: {self.checked} check(s) passed" + (f"; {note}" if note else ""))
+
+
+def _raised_in(error: BaseException, fn) -> bool:
+    """Whether ``error`` was raised by a line of ``fn`` itself (its innermost frame is ``fn``'s)."""
+    tb = error.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    return tb is not None and tb.tb_frame.f_code is getattr(fn, "__code__", None)
 
 
 def _student_function(name: str):

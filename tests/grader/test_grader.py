@@ -318,7 +318,7 @@ def test_feedback_has_verdicts_and_plots_but_no_hidden_tests(graded):
     from grader.feedback.scrub import hidden_lines
 
     html = (graded["course"] / "feedback" / "bob" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
-    assert "Grader: ex1_tool_xy_test: 0 / 2 points" in html
+    assert "Grader: 1 tool_xy: 0 / 2 points" in html
     assert "8 of 8 hidden cases wrong; the first: tool_xy([" in html
     assert "Hz where" in html and "Hz was asked" in html and "no recorded run in your result" in html
     plots = len([t for t in re.findall(r"<img\b[^>]*>", html)

@@ -23,6 +23,7 @@ from grader.feedback.notebook import recorded
 from grader.scoring.verdict import LOCAL
 from snakekit.errors import CheckFailed
 from tests.conftest import need, need_program
+from tests.grader.grader_helpers import box_title
 from tests.lessons.test_forgot_return import exercises, groups
 from tests.lessons.test_no_solution import MISTAKES
 
@@ -73,7 +74,7 @@ def said_and_graded(course, lesson: str, student: str, gid: str) -> tuple[str, o
     errors = [o for o in cell.outputs if o.output_type == "error"]
     verdict = next(e for e in recorded(nb)[4] if e.grade_id == gid)
     page = (course / "feedback" / student / lesson / f"{lesson}.html").read_text()
-    at = page.index(f"Grader: {gid}:")
+    at = page.index(f"Grader: {box_title(course / 'source' / lesson / f'{lesson}.ipynb', gid)}:")
     shown = html.unescape(re.sub(r"<[^>]+>", " ", page[at:page.index("</div>", at)]))
     return (str(errors[0].evalue) if errors else ""), verdict, " ".join(shown.split())
 
