@@ -285,6 +285,8 @@ def with_local_check(sc: ExerciseScore, cell) -> ExerciseScore:
     0 of 6 right. Your notebook's check fails too: tool x is 331.5 m, expected 0.3315 m. Hint: millimetres?
     >>> print(with_local_check(ExerciseScore("ex01_1_planar_fk_test", 0.0, 3.0, "scored", "planar_fk returned a str"), c).message)
     planar_fk returned a str. Your notebook's check fails too: tool x is 331.5 m, expected 0.3315 m. Hint: millimetres?
+    >>> print(with_local_check(ExerciseScore("ex01_1_planar_fk_test", 0.0, 3.0, "scored", "f(1): tool x is 331.5 m, expected 0.3315 m."), c).message)
+    f(1): tool x is 331.5 m, expected 0.3315 m. Your notebook's check fails too: it says the same. Hint: millimetres?
     """
     err = next((o for o in (cell or {}).get("outputs", []) if o.get("output_type") == "error"), None)
     if err is None or err.get("ename") not in ("CheckFailed", "ShortcutError"):
@@ -300,6 +302,8 @@ def with_local_check(sc: ExerciseScore, cell) -> ExerciseScore:
     if said and hint and not said.endswith((".", "!", "?", ":", ")")):
         said += "."   # the check's sentence ends before its hint begins
     told = [part for part in (said, f"Hint: {hint}" if hint else "") if part and part.removeprefix("Hint: ") not in flat]
+    if told and said and said not in told:   # the grader's words are the check's: said once, its hint follows
+        told.insert(0, "it says the same.")
     if told and message.strip() and not message.rstrip().endswith((".", "!", "?", ":", ")")):
         message = message.rstrip() + "."   # the grader's sentence ends before the check's begins
     return dataclasses.replace(sc, message=" ".join([message, LOCAL + " ".join(told)] if told else [message]),

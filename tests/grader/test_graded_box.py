@@ -207,3 +207,40 @@ def test_a_composite_graded_with_the_lessons_own_part_says_each_detail_once(less
         if e.kind == "run":   # and why the arm made no run of it
             assert "the arm made no run of it: it starts with joint 1 at +0.1000 rad, away from home" in text, text
             assert "measured_" not in text and "in your result" not in text, text
+
+
+def _templated():
+    """The values a check names by a value of its case (``what=f"lag of joint {joint + 1}"``, where ``joint`` is one
+    of the case's values, as the test cell's hand-in helper names them)."""
+    out = []
+    for lesson, gid in EXERCISES:
+        source = _lesson(lesson)[0][gid]
+        w = wording(gid, source, handed_in_function(gid, source))
+        out += [(lesson, gid, p.template) for p in w.parts if p.template and w.params
+                and set(re.findall(r"[A-Za-z_]\w*", "".join(re.findall(r"\{([^{}]+)\}", p.template)))) <= set(w.params)]
+    return out
+
+
+TEMPLATED = _templated()
+
+
+@pytest.mark.parametrize("lesson, gid, template", TEMPLATED, ids=[g for _, g, _ in TEMPLATED])
+def test_a_value_the_check_names_by_its_case_is_named_by_the_hidden_case(lesson, gid, template):
+    """6.4's check says "lag of joint 3": graded, the lag is named by the hidden case's joint, not "lag of joint"."""
+    e = _expected(lesson, gid)
+    k = next(k for k, r in enumerate(e.results) if isinstance(r, dict))
+    said = score_exercise(gid, [_wrongs(r)[0] if isinstance(r, dict) else r for r in e.results], e, 1.0).message
+    name = eval(f"f{template!r}", {}, dict(zip(e.words().params, e.cases[k])))   # the check's own f-string
+    assert re.search(rf"{re.escape(name)}\b", said), f"{gid}: {name!r} not in {said}"
+
+
+def test_an_error_message_is_handed_in_whole_or_cut_at_a_sentence():
+    from snakekit.errors import LimitError
+    from snakekit.handin import decode_results, encode_results
+
+    one = ("joint 2 at t=0.100 s: velocity +52.6992 rad/s (limit +1.5000), beyond it from t=0.100 to 0.300 s "
+           "(3 points) ") * 8 + "Nothing was sent to the robot."
+    long = "A sentence about the trajectory's limits, said once. " * 60
+    got = decode_results(encode_results([LimitError(one), LimitError(long)]))
+    assert got[0] == f"LimitError: {one}"     # 700 characters: whole (it was cut at 500, mid-word)
+    assert got[1].endswith("said once. (the rest of the message left out)") and len(got[1]) < len(long)
