@@ -256,7 +256,8 @@ class Exercise:
             unit: the unit of every entry, or one per entry of a 1-D value ("m", "rad", "s").
             tol: absolute tolerance [unit]; rtol: relative tolerance.
             why: the reason for the tolerance; default "exact math" when ``tol`` is 0.
-            labels: names of the entries of a 1-D value ("x", "y", "heading").
+            labels: names of the entries of a 1-D value ("x", "y", "heading"), or of the columns of a 2-D one
+                ("time", "joint", "kind": a message names ``violations[0] time``, not ``violations[0, 0]``).
             mistakes: ``{hint: value}``: answers a known mistake would give; when ``got``
                 matches one, its hint is shown.
             array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
@@ -292,6 +293,8 @@ class Exercise:
         name = what
         if labels is not None and arr.ndim == 1:
             name = f"{what} {labels[i[0]]}"
+        elif labels is not None and arr.ndim == 2 and len(labels) == arr.shape[1]:   # a row's columns named
+            name = f"{what}[{int(i[0])}] {labels[i[1]]}"
         elif arr.ndim >= 1:
             name = f"{what}[{', '.join(str(int(k)) for k in i)}]"
         # Without a stated reason the check is exact math: 1e-9 relative, plus a tiny absolute
@@ -478,6 +481,12 @@ class waiting_for(contextlib.AbstractContextManager):
     >>> with waiting_for("6.3"):
     ...     sweep = task2_sweep()
     This cell waits for exercise 6.3: write it, run it, then run this cell again.
+    >>> try:
+    ...     with waiting_for("6.3"):
+    ...         raise ValueError("nothing was sent.")
+    ... except CheckFailed as e:
+    ...     print(e)
+    this cell uses your answer to exercise 6.3, and it stopped with ValueError: nothing was sent. Run exercise 6.3's check cell first: it says what is wrong.
     """
 
     def __init__(self, exercise: str):
@@ -494,6 +503,6 @@ class waiting_for(contextlib.AbstractContextManager):
             # check cell says what is wrong, in more words than this cell's error can
             raise _shorten(CheckFailed(
                 f"this cell uses your answer to exercise {self.exercise}, and it stopped with {kind.__name__}: "
-                f"{value}. Run exercise {self.exercise}'s check cell first: it says what is wrong.",
+                f"{str(value).rstrip('.')}. Run exercise {self.exercise}'s check cell first: it says what is wrong.",
                 _student_frames(tb))) from None
         return False

@@ -132,6 +132,8 @@ class Part:
             return self.what
         if self.labels is not None and ndim == 1 and index[0] < len(self.labels):
             return f"{self.what} {self.labels[index[0]]}"
+        if self.labels is not None and ndim == 2 and index[1] < len(self.labels):   # a row's column, by its name
+            return f"{self.what}[{int(index[0])}] {self.labels[index[1]]}"
         return f"{self.what}[{', '.join(str(int(k)) for k in index)}]"
 
 
