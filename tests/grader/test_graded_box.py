@@ -244,3 +244,39 @@ def test_an_error_message_is_handed_in_whole_or_cut_at_a_sentence():
     got = decode_results(encode_results([LimitError(one), LimitError(long)]))
     assert got[0] == f"LimitError: {one}"     # 700 characters: whole (it was cut at 500, mid-word)
     assert got[1].endswith("said once. (the rest of the message left out)") and len(got[1]) < len(long)
+
+
+def _labelled():
+    out = []
+    for lesson, gid in EXERCISES:
+        source = _lesson(lesson)[0][gid]
+        out += [(lesson, gid, p) for p in wording(gid, source, handed_in_function(gid, source)).parts if p.labels]
+    return out
+
+
+LABELLED = _labelled()
+
+
+@pytest.mark.parametrize("lesson, gid, part", LABELLED, ids=[f"{g}-{p.what}" for _, g, p in LABELLED])
+@pytest.mark.parametrize("rows", [0, 2], ids=["1-D", "rows"])
+def test_a_wrong_entry_is_named_by_its_label_and_unit_locally_and_graded(lesson, gid, part, rows):
+    """A check's ``labels`` name the entries of a value, or the columns of its rows (4.4: time, joint, kind):
+    "violations[0] time is 0.1 s, expected 0.2 s", the same words in the notebook and on the page."""
+    from snakekit import checks
+    from snakekit.errors import CheckFailed
+    from grader.scoring.score import _compare_case
+
+    w = wording(gid, _lesson(lesson)[0][gid])
+    shape = (rows, len(part.labels)) if rows else (len(part.labels),)
+    for column, label in enumerate(part.labels):
+        want = np.ones(shape)
+        got = want.copy()
+        got[(0, column) if rows else column] = 2.0
+        unit = part.unit_at((column,))
+        name = f"{part.what}[0] {label}" if rows else f"{part.what} {label}"
+        shown = f"is 2{' ' + unit if unit else ''}, expected 1{' ' + unit if unit else ''}"
+        graded = _compare_case(w, {"value": got}, {"value": want}, {"rtol": 1e-9, "atol": 1e-12})
+        assert f"{name} {shown}" in graded, graded
+        with pytest.raises(CheckFailed) as local:
+            checks.Exercise("9.9", "f").close(got, want, what=part.what, labels=part.labels, unit=part.unit)
+        assert f"{name} {shown}" in str(local.value), str(local.value)
