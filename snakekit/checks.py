@@ -51,7 +51,7 @@ import numpy as np
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import Returned, ReturnedNone, encode_results, fetch_cases
 from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
-from .watch import calls_to, forgot_return, returns_none
+from .watch import calls_to, forgot_return, raised_in, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "pose_mistakes",
            "quick", "waiting_for"]
@@ -349,7 +349,7 @@ class Exercise:
                     if isinstance(e, KeyboardInterrupt):
                         raise
                     results.append(e)
-                    if none.returned and fn is not student and _raised_in(e, fn):
+                    if none.returned and fn is not student and raised_in(e, fn):
                         # the test cell's own code stumbled on what the student's function gave back
                         results[-1] = Returned(self.name, none.returned)
                 if none:   # named as the forgotten `return` it is, whatever the wrapper made of the None
@@ -363,14 +363,6 @@ class Exercise:
         """Print that the checks passed (the last line of a test cell)."""
         _VERDICTS[self.number] = True
         print(f"exercise {self.number} {self.name}: {self.checked} check(s) passed" + (f"; {note}" if note else ""))
-
-
-def _raised_in(error: BaseException, fn) -> bool:
-    """Whether ``error`` was raised by a line of ``fn`` itself (its innermost frame is ``fn``'s)."""
-    tb = error.__traceback__
-    while tb is not None and tb.tb_next is not None:
-        tb = tb.tb_next
-    return tb is not None and tb.tb_frame.f_code is getattr(fn, "__code__", None)
 
 
 def _student_function(name: str):

@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 
-__all__ = ["calls_to", "forgot_return", "returns_none"]
+__all__ = ["calls_to", "forgot_return", "raised_in", "returns_none"]
 
 _RETURNS = {dis.opmap[name] for name in ("RETURN_VALUE", "RETURN_CONST") if name in dis.opmap}
 
@@ -80,6 +80,15 @@ def calls_to(fn):
 
     with _trace(code, on_call=note):
         yield calls
+
+
+def raised_in(error: BaseException, fn) -> bool:
+    """Whether ``error`` was raised by a line of ``fn`` itself (its innermost frame is ``fn``'s), not by a
+    function it called."""
+    tb = error.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    return tb is not None and tb.tb_frame.f_code is getattr(fn, "__code__", None)
 
 
 class _Returns(list):
