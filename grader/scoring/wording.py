@@ -61,6 +61,8 @@ def shown(value, most: int = 8) -> str:
     ('0.1649', '[1.266, 0.2843, -0.6266, 0.3641, 0.5]', '(0.12, 0.2073)')
     >>> shown(np.arange(23) / 10)
     '[0, 0.1, 0.2, ..., 2.2] (23 values)'
+    >>> shown(np.array([[0.235, -0.18, -1.194], [0.1, 0.2, 0.3], [0.163, 0.2144, 1.461]]))
+    '[[0.235, -0.18, -1.194], [0.1, 0.2, 0.3], [0.163, 0.2144, 1.461]]'
     >>> shown(np.zeros((23, 5)))
     '[[0, 0, 0, 0, 0], ..., [0, 0, 0, 0, 0]] (shape (23, 5))'
     """
@@ -80,7 +82,7 @@ def shown(value, most: int = 8) -> str:
             return open_ + ", ".join(items) + close
         return f"{open_}{', '.join(items[:3])}, ..., {items[-1]}{close} ({len(items)} values)"
     rows = [shown(r, most) for r in arr]
-    if arr.size <= most:
+    if arr.size <= 2 * most:   # three targets of (x, y, heading): whole
         return open_ + ", ".join(rows) + close
     return f"{open_}{rows[0]}, ..., {rows[-1]}{close} (shape {arr.shape})"
 
