@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import base64
 import html
+import re
 
 import nbformat
 
@@ -32,11 +33,13 @@ def _verdict_cell(ex, label: str, png: bytes | None = None):
     if png and ex.checks:
         for c in ex.checks:
             message = message.replace(c.message, "")
-        message = " ".join(message.split())
+        message = " ".join(re.sub(r"(^|\s)[.;,](?=\s|$)", " ", message).split())   # no stop left of a line moved
         note = rows_note(ex.message)
+        said = [c.message for c in ex.checks]
         rows = (f"<tr><td colspan='3'><i>{html.escape(note)}</i></td></tr>" if note else "") + "".join(
             f"<tr><td>{html.escape(c.name)}</td><td>{c.fraction * c.weight:.2f} / {c.weight:g}</td>"
-            f"<td>{html.escape(c.message)}</td></tr>" for c in ex.checks)
+            f"<td>{html.escape(c.message if c.message not in said[:k] else 'as above.')}</td></tr>"
+            for k, c in enumerate(ex.checks))
     body = (f"<div class='grader-verdict' style='border-left:4px solid {'#2a2' if ex.score >= ex.max_score else '#c33'};"
             f"padding:4px 10px;margin:6px 0'><b>Grader: {html.escape(label)}: {points(ex.score)} / {ex.max_score:g} points"
             f"</b><br>{html.escape(message)}"

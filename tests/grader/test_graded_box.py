@@ -280,3 +280,22 @@ def test_a_wrong_entry_is_named_by_its_label_and_unit_locally_and_graded(lesson,
         with pytest.raises(CheckFailed) as local:
             checks.Exercise("9.9", "f").close(got, want, what=part.what, labels=part.labels, unit=part.unit)
         assert f"{name} {shown}" in str(local.value), str(local.value)
+
+
+MOTIONS = [(lesson, gid) for lesson, gid in EXERCISES
+           if Reference.load(REFERENCES / f"{lesson}.npz").exercises[gid]["kind"] != "values"]
+
+
+@pytest.mark.parametrize("lesson, gid", MOTIONS, ids=[g for _, g in MOTIONS])
+def test_a_motion_of_another_size_says_not_judged_once(lesson, gid):
+    """A sweep that ignores its arguments (500 goals wherever): every check but the count is "not judged", said
+    once in the box, not once per check."""
+    from grader.feedback.notebook import _verdict_cell
+
+    e = _expected(lesson, gid)
+    wrong = [{n: (np.arange(500) / 10.0 if "times" in n else np.zeros((500, 5))) for n in r} if isinstance(r, dict)
+             else r for r in e.results]
+    s = score_exercise(gid, wrong, e, 7.0)
+    cell = _verdict_cell(s, "x", b"\x89PNG")
+    text = " ".join(html.unescape(re.sub(r"<[^>]+>", " ", cell.outputs[0]["data"]["text/html"])).split())
+    assert s.message.count("not judged") >= 1 and text.count("not judged") == 1, text
