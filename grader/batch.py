@@ -50,6 +50,7 @@ from grader.scoring.references import course_references, expected
 from grader.sandbox.runner import Runner
 from grader.scoring.verdict import SubmissionResult, Verdicts, busy_machine, real_time
 from grader.scoring.score import read_handin
+from grader.scoring.wording import signatures
 from grader.course.restore import release_order, restore
 
 #: The student id the instructor notebook runs under in its sandbox (never a row of the gradebook).
@@ -278,7 +279,9 @@ class Grader:
                     handins[gid] = read_handin(raw)
             try:
                 return expected(self.a.reference, self.draw, handins, where=where,
-                                sources={g: c.source for g, c in a.tests.items()})
+                                sources={g: c.source for g, c in a.tests.items()},
+                                signatures=signatures(c.source for nb in nbs.values() for c in nb.cells
+                                                      if c.cell_type == "code"))
             except InstructorReferenceError as e:
                 detail = "" if outcome.returncode == 0 else f" (its sandbox ended with {outcome.returncode}" + \
                     (", timed out" if outcome.timed_out else "") + ")"

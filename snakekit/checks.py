@@ -49,9 +49,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
-from .handin import ReturnedNone, encode_results, fetch_cases
+from .handin import Returned, ReturnedNone, encode_results, fetch_cases
 from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
-from .watch import calls_to, forgot_return, returns_none
+from .watch import calls_to, forgot_return, raised_in, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "live_off",
            "pose_mistakes", "quick", "waiting_for"]
@@ -217,6 +217,8 @@ class Exercise:
         """The arguments of a call, as a message shows them."""
         if where is not None:
             return str(where)
+        if not args:
+            return "no arguments (its defaults)"
         def shown(a):   # an object without a readable repr (a ControlPanel, a robot) by its type
             text = repr(a)
             return f"a {type(a).__name__}" if text.startswith("<") and " at 0x" in text else text
@@ -264,7 +266,8 @@ class Exercise:
             unit: the unit of every entry, or one per entry of a 1-D value ("m", "rad", "s").
             tol: absolute tolerance [unit]; rtol: relative tolerance.
             why: the reason for the tolerance; default "exact math" when ``tol`` is 0.
-            labels: names of the entries of a 1-D value ("x", "y", "heading").
+            labels: names of the entries of a 1-D value ("x", "y", "heading"), or of the columns of a 2-D one
+                ("time", "joint", "kind": a message names ``violations[0] time``, not ``violations[0, 0]``).
             mistakes: ``{hint: value}``: answers a known mistake would give; when ``got``
                 matches one, its hint is shown.
             array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
@@ -300,6 +303,8 @@ class Exercise:
         name = what
         if labels is not None and arr.ndim == 1:
             name = f"{what} {labels[i[0]]}"
+        elif labels is not None and arr.ndim == 2 and len(labels) == arr.shape[1]:   # a row's columns named
+            name = f"{what}[{int(i[0])}] {labels[i[1]]}"
         elif arr.ndim >= 1:
             name = f"{what}[{', '.join(str(int(k)) for k in i)}]"
         # Without a stated reason the check is exact math: 1e-9 relative, plus a tiny absolute
@@ -345,14 +350,18 @@ class Exercise:
             warnings.simplefilter("ignore")  # a warning on stderr would fail the cell in nbgrader
             if forbid:
                 stack.enter_context(globals()["forbid"](*forbid, what=what or self.name))
+            student = _student_function(self.name)
             for args in cases:
                 try:
-                    with returns_none(_student_function(self.name)) as none:
+                    with returns_none(student) as none:
                         results.append(fn(*args))
                 except BaseException as e:  # noqa: BLE001 - a student's SystemExit is a result too
                     if isinstance(e, KeyboardInterrupt):
                         raise
                     results.append(e)
+                    if none.returned and fn is not student and raised_in(e, fn):
+                        # the test cell's own code stumbled on what the student's function gave back
+                        results[-1] = Returned(self.name, none.returned)
                 if none:   # named as the forgotten `return` it is, whatever the wrapper made of the None
                     results[-1] = ReturnedNone(self.name)
         path = Path(folder) / f"{grade_id}.npz"
@@ -474,6 +483,12 @@ class waiting_for(contextlib.AbstractContextManager):
     >>> with waiting_for("6.3"):
     ...     sweep = task2_sweep()
     This cell waits for exercise 6.3: write it, run it, then run this cell again.
+    >>> try:
+    ...     with waiting_for("6.3"):
+    ...         raise ValueError("nothing was sent.")
+    ... except CheckFailed as e:
+    ...     print(e)
+    this cell uses your answer to exercise 6.3, and it stopped with ValueError: nothing was sent. Run exercise 6.3's check cell first: it says what is wrong.
     """
 
     def __init__(self, exercise: str):
@@ -490,6 +505,6 @@ class waiting_for(contextlib.AbstractContextManager):
             # check cell says what is wrong, in more words than this cell's error can
             raise _shorten(CheckFailed(
                 f"this cell uses your answer to exercise {self.exercise}, and it stopped with {kind.__name__}: "
-                f"{value}. Run exercise {self.exercise}'s check cell first: it says what is wrong.",
+                f"{str(value).rstrip('.')}. Run exercise {self.exercise}'s check cell first: it says what is wrong.",
                 _student_frames(tb))) from None
         return False

@@ -7,6 +7,8 @@ input also derive from the matching built-in (``ValueError``, ``OSError``...), s
 
 from __future__ import annotations
 
+import re
+
 
 class SnakekitError(Exception):
     """Base class of every error snakekit raises on purpose."""
@@ -142,6 +144,22 @@ def wrap_lines(text: str, width: int) -> list[str]:
         out += textwrap.wrap(line, width, subsequent_indent=indent, break_on_hyphens=False,
                              drop_whitespace=True) or [""]
     return out
+
+
+def whole_sentences(text: str, most: int = 2000) -> str:
+    """``text`` whole, or, past ``most`` characters, up to the end of its last sentence that fits (a
+    message is never cut mid-word): the sentences left out are said to be left out. Text without a
+    sentence's end to cut at stays whole.
+
+    >>> whole_sentences("One. Two words here. Three.", 20)
+    'One. (the rest of the message left out)'
+    >>> whole_sentences("velocity +52.6992 rad/s (limit +1.5000), beyond", 20)
+    'velocity +52.6992 rad/s (limit +1.5000), beyond'
+    """
+    if len(text) <= most:
+        return text
+    ends = [m.end() for m in re.finditer(r"[.!?](?=\s)", text[:most])]
+    return text[:ends[-1]] + " (the rest of the message left out)" if ends else text
 
 
 class CheckFailed(SnakekitError, AssertionError):

@@ -16,7 +16,7 @@ import struct
 
 import numpy as np
 
-from .errors import FileFormatError, InputTypeError
+from .errors import FileFormatError, InputTypeError, whole_sentences
 
 __all__ = ["encode_cases", "decode_cases", "fetch_cases", "encode_results", "decode_results"]
 
@@ -78,28 +78,37 @@ def _recv(s, size: int) -> bytes:
     return b"".join(chunks)
 
 
-class ReturnedNone:
+class Returned:
+    """A case at which the student's function ``name`` returned a ``what`` (a type's name) the test cell's
+    own code could not use (it stumbled on it): handed in as ``"returned <what> from <name>"``, so the
+    grader names the wrong kind of result, not an error of the student's function."""
+
+    def __init__(self, name: str, what: str):
+        self.name, self.what = name, what
+
+
+class ReturnedNone(Returned):
     """A case at which the student's function ``name`` returned None (a forgotten ``return``),
     whatever the code that called it made of that: handed in as ``"returned None from <name>"``."""
 
     def __init__(self, name: str):
-        self.name = name
+        super().__init__(name, "None")
 
 
 def encode_results(results, *, array: bool = False) -> bytes:
     """One entry per case: ``<k>/value`` (an array), ``<k>/<name>`` (a dict's arrays), or
     ``<k>/__error__`` (an exception raised, ``"<type>: <message>"``; a result that is not numbers
-    is one too: ``"returned None"``, ``"returned str"``; a :class:`ReturnedNone`:
-    ``"returned None from <name>"``). With ``array`` (the exercise asks for a numpy array, as its
+    is one too: ``"returned None"``, ``"returned str"``; a :class:`Returned`:
+    ``"returned None from <name>"``, ``"returned tuple from <name>"``). With ``array`` (the exercise asks for a numpy array, as its
     check's ``close(..., array=True)``), a Python list or tuple where a result is expected is one
     too (``"returned list"``): the grader then judges as the local check does."""
     arrays = {"__cases__": np.array(len(results))}
     for k, r in enumerate(results):
-        if isinstance(r, ReturnedNone):
-            arrays[f"{k}/__error__"] = np.array(f"returned None from {r.name}")
+        if isinstance(r, Returned):
+            arrays[f"{k}/__error__"] = np.array(f"returned {r.what} from {r.name}")
             continue
         if isinstance(r, BaseException):
-            arrays[f"{k}/__error__"] = np.array(f"{type(r).__name__}: {str(r)[:500]}")
+            arrays[f"{k}/__error__"] = np.array(f"{type(r).__name__}: {whole_sentences(str(r))}")
             continue
         parts = r if isinstance(r, dict) else {"value": r}
         entry = {}

@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 
-__all__ = ["calls_to", "forgot_return", "returns_none"]
+__all__ = ["calls_to", "forgot_return", "raised_in", "returns_none"]
 
 _RETURNS = {dis.opmap[name] for name in ("RETURN_VALUE", "RETURN_CONST") if name in dis.opmap}
 
@@ -82,6 +82,22 @@ def calls_to(fn):
         yield calls
 
 
+def raised_in(error: BaseException, fn) -> bool:
+    """Whether ``error`` was raised by a line of ``fn`` itself (its innermost frame is ``fn``'s), not by a
+    function it called."""
+    tb = error.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    return tb is not None and tb.tb_frame.f_code is getattr(fn, "__code__", None)
+
+
+class _Returns(list):
+    """The calls that returned None (:func:`returns_none`); ``returned``: the type of the last value returned
+    that was not None ("" if none was)."""
+
+    returned = ""
+
+
 @contextlib.contextmanager
 def returns_none(fn):
     """Count the calls of ``fn`` that returned None (a ``return`` forgotten, or not reached) while
@@ -94,14 +110,18 @@ def returns_none(fn):
     ...     return [area(w, 2.0)][0] is None
     >>> with returns_none(area) as seen:
     ...     _ = wrapper(3.0)
-    >>> len(seen)
-    1
+    >>> len(seen), seen.returned
+    (1, '')
     """
-    code, seen = getattr(fn, "__code__", None), []
+    code, seen = getattr(fn, "__code__", None), _Returns()
 
     def note(frame, value):   # a return while an exception unwinds the frame is at another opcode
-        if value is None and frame.f_code.co_code[frame.f_lasti] in _RETURNS:
+        if frame.f_code.co_code[frame.f_lasti] not in _RETURNS:
+            return
+        if value is None:
             seen.append(frame.f_code.co_name)
+        else:
+            seen.returned = type(value).__name__
 
     if code is None:
         yield seen

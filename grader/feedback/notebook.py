@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import base64
 import html
+import re
 
 import nbformat
 
@@ -19,15 +20,29 @@ from grader.feedback.plot import verdict_plot
 from grader.feedback.scrub import hidden_lines, machine_paths
 from grader.feedback.scrub import scrub_cell as _scrub
 from grader.markup import visible_part
+from grader.scoring.rerun import rows_note
+from grader.scoring.wording import points, title
 
 
 def _verdict_cell(ex, label: str, png: bytes | None = None):
+    """The grader's box under a test cell: its points, its message, and (with a plot) a row per check, each
+    detail said once: in its row, not again in the message above."""
     png = png or verdict_plot(ex)
-    rows = "".join(f"<tr><td>{html.escape(c.name)}</td><td>{c.fraction * c.weight:.2f} / {c.weight:g}</td>"
-                   f"<td>{html.escape(c.message)}</td></tr>" for c in ex.checks) if png else ""
+    message = ex.message
+    rows = ""
+    if png and ex.checks:
+        for c in ex.checks:
+            message = message.replace(c.message, "")
+        message = " ".join(re.sub(r"(^|\s)[.;,](?=\s|$)", " ", message).split())   # no stop left of a line moved
+        note = rows_note(ex.message)
+        said = [c.message for c in ex.checks]
+        rows = (f"<tr><td colspan='3'><i>{html.escape(note)}</i></td></tr>" if note else "") + "".join(
+            f"<tr><td>{html.escape(c.name)}</td><td>{c.fraction * c.weight:.2f} / {c.weight:g}</td>"
+            f"<td>{html.escape(c.message if c.message not in said[:k] else 'as above.')}</td></tr>"
+            for k, c in enumerate(ex.checks))
     body = (f"<div class='grader-verdict' style='border-left:4px solid {'#2a2' if ex.score >= ex.max_score else '#c33'};"
-            f"padding:4px 10px;margin:6px 0'><b>Grader: {html.escape(label)}: {ex.score:g} / {ex.max_score:g} points"
-            f"</b><br>{html.escape(ex.message)}"
+            f"padding:4px 10px;margin:6px 0'><b>Grader: {html.escape(label)}: {points(ex.score)} / {ex.max_score:g} points"
+            f"</b><br>{html.escape(message)}"
             + (f"<table style='font-size:90%'>{rows}</table>" if rows else "") + "</div>")
     outputs = [nbformat.v4.new_output("display_data", data={"text/html": body})]
     if png:
@@ -80,7 +95,7 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
             if index == stopped:
                 cells.append(_stopped_cell(timeout))
             if gid in by_id:
-                cells.append(_verdict_cell(by_id[gid], gid, plots.get(gid)))
+                cells.append(_verdict_cell(by_id[gid], title(gid, test_sources[gid]), plots.get(gid)))
             continue
         cell = nbformat.from_dict(dict(cell))
         if cell.cell_type == "code":
@@ -95,14 +110,16 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
             cells.append(nbformat.v4.new_markdown_cell(f"**Comment from your teacher:** {html.escape(comments[gid])}"))
     for gid, ex in by_id.items():
         if gid not in seen:
-            cells.append(nbformat.v4.new_markdown_cell(f"**Test cell `{gid}` was missing from your notebook.**"))
-            cells.append(_verdict_cell(ex, gid, plots.get(gid)))
-    head = head or (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{result.score:g} / {result.max_score:g}**"
+            name = title(gid, test_sources.get(gid, ""))
+            cells.append(nbformat.v4.new_markdown_cell(f"**The test cell of exercise {name} was missing from your "
+                                                       "notebook.**"))
+            cells.append(_verdict_cell(ex, name, plots.get(gid)))
+    head = head or (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{points(result.score)} / {result.max_score:g}**"
             + (f" ({result.status})" if result.status != "graded" else "") + "\n\n"
             + (f"{result.detail}\n\n" if result.detail else "")
             + "| exercise | points | |\n|---|---|---|\n"
-            + "".join(f"| `{e.grade_id}` | {e.score:g} / {e.max_score:g} | {'ok' if e.score >= e.max_score else 'see below'} |\n"
-                      for e in result.exercises))
+            + "".join(f"| {title(e.grade_id, test_sources.get(e.grade_id, ''))} | {points(e.score)} / {e.max_score:g} | "
+                      f"{'ok' if e.score >= e.max_score else 'see below'} |\n" for e in result.exercises))
     out = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(head)] + cells)
     for i, cell in enumerate(out.cells):  # the same page whenever it is written again
         cell["id"] = f"cell-{i}"

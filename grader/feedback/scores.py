@@ -26,6 +26,7 @@ import nbformat
 from grader.course.gradebook import SubmissionScores, class_rows, read_class_csv, scores_of, write_csv
 from grader.feedback.notebook import build, recorded
 from grader.feedback.exporter import page_exporter
+from grader.scoring.wording import points, title
 
 #: The page's ``<meta>`` that holds the stamp of the gradebook's numbers it shows.
 STAMP = "snakekit-gradebook"
@@ -61,17 +62,19 @@ def _duration(seconds: float) -> str:
     return " ".join(p for p in parts if p)
 
 
-def head(numbers: SubmissionScores, status: str, detail: str) -> str:
+def head(numbers: SubmissionScores, status: str, detail: str, tests: dict | None = None) -> str:
     """The page's first cell: the score every place shows, each exercise's points (a score the teacher
-    set and extra credit said so), and what a late penalty took."""
+    set and extra credit said so), and what a late penalty took. Each exercise is named as its lesson names
+    it (``tests``: the test cells' sources by grade id, :func:`grader.scoring.wording.title`)."""
     rows = []
     for g in numbers.exercises:
         note = "ok" if g.score >= g.max_score else "see below"
         if g.manual is not None:
-            note += f"; set by your teacher (the grader gave {g.auto or 0:g})"
+            note += f"; set by your teacher (the grader gave {points(g.auto or 0)})"
         if g.extra:
             note += f"; {g.extra:+g} extra from your teacher"
-        rows.append(f"| `{g.grade_id}` | {g.score:g} / {g.max_score:g} | {note} |\n")
+        name = title(g.grade_id, (tests or {}).get(g.grade_id, ""))
+        rows.append(f"| {name} | {points(g.score)} / {g.max_score:g} | {note} |\n")
     late = ""
     if numbers.late_penalty:
         when = f" ({_duration(numbers.seconds_late)} after the due date)" if numbers.seconds_late > 0 else ""
@@ -79,7 +82,7 @@ def head(numbers: SubmissionScores, status: str, detail: str) -> str:
                 f"{numbers.late_penalty:g} point(s) off the {round(numbers.raw, 4):g} your exercises scored, "
                 f"so your score is {numbers.score:g}.\n\n")
     return (f"# Feedback: {numbers.assignment}\n\nStudent: `{numbers.student}`. "
-            f"Score: **{numbers.score:g} / {numbers.max_score:g}**"
+            f"Score: **{points(numbers.score)} / {numbers.max_score:g}**"
             + (f" ({status})" if status != "graded" else "") + "\n\n" + late
             + (f"{detail}\n\n" if detail else "")
             + "| exercise | points | |\n|---|---|---|\n" + "".join(rows))
@@ -121,7 +124,7 @@ def page(nb, numbers: SubmissionScores, notebook: str, tests: dict[str, str], *,
     comments = {cell: text for where, cell, text in numbers.comments if where == notebook}
     return build(nb, student=numbers.student, assignment=numbers.assignment, result=result,
                  test_sources=tests, stopped=stopped, timeout=timeout, plots=plots, comments=comments,
-                 hide_paths=hide_paths, head=head(numbers, status, detail))
+                 hide_paths=hide_paths, head=head(numbers, status, detail, tests))
 
 
 def html(feedback_nb, numbers: SubmissionScores) -> str:

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import nbformat
 
+from snakekit.errors import whole_sentences
+
 from grader.feedback.mathml import math_html
 from grader.markup import HIDDEN, first_hidden_line
 
@@ -64,7 +66,7 @@ def cell_error(cell) -> tuple[str, str, str] | None:
     if err is None:
         return None
     ename = str(err.get("ename", "an error"))[:80]
-    evalue = _ANSI.sub("", str(err.get("evalue", "")))[:600]
+    evalue = whole_sentences(_ANSI.sub("", str(err.get("evalue", ""))))
     lines = str(cell.get("source", "")).splitlines()
     first_hidden = first_hidden_line(lines)
     tb = _ANSI.sub("", "\n".join(map(str, err.get("traceback", []))))

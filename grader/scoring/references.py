@@ -140,13 +140,14 @@ class Reference:
 
 
 def expected(ref: Reference, batch: Draw, handins: dict[str, list], *, where: str = "the instructor notebook",
-             sources: dict | None = None) -> dict[str, Expected]:
+             sources: dict | None = None, signatures: dict | None = None) -> dict[str, Expected]:
     """The batch's expected results from the instructor's hand-ins at ``batch``'s cases.
 
     Raises :class:`InstructorReferenceError` (the batch cannot be graded) when the instructor solution did
     not hand in a result for every case, handed in what the reference does not describe, or does
     not score full marks against itself. ``sources``: the test cells' sources by grade id (the
-    feedback names the function each hands in).
+    feedback names the function each hands in); ``signatures``: the parameters of the notebook's functions
+    (:func:`grader.scoring.wording.signatures`: the feedback names each argument as the function does).
     """
     out = {}
     for gid, cases in batch.cases.items():
@@ -179,7 +180,7 @@ def expected(ref: Reference, batch: Draw, handins: dict[str, list], *, where: st
             raise InstructorReferenceError(f"{bad}; record it again (`python -m grader.scoring.references {batch.assignment}`)") from None
         source = (sources or {}).get(gid, "")
         handed = handed_in_function(gid, source)
-        e = Expected(gid, kind, list(cases), results, tol, handed, wording(gid, source, handed) if source else None)
+        e = Expected(gid, kind, list(cases), results, tol, handed, wording(gid, source, handed, signatures) if source else None)
         own = score_exercise(gid, results, e, 1.0)
         if own.score < 1.0:
             raise InstructorReferenceError(f"{where}: {gid} scores {own.score:g} of 1 against itself at the cases of seed "

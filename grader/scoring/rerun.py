@@ -24,6 +24,7 @@ import nbformat
 
 from grader.markup import without_solution_markers
 from grader.scoring.score import ExerciseScore
+from grader.scoring.wording import points
 
 __all__ = ["needed", "with_answers", "better"]
 
@@ -93,6 +94,25 @@ def with_answers(nbs: dict, source: dict, cells: set) -> dict:
     return out
 
 
+#: How :func:`better` starts the message of an exercise graded with the lesson's own parts.
+OWN = re.compile(r"graded with the lesson's own (.+?) in place of yours: .*?\(with yours: ([\d.]+), the run below\)")
+
+
+def rows_note(message: str) -> str:
+    """What a page says above the rows of checks of an exercise graded with the lesson's own parts: the rows
+    are the run with the student's own (the points come from the other run), "" for any other exercise.
+
+    >>> rows_note("graded with the lesson's own 6.1 in place of yours: 7 of 7 (with yours: 3.98, the run below). x")
+    "The rows below describe the run with your own 6.1 (it scored 3.98); the points above come from the run with the lesson's own 6.1."
+    """
+    m = OWN.match(message)
+    if not m:
+        return ""
+    parts, mine = m.groups()
+    return (f"The rows below describe the run with your own {parts} (it scored {mine}); the points above come from "
+            f"the run with the lesson's own {parts}.")
+
+
 def better(first: ExerciseScore, second: ExerciseScore | None, replaced: list[str]) -> ExerciseScore:
     """The better of the two runs' scores of one exercise. The second run's checks and curves
     are never shown (they came from a kernel that held the instructor's code): only its score,
@@ -101,8 +121,8 @@ def better(first: ExerciseScore, second: ExerciseScore | None, replaced: list[st
         return first
     parts = sorted({exercise(c) for c in replaced})
     names = " and ".join(parts)
-    line = (f"graded with the lesson's own {names} in place of yours: {second.score:g} of {second.max_score:g} "
-            f"(with yours: {first.score:g}, the run below)." if parts else
-            f"graded in a run of its own, as your notebook's time ran out before this cell had run: {second.score:g} "
-            f"of {second.max_score:g} (in your notebook's run: {first.score:g}, the run below).")
+    line = (f"graded with the lesson's own {names} in place of yours: {points(second.score)} of {second.max_score:g} "
+            f"(with yours: {points(first.score)}, the run below)." if parts else
+            f"graded in a run of its own, as your notebook's time ran out before this cell had run: "
+            f"{points(second.score)} of {second.max_score:g} (in your notebook's run: {points(first.score)}, the run below).")
     return dataclasses.replace(first, score=second.score, message=f"{line} {first.message}")

@@ -27,6 +27,7 @@ from snakekit.checks import _fmt_diff, _fmt_pair
 from snakekit.errors import SnakekitError
 from snakekit.handin import decode_results
 from snakekit.watch import forgot_return
+from snakekit.model import SPEC
 from snakekit.trajectory import Trajectory
 
 from grader.scoring import compare
@@ -152,29 +153,34 @@ def handed_in_function(grade_id: str, source: str) -> str:
 
 
 def call(name: str | Wording, args) -> str:
-    """The case as a call a student recognises: ``sweep_times(4, 10.0)``; where the test cell's hand-in builds
-    the student's arguments from the case's (a run from a sweep's values), the case's values:
-    ``estimate_lag at the hidden case (150, 10.0, 3, 0.07, 2)``."""
+    """The case as a call a student recognises, each argument named as their function names it:
+    ``sweep_times(points=4, rate=10)`` (:meth:`grader.scoring.wording.Wording.call`)."""
     w = name if isinstance(name, Wording) else Wording(name)
-    if w.params:
-        return f"{w.function} at the hidden case ({', '.join(describe(a, 48) for a in args)})"
-    return f"{w.function}({', '.join(describe(a, 48) for a in args)})"
+    return w.call(args)
 
 
-def explain_error(text: str, name: str = "your function") -> str:
+def explain_error(text: str, name: str = "your function", returns: str = "") -> str:
     """What went wrong in the student's function ``name`` at a case, in plain words; a forgotten
-    ``return`` in the words the notebook's own check uses (:func:`snakekit.watch.forgot_return`).
+    ``return`` in the words the notebook's own check uses (:func:`snakekit.watch.forgot_return`); a result the
+    test cell could not use (``"returned tuple from task2_sweep"``) as the wrong kind of result (``returns``:
+    the kind the exercise asks for, as its check says).
 
     >>> explain_error("returned None from task1", "graded_task1")[:52]
     'task1 returned None: did you forget `return`? A func'
     >>> explain_error("NameError: name 'sweep_times' is not defined", "sweep_times")[:59]
     'sweep_times is not defined: its answer cell did not run to '
+    >>> explain_error("returned tuple from task2_sweep", "graded_run", "a snakekit.Trajectory")
+    'task2_sweep should return a snakekit.Trajectory, got tuple.'
     >>> explain_error("NameError: name 'helper' is not defined", "sweep_times")
     "your function raised NameError: name 'helper' is not defined"
     """
-    m = re.match(r"returned None from (\w+)$", text)
-    if m:
-        return forgot_return(m.group(1))
+    m = re.match(r"returned (\w+) from (\w+)$", text)
+    if m and m.group(1) == "None":
+        return forgot_return(m.group(2))
+    if m:   # the test cell's code stumbled on what the function gave back: a result of the wrong kind
+        what, fn = m.groups()
+        return f"{fn} should return {returns}, got {what}." if returns else \
+            f"{fn} returned a {what}, which is not the kind of result the exercise asks for (see its check)."
     m = re.match(r"returned (\w+)(?: for (\w+))?$", text)
     if m:
         what, part = m.groups()
@@ -215,15 +221,20 @@ def _raised_as_expected(w: Wording, args, got, want: str) -> tuple[bool, str]:
     etype = want.split(":", 1)[0]
     if isinstance(got, str) and got.split(":", 1)[0] == etype:
         return True, ""
-    did = explain_error(got, w.function) if isinstance(got, str) else "your function returned a result"
+    did = explain_error(got, w.function, _kind(w)) if isinstance(got, str) else "your function returned a result"
     return False, f"{call(w, args)} must raise {etype} (the exercise asks for it there); {did}"
 
 
-def _compare_case(w: Wording, got: dict, want: dict, tol: dict) -> str:
+def _kind(w: Wording) -> str:
+    """The kind of result the exercise asks for, as its check names it ("a snakekit.Trajectory"); "" if it names none."""
+    return f"a {w.returns}" if w.returns else ""
+
+
+def _compare_case(w: Wording, got: dict, want: dict, tol: dict, case=()) -> str:
     """Why a case's results differ from the instructor's ("" when they agree), worded as the notebook's
     check words it: the value's name and unit, the numbers with the check's digits (:mod:`snakekit.checks`)."""
     for name, e in want.items():
-        part = w.part(name)
+        part = w.part(name, case)
         if name not in got:
             return f"your result has no {part.what}."
         g, e = np.asarray(got[name]), np.asarray(e)
@@ -256,12 +267,12 @@ def _score_values(gid, handin, expected: Expected, max_score) -> ExerciseScore:
         if isinstance(want, str):
             right, msg = _raised_as_expected(w, args, got, want)
         elif isinstance(got, str):
-            right, msg = False, f"{call(w, args)}: {explain_error(got, w.function)}"
+            right, msg = False, f"{call(w, args)}: {explain_error(got, w.function, _kind(w))}"
         elif rule is not None:  # judged by a property (grader.scoring.rules), not closeness
             right, msg = rule(args, got, tol)
             msg = f"{call(w, args)}: {msg}" if msg else ""
         else:
-            msg = _compare_case(w, got, want, tol)
+            msg = _compare_case(w, got, want, tol, args)
             right, msg = not msg, f"{call(w, args)}: {msg}" if msg else ""
         ok.append(right)
         if msg:
@@ -294,6 +305,27 @@ def _trajectory(d: dict, times: str, positions: str, what: str) -> Trajectory:
         raise ValueError(f"the {what} is not a valid trajectory: {e}") from e
 
 
+#: How far from where the arm stands a trajectory may start [rad] (the robot interface's ``start_tolerance``).
+START_TOLERANCE = 0.05
+
+
+def refused(cmd: Trajectory) -> str:
+    """Why the arm made no run of the commanded trajectory ``cmd``: the reason the robot interface refuses
+    one (it breaks the limits; it does not start where the arm stands, at home), in a student's words.
+
+    >>> print(refused(Trajectory([0.0, 0.1], [[0.09, 0, 0, 0, 0], [0.0, 0, 0, 0, 0]])))
+    the arm made no run of it: it starts with joint 1 at +0.0900 rad, away from home where the arm stands, and the arm refuses a trajectory that does not start where it is (nothing was sent).
+    """
+    if cmd.limit_violations():
+        why = "it breaks the joint limits, and the arm refuses such a trajectory (nothing was sent)"
+    else:
+        gap = np.abs(cmd.positions[0] - np.asarray(SPEC.home))
+        j = int(gap.argmax())
+        why = (f"it starts with joint {j + 1} at {cmd.positions[0, j]:+.4f} rad, away from home where the arm "
+               "stands, and the arm refuses a trajectory that does not start where it is (nothing was sent)") if gap[j] > START_TOLERANCE else "the arm refused it"
+    return f"the arm made no run of it: {why}."
+
+
 def _motion_checks(got: dict, want: dict, kind: str, tol: dict):
     """The weighted checks of one case: counts and limits of its own, shape against the reference."""
     names = ("times", "positions") if "times" in want else ("commanded_times", "commanded_positions")
@@ -319,21 +351,25 @@ def _motion_checks(got: dict, want: dict, kind: str, tol: dict):
     if kind == "run":
         ref_meas = Trajectory(want["measured_times"], want["measured_positions"])
         try:
-            meas = _trajectory(got, "measured_times", "measured_positions", "recorded run")
+            meas = _trajectory(got, "measured_times", "measured_positions", "recorded run") \
+                if {"measured_times", "measured_positions"} <= set(got) else None
         except ValueError as e:
             checks.append(compare.Check("run vs reference", 0.0, str(e).rstrip(".") + ".", 2.0))
         else:
-            checks.append(compare.tracking(meas, ref_meas, max_tol=tol["max"], rms_tol=tol["rms"],
-                                           what="measured angle", name="run vs reference", weight=2.0))
-            curves["measured"] = (meas.times, meas.positions)
-            curves["reference measured"] = (ref_meas.times, ref_meas.positions)
+            if meas is None:
+                checks.append(compare.Check("run vs reference", 0.0, refused(cmd), 2.0))
+            else:
+                checks.append(compare.tracking(meas, ref_meas, max_tol=tol["max"], rms_tol=tol["rms"],
+                                               what="measured angle", name="run vs reference", weight=2.0))
+                curves["measured"] = (meas.times, meas.positions)
+                curves["reference measured"] = (ref_meas.times, ref_meas.positions)
     if len(cmd) != len(ref_cmd) and abs(cmd.duration - ref_cmd.duration) > 0.01 * ref_cmd.duration:
         # another number of points over another time: not the sweep this case asks for (a stored
         # one returned whatever the arguments); only its count is judged, nothing earns for being
         # safe, smooth or at home by accident
         asked = f"{len(cmd)} points over {cmd.duration:.4g} s where {len(ref_cmd)} over {ref_cmd.duration:.4g} s " \
                 "were asked"
-        checks = [c if c.name == "points" else compare.Check(c.name, 0.0, f"{c.name}: not judged: {asked}.", c.weight)
+        checks = [c if c.name == "points" else compare.Check(c.name, 0.0, f"not judged: {asked}.", c.weight)
                   for c in checks]
     return checks, curves
 
@@ -352,7 +388,7 @@ def _score_motion(gid, handin, expected: Expected, max_score) -> ExerciseScore:
         per_case.append((case_kind(args, want), len(rows)))
         try:
             if isinstance(got, str):
-                raise ValueError(explain_error(got, w.function))
+                raise ValueError(explain_error(got, w.function, _kind(w)))
             checks, c = _motion_checks(got, want, expected.kind, tol)
         except ValueError as e:
             rows.append((where, f"{where}: {e}"))
@@ -377,7 +413,7 @@ def _score_motion(gid, handin, expected: Expected, max_score) -> ExerciseScore:
         checks.append(_cases_check([ok for ok, _ in raised], [m for ok, m in raised if not ok], "raises as asked"))
     total = sum(c.weight for c in checks)
     fraction = sum(c.weight * c.fraction for c in checks) / total if total else 0.0
-    failed = [c.message for c in checks if not c.passed]
+    failed = list(dict.fromkeys(c.message for c in checks if not c.passed))   # each said once
     if good and errors:
         failed.insert(0, f"{len(errors)} of {len(rows)} hidden cases gave no trajectory; the first: {errors[0]}")
     msg = " ".join(failed) if failed else "every check passed in every hidden case."

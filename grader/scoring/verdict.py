@@ -24,6 +24,7 @@ from grader.course.assignment import read_inside
 from grader.hooks import NO_HOOKS, BatchHooks
 from grader.scoring.compare import GUESSES
 from grader.scoring.score import ExerciseScore, read_handin, score_exercise
+from grader.scoring.wording import title
 
 
 @dataclass(frozen=True)
@@ -284,6 +285,8 @@ def with_local_check(sc: ExerciseScore, cell) -> ExerciseScore:
     0 of 6 right. Your notebook's check fails too: tool x is 331.5 m, expected 0.3315 m. Hint: millimetres?
     >>> print(with_local_check(ExerciseScore("ex01_1_planar_fk_test", 0.0, 3.0, "scored", "planar_fk returned a str"), c).message)
     planar_fk returned a str. Your notebook's check fails too: tool x is 331.5 m, expected 0.3315 m. Hint: millimetres?
+    >>> print(with_local_check(ExerciseScore("ex01_1_planar_fk_test", 0.0, 3.0, "scored", "f(1): tool x is 331.5 m, expected 0.3315 m."), c).message)
+    f(1): tool x is 331.5 m, expected 0.3315 m. Your notebook's check fails too: it says the same. Hint: millimetres?
     """
     err = next((o for o in (cell or {}).get("outputs", []) if o.get("output_type") == "error"), None)
     if err is None or err.get("ename") not in ("CheckFailed", "ShortcutError"):
@@ -296,7 +299,11 @@ def with_local_check(sc: ExerciseScore, cell) -> ExerciseScore:
         message = GUESSES.sub("", message)
         checks = tuple(dataclasses.replace(c, message=GUESSES.sub("", c.message)) for c in checks)
     flat = " ".join(message.split())
+    if said and hint and not said.endswith((".", "!", "?", ":", ")")):
+        said += "."   # the check's sentence ends before its hint begins
     told = [part for part in (said, f"Hint: {hint}" if hint else "") if part and part.removeprefix("Hint: ") not in flat]
+    if told and said and said not in told:   # the grader's words are the check's: said once, its hint follows
+        told.insert(0, "it says the same.")
     if told and message.strip() and not message.rstrip().endswith((".", "!", "?", ":", ")")):
         message = message.rstrip() + "."   # the grader's sentence ends before the check's begins
     return dataclasses.replace(sc, message=" ".join([message, LOCAL + " ".join(told)] if told else [message]),
@@ -340,13 +347,13 @@ def _clock_stop(cell, cell_timeout: float | None, timeout: float | None) -> str 
     """Why a test cell a clock interrupted handed nothing in, in a student's words; None if no clock stopped it.
 
     >>> from nbformat.v4 import new_code_cell, new_output
-    >>> c = new_code_cell("ex.hand_in('ex1_test', tool_xy)", execution_count=4)
+    >>> c = new_code_cell("ex = checks.Exercise('1', 'tool_xy'); ex.hand_in('ex1_test', tool_xy)", execution_count=4)
     >>> c.metadata["nbgrader"] = {"grade_id": "ex1_test"}
     >>> c.outputs = [new_output("error", ename="KeyboardInterrupt", evalue="", traceback=[
     ...     "Cell In[4], line 1, in <module>", "Cell In[2], line 3, in tool_xy(q)", "KeyboardInterrupt: "])]
     >>> print(_clock_stop(c, 15, 120))  # doctest: +NORMALIZE_WHITESPACE
     nothing was handed in: the cell was stopped after the per-cell limit of 15 s, while your `tool_xy` ran
-    (exercise ex1_test). That usually means an endless loop: a `while` whose condition never becomes false,
+    (exercise 1 tool_xy). That usually means an endless loop: a `while` whose condition never becomes false,
     or a loop whose counter is never advanced. Run the cell in your notebook: if it does not finish, stop it
     (Kernel > Interrupt) and look at the loops of `tool_xy`.
     """
@@ -364,7 +371,8 @@ def _clock_stop(cell, cell_timeout: float | None, timeout: float | None) -> str 
     fn = f" of `{frames[-1]}`" if frames else ""
     gid = cell.get("metadata", {}).get("nbgrader", {}).get("grade_id", "")
     ran = f"while your `{frames[-1]}` ran" if frames else "while this test cell ran"
-    return (f"nothing was handed in: {limit}, {ran}" + (f" (exercise {gid})" if gid else "") + ". "
+    return (f"nothing was handed in: {limit}, {ran}" + (f" (exercise {title(gid, cell.get('source', ''))})" if gid else "")
+            + ". "
             + LOOP_HINT.format(where=fn))
 
 

@@ -14,7 +14,91 @@ import ast
 import re
 from dataclasses import dataclass, field
 
-__all__ = ["Part", "Wording", "wording"]
+import numpy as np
+
+__all__ = ["Part", "Wording", "wording", "title", "points", "shown", "signatures"]
+
+#: A test cell's ``checks.Exercise("6.3", "task2_sweep")``: the exercise's number and the student's function.
+EXERCISE = re.compile(r"checks\.Exercise\(\s*[\"']([\w.]+)[\"']\s*,\s*[\"'](\w+)[\"']")
+
+
+def title(grade_id: str, source: str = "") -> str:
+    """An exercise as its lesson names it (its test cell's ``checks.Exercise``), never by the test cell's id.
+
+    >>> title("ex06_3_task2_test", 'ex = checks.Exercise("6.3", "task2_sweep")'), title("ex04_4_limit_check_test")
+    ('6.3 task2_sweep', '4.4 limit_check')
+    """
+    m = EXERCISE.search(source or "")
+    if m:
+        return f"{m.group(1)} {m.group(2)}"
+    m = re.match(r"ex0*(\d+)_(\d+)_(\w+?)(?:_test)?$", grade_id)
+    return f"{m.group(1)}.{m.group(2)} {m.group(3)}" if m else grade_id
+
+
+def points(x: float) -> str:
+    """A score as a student reads it: at most 2 decimals.
+
+    >>> points(2.6666667), points(3.0), points(1.3636), points(3.9773)
+    ('2.67', '3', '1.36', '3.98')
+    """
+    return f"{round(float(x), 2) + 0.0:g}"
+
+
+def _num(x) -> str:
+    """One number, to 4 significant digits (an integer as it is)."""
+    if isinstance(x, (bool, np.bool_)):
+        return str(bool(x))
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    return f"{float(x):.4g}"
+
+
+def shown(value, most: int = 8) -> str:
+    """An argument as a message shows it: numbers to 4 significant digits, a short array whole (a 5-angle ``q``),
+    a long one as its first and last entries with its brackets closed and its size said.
+
+    >>> shown(0.16485351659594227), shown(np.array([1.2664, 0.28429, -0.6266, 0.3641, 0.5])), shown((0.12, 0.2073))
+    ('0.1649', '[1.266, 0.2843, -0.6266, 0.3641, 0.5]', '(0.12, 0.2073)')
+    >>> shown(np.arange(23) / 10)
+    '[0, 0.1, 0.2, ..., 2.2] (23 values)'
+    >>> shown(np.array([[0.235, -0.18, -1.194], [0.1, 0.2, 0.3], [0.163, 0.2144, 1.461]]))
+    '[[0.235, -0.18, -1.194], [0.1, 0.2, 0.3], [0.163, 0.2144, 1.461]]'
+    >>> shown(np.zeros((23, 5)))
+    '[[0, 0, 0, 0, 0], ..., [0, 0, 0, 0, 0]] (shape (23, 5))'
+    """
+    if isinstance(value, str):
+        return repr(value)
+    if not isinstance(value, (np.ndarray, list, tuple)):
+        return _num(value) if isinstance(value, (int, float, np.number, bool, np.bool_)) else repr(value)
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biuf":
+        return repr(value)[:60]
+    open_, close = ("(", ")") if isinstance(value, tuple) else ("[", "]")
+    if arr.ndim == 0:
+        return _num(arr.item())
+    if arr.ndim == 1:
+        items = [_num(x) for x in arr.tolist()]
+        if len(items) <= most:
+            return open_ + ", ".join(items) + close
+        return f"{open_}{', '.join(items[:3])}, ..., {items[-1]}{close} ({len(items)} values)"
+    rows = [shown(r, most) for r in arr]
+    if arr.size <= 2 * most:   # three targets of (x, y, heading): whole
+        return open_ + ", ".join(rows) + close
+    return f"{open_}{rows[0]}, ..., {rows[-1]}{close} (shape {arr.shape})"
+
+
+def signatures(sources) -> dict:
+    """The parameters of every function the notebook cells ``sources`` define: name -> their names (the
+    student's function as the lesson writes it, ``distance_mm(q, target)``)."""
+    out = {}
+    for source in sources:
+        for m in re.finditer(r"^def (\w+)\((.*?)\)\s*(?:->[^:\n]*)?:", source, re.M | re.S):
+            try:
+                fn = ast.parse(f"def f({m.group(2)}): pass").body[0]
+            except SyntaxError:
+                continue
+            out[m.group(1)] = tuple(a.arg for a in fn.args.posonlyargs + fn.args.args)
+    return out
 
 
 @dataclass(frozen=True)
@@ -25,6 +109,18 @@ class Part:
     what: str
     unit: str | tuple = ""
     labels: tuple | None = None
+    template: str = field(default="", repr=False)
+
+    def at(self, values: dict) -> "Part":
+        """The part at a hidden case whose named values are ``values``: a name the check makes of a value of
+        its case ("lag of joint {joint + 1}") filled in from the case ("lag of joint 3")."""
+        if not self.template:
+            return self
+        try:
+            what = re.sub(r"\{([^{}]+)\}", lambda m: _number(_evaluate(m.group(1), values)), self.template)
+        except (KeyError, ValueError, SyntaxError):
+            return self
+        return Part(what, self.unit, self.labels)
 
     def unit_at(self, index: tuple) -> str:
         """The unit of the entry at ``index`` (the last axis picks a unit of a per-entry tuple)."""
@@ -38,6 +134,8 @@ class Part:
             return self.what
         if self.labels is not None and ndim == 1 and index[0] < len(self.labels):
             return f"{self.what} {self.labels[index[0]]}"
+        if self.labels is not None and ndim == 2 and index[1] < len(self.labels):   # a row's column, by its name
+            return f"{self.what}[{int(index[0])}] {self.labels[index[1]]}"
         return f"{self.what}[{', '.join(str(int(k)) for k in index)}]"
 
 
@@ -55,14 +153,40 @@ class Wording:
     function: str
     params: tuple | None = None
     parts: tuple = field(default=())
+    args: tuple | None = None
+    given: tuple = ()
+    returns: str = ""
 
-    def part(self, name: str) -> Part:
+    def values(self, case) -> dict:
+        """A hidden case's values by the names the test cell gives them (its hand-in helper's arguments)."""
+        return dict(zip(self.params or (), case))
+
+    def call(self, case) -> str:
+        """A hidden case as the student's function takes it, each argument named as the function names it:
+        ``distance_mm(q=[0.1, 0.2, 0.3, 0.4, 0.5], target=(0.12, 0.2))``. Where the test cell's helper builds
+        an argument from the case's values (a run from a sweep's), the call names it, and what it was built
+        of follows: ``estimate_lag(run, joint=2) on the run of points=195, rate=10, ...``."""
+        if not self.params:
+            names = self.args if self.args and len(self.args) >= len(case) else ()
+            return f"{self.function}({', '.join(_labelled(names, case))})"
+        values = self.values(case)
+        if not self.given:   # the test cell calls the function in a way of its own: the case's values, named
+            return f"{self.function} at the hidden case {', '.join(_labelled(self.params, case))}"
+        names = self.args if self.args and len(self.args) >= len(self.given) else \
+            tuple(g or "a value it builds" for g in self.given)
+        inner = [f"{n}={shown(values[g])}" if g in values else n for n, g in zip(names, self.given)]
+        built = [f"{p}={shown(v)}" for p, v in values.items() if p not in self.given]
+        made = [n for n, g in zip(names, self.given) if g not in values]
+        of = f" on the {made[0]} of " if len(made) == 1 else " at "
+        return f"{self.function}({', '.join(inner)})" + (of + ", ".join(built) if built else "")
+
+    def part(self, name: str, case=()) -> Part:
         """The check's words for the result ``name`` (``value``: the function's own value): the compared
         value whose words share one with the name (``goal_times``: "send times"), else the name in words,
         in the unit every compared value of the check has (if they have one)."""
         if name == "value":   # the words every compared value of the check shares ("Jacobian"), and its unit
             if len(self.parts) <= 1:
-                return self.parts[0] if self.parts else Part("the result")
+                return self.parts[0].at(self.values(case)) if self.parts else Part("the result")
             words = [p.what.split() for p in self.parts]
             common = [w[0] for w in zip(*words) if len(set(w)) == 1]
             units = {p.unit for p in self.parts}
@@ -70,9 +194,38 @@ class Wording:
         words = set(name.lower().split("_"))
         for p in self.parts:
             if words & set(re.findall(r"[a-z]+", p.what.lower())):
-                return p
+                return p.at(self.values(case))
         units = {p.unit for p in self.parts}
         return Part(f"the {name.replace('_', ' ')}", units.pop() if len(units) == 1 else "")
+
+
+def _labelled(names, case) -> list:
+    return [f"{n}={shown(v)}" if n else shown(v) for n, v in zip(tuple(names) + (None,) * len(case), case)]
+
+
+def _number(x) -> str:
+    return str(int(x)) if float(x).is_integer() else f"{float(x):.4g}"
+
+
+def _evaluate(text: str, values: dict):
+    """A placeholder of a check's f-string (``joint + 1``) at a case's ``values``: names, numbers, + - * only."""
+    def value(node):
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)):
+            return node.value
+        if isinstance(node, ast.Name):
+            return float(values[node.id])
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult)):
+            a, b = value(node.left), value(node.right)
+            return a + b if isinstance(node.op, ast.Add) else a - b if isinstance(node.op, ast.Sub) else a * b
+        raise ValueError(text)
+    return value(ast.parse(text, mode="eval").body)
+
+
+def _template(node) -> str:
+    """An f-string's text with each placeholder's expression kept (``lag of joint {joint + 1}``); "" for a literal."""
+    if not isinstance(node, ast.JoinedStr):
+        return ""
+    return "".join(v.value if isinstance(v, ast.Constant) else "{" + ast.unparse(v.value) + "}" for v in node.values)
 
 
 def _text(node) -> str | None:
@@ -118,31 +271,35 @@ def _parts(tree: ast.Module) -> tuple:
             labels = None
             if isinstance(kw.get("labels"), ast.Tuple):
                 labels = tuple(_text(e) or "" for e in kw["labels"].elts)
-            part = Part(what, _unit(kw["unit"]) if "unit" in kw else "", labels)
+            part = Part(what, _unit(kw["unit"]) if "unit" in kw else "", labels, _template(kw["what"]))
             if part not in parts:
                 parts.append(part)
     return tuple(parts)
 
 
-def _params(tree: ast.Module, handed: str, student: str) -> tuple | None:
+def _params(tree: ast.Module, handed: str, student: str) -> tuple:
     """The hand-in helper's argument names, or None when it passes the case on to the student's function as
-    it is (``sample_move(q_start, q_end, duration, rate)``, ``task2_sweep(*case)``)."""
+    it is (``sample_move(q_start, q_end, duration, rate)``, ``task2_sweep(*case)``); and how the helper calls
+    the student's function: per argument, the helper's argument it passes (None: a value the helper builds)."""
     helper = next((n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == handed), None)
     if helper is None or handed == student:
-        return None
+        return None, ()
     names = [a.arg for a in helper.args.args]
+    given = ()
     for node in ast.walk(helper):
         if isinstance(node, ast.Call) and getattr(node.func, "id", None) == student:
             given = [a.id if isinstance(a, ast.Name) else ("*" + a.value.id if isinstance(a, ast.Starred)
                      and isinstance(a.value, ast.Name) else None) for a in node.args]
             if given == names or (helper.args.vararg and given == ["*" + helper.args.vararg.arg]):
-                return None
-    return tuple(names) if names else None
+                return None, ()
+            given = tuple(g if g in names else None for g in given)
+    return (tuple(names) if names else None), given
 
 
-def wording(grade_id: str, source: str, handed: str = "") -> Wording:
+def wording(grade_id: str, source: str, handed: str = "", signatures: dict | None = None) -> Wording:
     """How the messages of the exercise whose test cell is ``source`` name things (``handed``: the function
-    its ``hand_in`` names). A cell that cannot be read keeps the names it hands in.
+    its ``hand_in`` names; ``signatures``: the parameters of the notebook's functions, :func:`signatures`).
+    A cell that cannot be read keeps the names it hands in.
 
     >>> w = wording("ex9_1_f_test", 'def graded_f(a, b):\\n    return {"goal_times": f(run(a), b)}\\n'
     ...             'ex = checks.Exercise("9.1", "f")\\nex.hand_in("ex9_1_f_test", graded_f)\\n'
@@ -150,10 +307,13 @@ def wording(grade_id: str, source: str, handed: str = "") -> Wording:
     >>> w.function, w.params, w.part("goal_times")
     ('f', ('a', 'b'), Part(what='send times', unit='s', labels=None))
     """
-    m = re.search(r"checks\.Exercise\(\s*[\"'][\w.]+[\"']\s*,\s*[\"'](\w+)[\"']", source)
-    student = m.group(1) if m else handed
+    m = EXERCISE.search(source)
+    student = m.group(2) if m else handed
     try:
         tree = ast.parse(source)
     except SyntaxError:
         return Wording(student or handed)
-    return Wording(student or handed, _params(tree, handed, student), _parts(tree))
+    params, given = _params(tree, handed, student)
+    m = re.search(r"isinstance\(\s*\w+\s*,\s*([\w.]+)\s*\)", source)
+    return Wording(student or handed, params, _parts(tree), (signatures or {}).get(student), given,
+                   m.group(1) if m else "")

@@ -116,3 +116,12 @@ def read_csv(path: Path) -> dict[str, dict]:
 
 def dump(obj) -> str:
     return json.dumps(obj, indent=1, default=str)
+
+
+def box_title(notebook: Path, gid: str) -> str:
+    """How a feedback page names the exercise of test cell ``gid`` of ``notebook`` (its lesson's words)."""
+    from grader.scoring.wording import title
+
+    nb = nbformat.read(notebook, as_version=4)
+    source = next((c.source for c in nb.cells if c.get("metadata", {}).get("nbgrader", {}).get("grade_id") == gid), "")
+    return title(gid, source)

@@ -23,7 +23,7 @@ import pytest
 from grader import markup
 from grader.scoring.references import REFERENCES, Reference
 from grader.scoring.score import Expected, handed_in_function, score_exercise
-from grader.scoring.wording import wording
+from grader.scoring.wording import signatures, wording
 from snakekit import SPEC
 from tests.conftest import need
 
@@ -42,6 +42,12 @@ def _lesson(lesson: str):
     own += [n.value for src in tests.values() for n in ast.walk(ast.parse(markup.visible_part(src)))
             if isinstance(n, ast.Constant) and isinstance(n.value, str)]
     return tests, set(re.findall(r"[A-Za-z_]\w*", " ".join(own)))
+
+
+def lesson_signatures(lesson: str) -> dict:
+    """The parameters of every function the lesson's notebook defines (the grader reads them as a batch does)."""
+    nb = need("nbformat").read(COURSE / "source" / lesson / f"{lesson}.ipynb", as_version=4)
+    return signatures(c.source for c in nb.cells if c.cell_type == "code")
 
 
 EXERCISES = [(lesson, gid) for lesson in LESSONS for gid in sorted(_lesson(lesson)[0])]
@@ -106,7 +112,8 @@ def graded_messages(lesson: str, gid: str, *, each: bool = False) -> list[str]:
     cases = runpy.run_path(str(COURSE / "cases" / f"{lesson}.py"))[gid](np.random.default_rng(5), SPEC)
     results = [_want(gid, meta["kind"], meta["outputs"], args) for args in cases]
     handed = handed_in_function(gid, source)
-    e = Expected(gid, meta["kind"], cases, results, meta["tolerances"], handed, wording(gid, source, handed))
+    e = Expected(gid, meta["kind"], cases, results, meta["tolerances"], handed,
+                 wording(gid, source, handed, lesson_signatures(lesson)))
     out = []
     if each:
         for name in results[0]:

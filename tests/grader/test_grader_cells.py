@@ -59,12 +59,12 @@ def test_an_endless_loop_in_one_exercise_leaves_the_others_their_points(tmp_path
     assert re.search(r"a cell ran longer than 15 s and was interrupted", loop["detail"]), loop["detail"]
     # what the student reads (the page) and the TA sees (formgrader shows the autograded notebook's verdict)
     said = ("0 / 2 points nothing was handed in: the cell was stopped after the per-cell limit of 15 s, while your "
-            "`tool_xy` ran (exercise ex1_tool_xy_test). That usually means an endless loop: a `while` whose condition "
+            "`tool_xy` ran (exercise 1 tool_xy). That usually means an endless loop: a `while` whose condition "
             "never becomes false, or a loop whose counter is never advanced. Run the cell in your notebook: if it "
             "does not finish, stop it (Kernel > Interrupt) and look at the loops of `tool_xy`.")
     page = html.unescape(re.sub(r"<[^>]+>", " ", (course / "feedback" / "loop" / ASSIGNMENT / f"{ASSIGNMENT}.html")
                                 .read_text()))
-    assert said in " ".join(page.split()), page[page.find("ex1_tool_xy_test: "):][:600]
+    assert said in " ".join(page.split()), page[page.find("1 tool_xy: "):][:600]
     assert "KeyboardInterrupt: ." not in page
     ran = nbformat.read(course / "autograded" / "loop" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
     cell = next(c for c in ran.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex1_tool_xy_test")

@@ -73,7 +73,7 @@ def test_a_ta_gets_grades_csv_and_feedback(graded):
 def test_a_wrong_case_is_named_with_its_call_and_numbers(graded):
     course, _ = graded
     html = (course / "feedback" / "dan" / LESSON / f"{LESSON}.html").read_text()
-    assert "Grader: ex06_1_sweep_times_test: 0 / 2 points" in html or "Grader: ex06_1_sweep_times_test: 0." in html
+    assert "Grader: 6.1 sweep_times: 0 / 2 points" in html or "Grader: 6.1 sweep_times: 0." in html
     assert "hidden cases wrong; the first: sweep_times(" in html and "expected" in html and "tolerance" in html
 
 
@@ -89,14 +89,14 @@ def test_a_slip_in_61_is_graded_again_with_the_lessons_own_61_and_the_feedback_s
 def test_an_untouched_notebook_is_told_what_is_missing(graded):
     course, _ = graded
     html = (course / "feedback" / "eve" / LESSON / f"{LESSON}.html").read_text()
-    assert "Grader: ex06_1_sweep_times_test: 0 / 2 points" in html
+    assert "Grader: 6.1 sweep_times: 0 / 2 points" in html
     assert "hidden cases wrong; the first: sweep_times(" in html and "your function raised" in html
 
 
 def test_task2_feedback_plots_the_run_against_the_reference(graded):
     course, _ = graded
     html = (course / "feedback" / "ana" / LESSON / f"{LESSON}.html").read_text()
-    assert "Grader: ex06_3_task2_test:" in html and "every check passed in every hidden case" in html
+    assert "Grader: 6.3 task2_sweep:" in html and "every check passed in every hidden case" in html
     assert any('src="data:image/png;base64,' in t and 'alt="No description has been provided for this image"' in t
                for t in re.findall(r"<img\b[^>]*>", html))
 
@@ -144,5 +144,5 @@ def test_lesson01_patching_numpy_and_the_checks_scores_0_for_that_exercise(grade
     test = next(c for c in ran.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex01_1_planar_fk_test")
     assert not [o for o in test.outputs if o.output_type == "error"]
     html = (course / "feedback" / "mal" / LESSON01 / f"{LESSON01}.html").read_text()
-    assert "Grader: ex01_1_planar_fk_test: 0 / 4 points" in html
+    assert "Grader: 1.1 planar_fk: 0 / 4 points" in html
     assert "hidden cases wrong; the first: planar_fk(" in html

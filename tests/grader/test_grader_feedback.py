@@ -127,9 +127,9 @@ def test_a_stopped_notebooks_page_keeps_its_outputs_up_to_the_stopped_cell(grade
     loop_cell = text.index("while True")
     assert before < loop_cell < note  # the note follows the cell that was stopped
     assert page.count("stopped here") == 1
-    assert "Grader: ex1_tool_xy_test: 2 / 2 points" in page
+    assert "Grader: 1 tool_xy: 2 / 2 points" in page
     # the test cell after it never ran: the student is told why
-    assert "Grader: ex2_sweep_test: 0 / 4 points" in page and "nothing was handed in" in page
+    assert "Grader: 2 my_sweep: 0 / 4 points" in page and "nothing was handed in" in page
     ran = nbformat.read(course / "autograded" / "loop" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
     stopped = [i for i, c in enumerate(ran.cells) if c.cell_type == "code" and "while True" in c.source][0]
     after = [c for c in ran.cells[stopped + 1:] if c.cell_type == "code"]
@@ -195,7 +195,7 @@ def test_nbgrader_generate_feedback_writes_the_graders_pages_with_the_tas_scores
     assert r.returncode == 0, r.stderr[-3000:]
     page = _page(course, "edited")
     assert "Score: <strong>4.5 / 7</strong> (tests restored)" in page  # 3 from the grader + 1.5 by hand
-    assert "Grader: ex2_sweep_test: 1.5 / 4 points" in page
+    assert "Grader: 2 my_sweep: 1.5 / 4 points" in page
     assert "Your teacher set the points to 1.5 (the grader gave 4)" in page
     assert "Comment from your teacher:</strong> Put the check back." in page
     assert "BEGIN HIDDEN TESTS" not in page and not [line for line in _secret_lines() if line in page]
@@ -316,6 +316,6 @@ def test_formgraders_autograde_and_feedback_buttons_give_the_graders_results(tmp
     assert "the check is gone" not in test.source   # the TA sees the released test, which ran
     page = _page(course, "edited")
     assert "Score: <strong>5 / 7</strong> (tests restored)" in page
-    assert "Grader: ex2_sweep_test: 2 / 4 points" in page and "Your teacher set the points to 2" in page
+    assert "Grader: 2 my_sweep: 2 / 4 points" in page and "Your teacher set the points to 2" in page
     assert "BEGIN HIDDEN TESTS" not in page and not [line for line in _secret_lines() if line in page]
     _loads_nothing(page)

@@ -228,7 +228,7 @@ def test_a_hub_student_fetches_the_safe_page(week):
     fetched = list((week["home"] / ASSIGNMENT / "feedback").glob(f"*/{ASSIGNMENT}.html"))
     assert len(fetched) == 1
     safe = (week["course"] / "feedback" / "erin" / ASSIGNMENT / f"{ASSIGNMENT}.html").read_bytes()
-    assert fetched[0].read_bytes() == safe and b"Grader: ex1_tool_xy_test: 2 / 2 points" in safe
+    assert fetched[0].read_bytes() == safe and b"Grader: 1 tool_xy: 2 / 2 points" in safe
     assert b"t / (t[-1] / sweeps)" not in safe  # the instructor's solution stays out
 
 

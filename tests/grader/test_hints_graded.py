@@ -23,6 +23,7 @@ from grader.feedback.notebook import recorded
 from grader.scoring.verdict import LOCAL
 from snakekit.errors import CheckFailed
 from tests.conftest import need, need_program
+from tests.grader.grader_helpers import box_title
 from tests.lessons.test_forgot_return import exercises, groups
 from tests.lessons.test_no_solution import MISTAKES
 
@@ -73,7 +74,7 @@ def said_and_graded(course, lesson: str, student: str, gid: str) -> tuple[str, o
     errors = [o for o in cell.outputs if o.output_type == "error"]
     verdict = next(e for e in recorded(nb)[4] if e.grade_id == gid)
     page = (course / "feedback" / student / lesson / f"{lesson}.html").read_text()
-    at = page.index(f"Grader: {gid}:")
+    at = page.index(f"Grader: {box_title(course / 'source' / lesson / f'{lesson}.ipynb', gid)}:")
     shown = html.unescape(re.sub(r"<[^>]+>", " ", page[at:page.index("</div>", at)]))
     return (str(errors[0].evalue) if errors else ""), verdict, " ".join(shown.split())
 
@@ -107,7 +108,12 @@ def test_a_mistake_the_notebooks_check_names_gets_the_same_hint_graded(graded, l
     # the grader says what the check said: its message (the visible case it fails at) and its hint
     assert re.sub(r"^exercise [\w.]+ \w+: ", "", message) in graded and hint in graded and words in graded, \
         f"{gid}: the check said {said!r}; graded: {graded!r}"
-    assert graded in page, f"{gid}: the page shows {page!r}, not the verdict {graded!r}"
+    # the page says all of it, each detail once: a check's words in its row (a box with rows of checks) or in the
+    # message above, and the notebook's check's words and hint
+    parts = [" ".join(c.message.split()) for c in verdict.checks if not c.passed] + \
+        [re.sub(r"^exercise [\w.]+ \w+: ", "", message), hint]
+    missing = [p for p in parts if p and page.count(p) != 1]
+    assert not missing, f"{gid}: the page shows {page!r}, where {missing[0]!r} should be once"
     if hint:   # ...and no hint of its own that names another mistake
         others = [h for h in " ".join([graded, *(c.message for c in verdict.checks)]).split("Hint: ")[1:]
                   if not h.startswith(hint)]

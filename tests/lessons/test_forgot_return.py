@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import copy_course, need, need_program
+from tests.grader.grader_helpers import box_title
 
 REPO = Path(__file__).resolve().parents[2]
 LESSONS = sorted(p.name for p in (REPO / "course" / "source").iterdir() if (p / f"{p.name}.ipynb").exists())
@@ -119,11 +120,11 @@ def graded(tmp_path_factory):
 
 
 def graded_message(course: Path, student: str, lesson: str, gid: str) -> str:
-    """What the feedback page says for ``gid``: the text after "Grader: <gid>: x / y points"."""
+    """What the feedback page says for ``gid``: the text after "Grader: <exercise>: x / y points"."""
     page = (course / "feedback" / student / lesson / f"{lesson}.html").read_text()
     text = html.unescape(re.sub(r"<[^>]+>", " ", page))
     text = " ".join(text.split())
-    at = text.index(f"Grader: {gid}:")
+    at = text.index(f"Grader: {box_title(course / 'source' / lesson / f'{lesson}.ipynb', gid)}:")
     return text[at:at + 1500]
 
 

@@ -461,6 +461,10 @@ MISTAKES = {
          "    times = np.arange(int(round(duration * 100)) + 1) / 100\n"
          "    return snakekit.Trajectory(times, q_start + np.outer(quintic(duration, times), np.asarray(q_end) - q_start))",
          "the rate looks like 100 Hz"),
+        ("ex04_3_sample_10hz_test", "def sample_move(q_start, q_end, duration, rate=10.0):\n"
+         "    times = np.arange(int(duration * rate) + 1) / rate\n"
+         "    return snakekit.Trajectory(times, q_start + np.outer(quintic(duration, times), np.asarray(q_end) - q_start))",
+         "one goal short: int() cuts 4.6 goal periods down to 4 (round gives 5)"),
         ("ex04_4_limit_check_test", "def limit_violations(trajectory):\n    return np.array([])",
          "an empty result has shape (0, 3)"),
         ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(p) > spec.upper", "p > spec.upper"),
