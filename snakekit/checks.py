@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
-from .handin import Returned, ReturnedNone, encode_results, fetch_cases
+from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
 from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
 from .watch import calls_to, forgot_return, raised_in, returns_none
 
@@ -57,22 +57,6 @@ __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "fo
            "pose_mistakes", "quick", "waiting_for"]
 
 _HERE = os.path.abspath(__file__)
-
-
-def quick() -> bool:
-    """True when long runs should shrink: ``SNAKEKIT_QUICK=1`` (or the suite's ``SNAKEKIT_TEST=1``)."""
-    return any(os.environ.get(v, "").lower() not in ("", "0", "false", "no")
-               for v in ("SNAKEKIT_QUICK", "SNAKEKIT_TEST"))
-
-
-def live_off() -> str | None:
-    """Why a lesson's live part (a ROS master, a node in real time) is left out here, or None: while the
-    grader runs the notebook (it grades what needs no live master), and when long runs shrink (:func:`quick`)."""
-    if os.environ.get("SNAKEKIT_CASES"):
-        return "a graded run leaves the live arm out (the grade comes from the exercises, which need no ROS master)"
-    if quick():
-        return "quick mode leaves the live arm out"
-    return None
 
 
 def _shorten(exc: BaseException) -> BaseException:
