@@ -80,6 +80,34 @@ def graded_classes(tmp_path_factory):
     return graded
 
 
+@pytest.fixture(scope="session")
+def graded_slips(tmp_path_factory):
+    """``lesson -> graded course folder``: a lesson's known mistakes (tests/grader/test_hints_graded.py's
+    ``packed``) and its forgotten returns (tests/lessons/test_forgot_return.py's ``returnless``) handed in
+    together and graded in one batch of ``snakekit grade`` (:func:`grader.course.fairness.grade_students`) on
+    its first use in this test process: one batch start and one instructor run per lesson for both files, where
+    each had its own. The students' names differ between the two (``group*`` and ``slip*``), and each file
+    reads only its own; under `make test` both files' tests of a lesson join one xdist group (``slipsNN``)."""
+    done = {}
+
+    def graded(lesson: str):
+        if lesson not in done:
+            from grader.course import fairness
+            from tests.grader.test_hints_graded import packed
+            from tests.lessons.test_forgot_return import returnless
+
+            mistakes, returns = packed(lesson)[0], returnless(lesson)[0]
+            assert not set(mistakes) & set(returns)
+            course, seconds, _ = fairness.grade_students(lesson, {**mistakes, **returns},
+                                                         tmp_path_factory.mktemp(f"slips{lesson[:2]}"))
+            print(f"\n{lesson}: {len(mistakes)} notebooks of known mistakes and {len(returns)} of forgotten returns "
+                  f"graded in {seconds:.0f} s")
+            done[lesson] = course
+        return done[lesson]
+
+    return graded
+
+
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that nothing listens on right now."""
     with socket.socket() as s:

@@ -662,7 +662,12 @@ def _probe(nb):
     import nbformat
 
     nb.cells.insert(0, nbformat.v4.new_code_cell(
-        "import sys, os\nprint('preloaded:', 'mujoco' in sys.modules, 'pinocchio' in sys.modules, 'uid', os.getuid())"))
+        "import sys, os\nprint('preloaded:', 'mujoco' in sys.modules, 'pinocchio' in sys.modules, 'uid', os.getuid())\n"
+        # the server's preloaded objects are frozen (gc.freeze): the notebook's own garbage is still collected
+        # by the collector on its own, as in a fresh kernel
+        "class _Loop:\n    freed = 0\n    def __del__(self):\n        _Loop.freed += 1\n"
+        "for _ in range(20000):\n    _loop = _Loop()\n    _loop.me = _loop\n"
+        "print('loops freed:', _Loop.freed > 0)"))
 
 
 def _grade_in_process(course, *, warm: bool, monkeypatch):
@@ -713,8 +718,8 @@ def test_warm_and_fresh_sandboxes_give_the_same_grades(tmp_path, monkeypatch):
     assert set(used[True].values()) == {True} and set(used[False].values()) == {False}
     sandbox_uid = __import__("pwd").getpwnam("snakekit-grader").pw_uid if os.geteuid() == 0 else os.getuid()
     want_uid = sandbox_uid if os.geteuid() == 0 else 0  # without root: uid 0 inside the user namespace
-    assert printed[True]["alice"] == f"preloaded: True True uid {want_uid}"
-    assert printed[False]["alice"] == f"preloaded: False False uid {want_uid}"
+    assert printed[True]["alice"] == f"preloaded: True True uid {want_uid}\nloops freed: True"
+    assert printed[False]["alice"] == f"preloaded: False False uid {want_uid}\nloops freed: True"
 
 
 def test_fork_server_that_cannot_start_says_why(tmp_path):

@@ -47,22 +47,12 @@ def packed(lesson: str) -> tuple[dict, dict]:
 
 
 @pytest.fixture(scope="module")
-def graded(tmp_path_factory):
-    """lesson -> (course folder, mistake index -> its student): the lesson's mistakes graded in one batch when a
-    test first asks for them."""
+def graded(graded_slips):
+    """lesson -> (course folder, mistake index -> its student): the lesson's mistakes graded in one batch (with its
+    forgotten returns: tests/conftest.py's ``graded_slips``) when a test first asks for them."""
     need_program("unshare")
     need("nbformat")
-    done = {}
-
-    def grade(lesson: str):
-        if lesson not in done:
-            students, who = packed(lesson)
-            course, seconds, _ = fairness.grade_students(lesson, students, tmp_path_factory.mktemp(f"hints{lesson[:2]}"))
-            print(f"\n{lesson}: {len(MISTAKES[lesson])} mistakes in {len(students)} notebooks graded in {seconds:.0f} s")
-            done[lesson] = course, who
-        return done[lesson]
-
-    return grade
+    return lambda lesson: (graded_slips(lesson), packed(lesson)[1])
 
 
 def said_and_graded(course, lesson: str, student: str, gid: str) -> tuple[str, object, str]:
@@ -92,8 +82,9 @@ def test_every_lesson_has_known_mistakes_each_in_a_notebook_with_no_mistake_in_a
 
 
 # ids "lessonNN-k", not the lesson's name: lesson 07's name marks a test serial, and this one need not be. Under
-# `make test` a lesson's mistakes go to one worker (its batch graded once) and the lessons to several.
-@pytest.mark.parametrize("lesson, k", [pytest.param(lesson, k, marks=pytest.mark.xdist_group(f"hints{lesson[:2]}"),
+# `make test` a lesson's mistakes go to one worker (its batch graded once, with the lesson's forgotten returns of
+# tests/lessons/test_forgot_return.py) and the lessons to several.
+@pytest.mark.parametrize("lesson, k", [pytest.param(lesson, k, marks=pytest.mark.xdist_group(f"slips{lesson[:2]}"),
                                                     id=f"lesson{lesson[:2]}-{k}") for lesson, k in CASES])
 def test_a_mistake_the_notebooks_check_names_gets_the_same_hint_graded(graded, lesson, k):
     course, who = graded(lesson)

@@ -93,6 +93,22 @@ def test_every_commands_help_prints_its_usage(command):
     assert r.stdout.startswith("usage: ") and "Traceback" not in r.stdout + r.stderr, r.stdout[:500] + r.stderr[-500:]
 
 
+def test_a_commands_process_runs_its_exit_handlers_then_leaves_what_it_loaded_to_the_system(tmp_path):
+    """A command ends without the collector's last sweep over the libraries it loaded (gc.freeze at exit;
+    about 1 s of CPU for the TA's commands, which load nbgrader), and only after every exit handler ran:
+    a temporary folder made while it ran is still removed, and its output is whole."""
+    code = ("import atexit, gc, sys, tempfile\n"
+            "from snakekit.cli import main\n"
+            "atexit.register(lambda: print('frozen at exit:', gc.get_freeze_count() > 0, flush=True))\n"
+            "made = tempfile.TemporaryDirectory(dir=sys.argv[1])\n"
+            "print('made:', made.name, flush=True)\n"
+            "sys.exit(main(['--help']))\n")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "usage: snakekit" in r.stdout and r.stdout.rstrip().endswith("frozen at exit: True"), r.stdout[-500:]
+    assert list(tmp_path.iterdir()) == [], "the temporary folder's cleanup did not run"
+
+
 def test_emulator_command_prints_a_port_the_sdk_can_use():
     import re
     import signal

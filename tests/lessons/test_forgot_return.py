@@ -14,13 +14,11 @@ from __future__ import annotations
 import ast
 import html
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import copy_course, need, need_program
+from tests.conftest import need, need_program
 from tests.grader.grader_helpers import box_title
 
 REPO = Path(__file__).resolve().parents[2]
@@ -53,7 +51,7 @@ def exercises(lesson: str) -> list[dict]:
     return out
 
 
-def returnless(source: str) -> str:
+def returnless_source(source: str) -> str:
     """``source`` with every ``return VALUE`` turned into ``_ = VALUE`` and a bare ``return``."""
     return re.sub(r"^(\s*)return (.+)$", r"\1_ = \2\n\1return", source, flags=re.M)
 
@@ -78,45 +76,30 @@ def test_the_slip_is_made_in_every_exercise_and_leaves_a_function_that_returns_n
     assert len(CASES) >= 25
     for lesson in LESSONS:
         for e in exercises(lesson):
-            changed = returnless(e["source"])
+            changed = returnless_source(e["source"])
             assert changed != e["source"] and "return\n" in changed + "\n", (lesson, e["name"])
             assert not re.search(r"^\s*return \S", changed, flags=re.M), changed
             compile(changed, e["answer"], "exec")
 
 
+def returnless(lesson: str) -> tuple[dict, dict]:
+    """The lesson's slips as students: (student -> answers typed in, every other answer the instructor's;
+    test grade id -> the student who made the slip in that exercise)."""
+    students, who = {}, {}
+    for k, group in enumerate(groups(exercises(lesson))):
+        students[f"slip{k}"] = {e["answer"]: returnless_source(e["source"]) for e in group}
+        who.update({e["test"]: f"slip{k}" for e in group})
+    return students, who
+
+
 @pytest.fixture(scope="module")
-def graded(tmp_path_factory):
-    """lesson -> (course folder, test grade id -> the student who made the slip in that exercise),
-    each lesson graded when a test first asks for it."""
+def graded(graded_slips):
+    """lesson -> (course folder, test grade id -> the student who made the slip in that exercise): the lesson's
+    slips graded in the batch of its known mistakes (tests/conftest.py's ``graded_slips``) when a test first
+    asks for them."""
     need_program("unshare")
-    nbformat = need("nbformat")
-    course = tmp_path_factory.mktemp("returnless") / "course"
-    copy_course(course)
-    done = {}
-
-    def grade(lesson: str):
-        if lesson in done:
-            return done[lesson]
-        found, who = exercises(lesson), {}
-        for k, group in enumerate(groups(found)):
-            student = f"slip{k}"
-            answers = {e["answer"]: e["source"] for e in found}
-            answers.update({e["answer"]: returnless(e["source"]) for e in group})
-            nb = nbformat.read(REPO / "notebooks" / f"{lesson}.ipynb", as_version=4)
-            for c in nb.cells:
-                if _meta(c).get("grade_id") in answers:
-                    c.source = answers[_meta(c)["grade_id"]]
-            folder = course / "submitted" / student / lesson
-            folder.mkdir(parents=True)
-            nbformat.write(nb, folder / f"{lesson}.ipynb")
-            who.update({e["test"]: student for e in group})
-        r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", lesson, "--course", str(course)],
-                           capture_output=True, text=True, timeout=1800, cwd=REPO)
-        assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:]
-        done[lesson] = (course, who)
-        return done[lesson]
-
-    return grade
+    need("nbformat")
+    return lambda lesson: (graded_slips(lesson), returnless(lesson)[1])
 
 
 def graded_message(course: Path, student: str, lesson: str, gid: str) -> str:
@@ -137,7 +120,9 @@ def local_message(course: Path, student: str, lesson: str, gid: str) -> str:
     return " ".join(ANSI.sub("", f"{errors[0].ename}: {errors[0].evalue}").split()) if errors else "(passed)"
 
 
-@pytest.mark.parametrize("lesson, gid, name", CASES)
+# a lesson's slips go to one worker under `make test`, with its known mistakes (tests/conftest.py's graded_slips)
+@pytest.mark.parametrize("lesson, gid, name", [pytest.param(*case, marks=pytest.mark.xdist_group(f"slips{case[0][:2]}"),
+                                                            id="-".join(case)) for case in CASES])
 def test_a_forgotten_return_is_named_locally_and_graded(graded, lesson, gid, name):
     course, who = graded(lesson)
     said = local_message(course, who[gid], lesson, gid)
