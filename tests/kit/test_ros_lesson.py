@@ -109,3 +109,52 @@ def test_the_live_arm_runs_a_sweep_rosbag_records_and_refuses_a_goal_beyond_the_
     # the sweep swung every joint both ways by most of its 0.2 rad, and came home
     assert (q.max(0) > 0.12).all() and (q.min(0) < -0.12).all(), (q.max(0), q.min(0))
     np.testing.assert_allclose(q[-1], 0.0, atol=0.02)
+
+
+# rosbag record's shape: a front that exits at Ctrl-C's signal, and a recorder (same process group) that
+# renames NAME.active to NAME only once it has closed the bag, a while later on a busy machine.
+FAKE_ROSBAG = r"""
+import os, signal, sys, time
+path = sys.argv[1]
+if os.fork() == 0:
+    def close(*_):
+        time.sleep(float(sys.argv[2]))
+        os.rename(path + ".active", path)
+        os._exit(0)
+    signal.signal(signal.SIGINT, close)
+    open(path + ".active", "w").write("218 messages")
+    while True:
+        time.sleep(1)
+signal.signal(signal.SIGINT, lambda *_: os._exit(0))
+while True:
+    time.sleep(1)
+"""
+
+
+def fake_rosbag(path, closing):
+    import sys
+    import time
+    rosbag = subprocess.Popen([sys.executable, "-c", FAKE_ROSBAG, str(path), str(closing)], start_new_session=True)
+    end = time.monotonic() + 60
+    while not path.with_name(path.name + ".active").exists():
+        assert time.monotonic() < end, "the fake recorder did not start"
+        time.sleep(0.02)
+    return rosbag
+
+
+def test_a_bag_still_closing_after_rosbag_record_stopped_is_waited_for(tmp_path):
+    from snakekit.ros import _close_bag
+
+    path = tmp_path / "sweep_recorded.bag"
+    _close_bag(fake_rosbag(path, 1.0), path, hang=30.0)
+    assert path.read_text() == "218 messages" and not path.with_name(path.name + ".active").exists()
+
+
+def test_a_bag_rosbag_never_closes_is_named_with_where_its_messages_are(tmp_path):
+    from snakekit.ros import _close_bag
+
+    path = tmp_path / "sweep_recorded.bag"
+    with pytest.raises(snakekit.BackendError, match=r"did not close sweep_recorded\.bag within 1 s .* "
+                                                    r"what it recorded is in sweep_recorded\.bag\.active"):
+        _close_bag(fake_rosbag(path, 100.0), path, hang=1.0)
+    assert path.with_name(path.name + ".active").read_text() == "218 messages"   # nothing lost
