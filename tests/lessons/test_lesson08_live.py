@@ -43,3 +43,16 @@ def test_the_live_part_sends_the_sweep_records_it_and_it_follows_the_reference(t
     assert (high > 0.12).all() and (low < -0.12).all(), got["swing"]    # every joint swung both ways
     # the same simulator in real time against its own run: timing alone (0.005 rad on a quiet machine)
     assert (np.array(got["rms"]) < 0.05).all(), got["rms"]
+
+
+def test_a_cell_that_reads_the_recorded_bag_before_it_exists_says_so_and_blames_no_exercise(tmp_path, monkeypatch):
+    nbformat, nbclient = need("nbformat"), need("nbclient")
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    nb = nbformat.read(LESSON / "08_ros.ipynb", as_version=4)
+    cells = {c.id: c for c in nb.cells}
+    nb.cells = [cells[i] for i in ("08-code-02", "ex08_2_read_joint_states", "08-code-10")]   # set-up, 8.2, the bag's plot
+    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
+                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+    said = "".join(o.get("text", "") for o in nb.cells[-1].outputs if o.output_type == "stream")
+    assert said == ("There is no sweep_recorded.bag yet: the cell that sends the sweep (after exercise 8.1) "
+                    "records it; run it first.\n"), said
