@@ -162,7 +162,8 @@ def _run_goal(robot, goal, rate: float, rospy) -> None:
             raise
         rospy.logerr(f"goal refused: {e}")
         return
-    rospy.loginfo(f"goal done: {len(trajectory)} points, {run.robot_time:.2f} s")
+    rospy.loginfo(f"goal done: {len(trajectory)} points, {run.robot_time:.2f} s (the last goal at "
+                  f"{trajectory.times[-1]:.2f} s, then {run.robot_time - trajectory.times[-1]:.2f} s to settle)")
 
 
 #: What a machine without Debian's ROS 1 uses for the live parts (one line).
