@@ -62,10 +62,9 @@ def test_a_field_of_the_wrong_type_is_named_before_anything_is_sent():
     bad.points[0].positions = [0.0] * 5  # a list where ROS's float64[] is asked
     with pytest.raises(FileFormatError, match="cannot be sent.*float64\\[\\] fields take numpy float arrays"):
         ros1_bytes(bad)
-    bad.points[0] = m.JointTrajectoryPoint(positions=np.zeros(5), velocities=np.zeros(0), accelerations=np.zeros(0),
-                                           effort=np.zeros(0), time_from_start=m.Duration(sec=0.5, nanosec=0))
-    with pytest.raises(FileFormatError, match="Duration's sec and nanosec whole numbers"):
-        ros1_bytes(bad)
+    with pytest.raises(snakekit.InputTypeError, match=r"a Duration's seconds must be a whole number \(int\), got float "
+                                                     r"0.5: split a time t into divmod\(round\(t \* 1e9\), 1000000000\)"):
+        m.Duration(sec=0.5, nanosec=0)    # refused as it is made, before any message holds it
 
 
 def test_a_joint_states_bag_is_read_back_by_debians_rosbag(tmp_path):
@@ -158,3 +157,25 @@ def test_a_bag_rosbag_never_closes_is_named_with_where_its_messages_are(tmp_path
                                                     r"what it recorded is in sweep_recorded\.bag\.active"):
         _close_bag(fake_rosbag(path, 100.0), path, hang=1.0)
     assert path.with_name(path.name + ".active").read_text() == "218 messages"   # nothing lost
+
+
+@pytest.mark.parametrize("kind", ["Time", "Duration"])
+def test_a_time_takes_ros_1s_own_field_names_too(kind):
+    make = getattr(ros1_messages(), kind)
+    assert make(secs=3, nsecs=7) == make(sec=3, nanosec=7) == make(3, 7)
+    assert (make(secs=3, nsecs=7).sec, make(secs=3, nsecs=7).nanosec) == (3, 7)
+
+
+@pytest.mark.parametrize("kind", ["Time", "Duration"])
+@pytest.mark.parametrize("nanoseconds", [-1, 1_000_000_000, 2_500_000_000])
+def test_nanoseconds_outside_one_second_are_refused_as_ros_1_would_misread_them(kind, nanoseconds):
+    with pytest.raises(snakekit.ConfigurationError, match=rf"a {kind}'s nanoseconds must be 0 \.\.\. 999999999, "
+                                                         rf"got {nanoseconds}: carry whole seconds into sec"):
+        getattr(ros1_messages(), kind)(secs=1, nsecs=nanoseconds)
+
+
+def test_a_message_holding_a_duration_past_one_second_of_nanoseconds_is_not_sent():
+    goal = trajectory_message([1_000_000_000], [[0.1, 0, 0, 0, 0]])
+    goal.points[0].time_from_start = type(goal.points[0].time_from_start)(sec=0, nanosec=-500_000_000)  # rosbags' own
+    with pytest.raises(FileFormatError, match="a Duration has nanoseconds -500000000, outside 0 ... 999999999"):
+        ros1_bytes(goal)
