@@ -20,6 +20,7 @@ run's first sample nor its latched topics.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import shutil
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FileFormatError
+from .errors import ConfigurationError, FileFormatError, InputTypeError
 from .model import SPEC
 from .trajectory import Trajectory
 from .validate import write_failed
@@ -245,15 +246,47 @@ def read(path: Path) -> dict:
 
 def ros1_messages():
     """ROS 1 message classes without a ROS install (``rosbags``'s Noetic definitions): a namespace with
-    ``JointTrajectory``, ``JointTrajectoryPoint``, ``JointState``, ``Header``, ``Time`` and ``Duration``
-    (``sec``, ``nanosec``). Their wire format is ROS 1's (:func:`ros1_bytes`), so a message built of
-    them is the one ``rospy`` sends."""
+    ``JointTrajectory``, ``JointTrajectoryPoint``, ``JointState``, ``Header``, ``Time`` and ``Duration``.
+    Their wire format is ROS 1's (:func:`ros1_bytes`), so a message built of them is the one ``rospy``
+    sends. A time's fields are named as ``rosbags`` names them for both ROS versions, ``sec`` and
+    ``nanosec``; ``Time`` and ``Duration`` also take ROS 1's own names, ``secs`` and ``nsecs`` (rospy's,
+    ``rostopic pub``'s), and refuse nanoseconds outside 0 ... 999999999: ROS 1 reads them signed.
+
+    >>> msgs = ros1_messages()
+    >>> msgs.Duration(secs=2, nsecs=500000000) == msgs.Duration(sec=2, nanosec=500000000)
+    True
+    """
     from types import SimpleNamespace
 
     types = _typestore(1).types
     return SimpleNamespace(JointTrajectory=types[_TRAJECTORY], JointTrajectoryPoint=types[
         "trajectory_msgs/msg/JointTrajectoryPoint"], JointState=types[_JOINT_STATE], Header=types["std_msgs/msg/Header"],
-        Time=types["builtin_interfaces/msg/Time"], Duration=types["builtin_interfaces/msg/Duration"])
+        Time=_time_of(types["builtin_interfaces/msg/Time"]), Duration=_time_of(types["builtin_interfaces/msg/Duration"]))
+
+
+def _time_of(kind):
+    """``kind`` (a Time or a Duration) made of whole seconds and nanoseconds, by ROS 2's names or ROS 1's."""
+    what = kind.__msgtype__.rpartition("/")[2]
+
+    def make(sec=None, nanosec=None, *, secs=None, nsecs=None):
+        if (sec is not None and secs is not None) or (nanosec is not None and nsecs is not None):
+            raise InputTypeError(f"a {what} takes sec and nanosec, or ROS 1's secs and nsecs, not both names for one")
+        sec, nanosec = secs if sec is None else sec, nsecs if nanosec is None else nanosec
+        if sec is None or nanosec is None:
+            raise InputTypeError(f"a {what} needs its whole seconds and nanoseconds: {what}(sec=..., nanosec=...) "
+                                 f"(or ROS 1's secs=..., nsecs=...)")
+        for name, value in (("seconds", sec), ("nanoseconds", nanosec)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise InputTypeError(f"a {what}'s {name} must be a whole number (int), got {type(value).__name__} "
+                                     f"{value!r}: split a time t into divmod(round(t * 1e9), 1000000000)")
+        if not 0 <= nanosec <= 999_999_999:
+            raise ConfigurationError(f"a {what}'s nanoseconds must be 0 ... 999999999, got {nanosec}: carry whole "
+                                     f"seconds into sec (divmod(round(t * 1e9), 1000000000) does), as ROS 1 reads "
+                                     "nanoseconds signed")
+        return kind(sec=int(sec), nanosec=int(nanosec))
+
+    make.__name__ = make.__qualname__ = what
+    return make
 
 
 def ros1_bytes(message) -> bytes:
@@ -263,12 +296,27 @@ def ros1_bytes(message) -> bytes:
     if not isinstance(kind, str):
         raise FileFormatError(f"expected a ROS message (a class of snakekit.bags.ros1_messages()), got "
                               f"{type(message).__name__}")
+    bad = _bad_time(message)
+    if bad is not None:
+        raise FileFormatError(f"this {kind.replace('/msg/', '/')} cannot be sent: a {bad.__msgtype__.rpartition('/')[2]} "
+                              f"has nanoseconds {bad.nanosec}, outside 0 ... 999999999 (ROS 1 would read another "
+                              "time): carry whole seconds into sec")
     try:
         return bytes(_typestore(1).serialize_ros1(message, kind))
     except (TypeError, ValueError, AttributeError, KeyError, OverflowError, struct_error) as e:
         raise FileFormatError(f"this {kind.replace('/msg/', '/')} cannot be sent: a field has the wrong type or value "
                               f"({type(e).__name__}: {str(e)[:160]}); float64[] fields take numpy float arrays, "
                               "a Duration's sec and nanosec whole numbers") from None
+
+
+def _bad_time(value):
+    """The first Time or Duration in ``value`` (a message, its fields, their lists) whose nanoseconds are
+    outside 0 ... 999999999; None if there is none."""
+    if str(getattr(value, "__msgtype__", "")).startswith("builtin_interfaces/"):
+        return None if 0 <= value.nanosec <= 999_999_999 else value
+    items = [getattr(value, f.name) for f in dataclasses.fields(value)] if dataclasses.is_dataclass(value) else \
+        value if isinstance(value, list) else ()
+    return next((bad for bad in map(_bad_time, items) if bad is not None), None)
 
 
 def ros1_message(data: bytes, kind: str):

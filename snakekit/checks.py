@@ -302,7 +302,8 @@ class Exercise:
         self.fail(f"{name}{_where(where)} is {shown}, expected {wanted}: "
                   f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
 
-    def hand_in(self, grade_id: str, fn, *, forbid: tuple = (), what: str = "", array: bool = False) -> int:
+    def hand_in(self, grade_id: str, fn, *, forbid: tuple = (), what: str = "", instead: str = "",
+                array: bool = False) -> int:
         """Hand in ``fn``'s results at the grader's hidden cases of this exercise.
 
         While a notebook is graded, ``SNAKEKIT_CASES`` names the grader's socket: the grader
@@ -314,7 +315,7 @@ class Exercise:
 
         It prints nothing and raises nothing (a test cell calls it first, so a visible check
         that fails after it does not lose what the hidden cases earn). ``forbid``: library
-        functions that raise :class:`ShortcutError` while ``fn`` runs (see :func:`forbid`).
+        functions that raise :class:`ShortcutError` while ``fn`` runs (see :func:`forbid`, as ``instead``).
         ``array``: the exercise asks for a numpy array (its checks use ``close(..., array=True)``):
         a list or tuple returned is handed in as such, and the grader counts it wrong, as the
         visible check does.
@@ -333,7 +334,7 @@ class Exercise:
             stack.enter_context(warnings.catch_warnings())
             warnings.simplefilter("ignore")  # a warning on stderr would fail the cell in nbgrader
             if forbid:
-                stack.enter_context(globals()["forbid"](*forbid, what=what or self.name))
+                stack.enter_context(globals()["forbid"](*forbid, what=what or self.name, instead=instead))
             student = _student_function(self.name)
             for args in cases:
                 try:
@@ -383,7 +384,7 @@ def _resolve(name: str):
 
 
 @contextlib.contextmanager
-def forbid(*names: str, what: str):
+def forbid(*names: str, what: str, instead: str = ""):
     """Make the named library functions raise :class:`ShortcutError` inside the block.
 
     Every place a student could reach a function from is patched: the ``snakekit`` package,
@@ -394,6 +395,7 @@ def forbid(*names: str, what: str):
     Args:
         names: dotted names, e.g. ``"snakekit.forward_kinematics"``.
         what: what the exercise asks to write, e.g. ``"planar FK"``.
+        instead: what to use in its place (default: numpy and what the lesson taught so far).
     """
     patched = []
     called = []
@@ -404,7 +406,7 @@ def forbid(*names: str, what: str):
             called.append(_name)
             raise _shorten(ShortcutError(
                 f"this exercise asks you to write {what} yourself; `{_name}` was called. "
-                f"Use only numpy and what the lesson taught so far (the library's version is for "
+                f"{instead or 'Use only numpy and what the lesson taught so far'} (the library's version is for "
                 f"after the exercise)."))
 
         holders = [m for k, m in list(sys.modules.items()) if m is not None and

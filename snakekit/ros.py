@@ -162,7 +162,8 @@ def _run_goal(robot, goal, rate: float, rospy) -> None:
             raise
         rospy.logerr(f"goal refused: {e}")
         return
-    rospy.loginfo(f"goal done: {len(trajectory)} points, {run.robot_time:.2f} s")
+    rospy.loginfo(f"goal done: {len(trajectory)} points, {run.robot_time:.2f} s (the last goal at "
+                  f"{trajectory.times[-1]:.2f} s, then {run.robot_time - trajectory.times[-1]:.2f} s to settle)")
 
 
 #: What a machine without Debian's ROS 1 uses for the live parts (one line).
@@ -249,6 +250,7 @@ class LiveArm:
         """``rosbag record -O path topics`` while the block runs (stopped with Ctrl-C's signal, as from a
         terminal); the bag's path."""
         path = Path(path).resolve()
+        path.unlink(missing_ok=True)   # rosbag would replace it: an old bag must not pass for this recording
         rosbag = subprocess.Popen(["rosbag", "record", "-O", str(path), *topics], env=self.env, cwd=path.parent,
                                   stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, start_new_session=True)
         try:
@@ -256,9 +258,35 @@ class LiveArm:
                 n.startswith("/record") for n in self._subscribers(topics[0])))
             yield path
         finally:
-            _stop(rosbag, signal.SIGINT, self.hang)
+            _close_bag(rosbag, path, self.hang)
         if not path.exists():
             raise BackendError(f"rosbag record wrote no {path.name}: nothing was published on {', '.join(topics)}")
+
+
+def _close_bag(rosbag: subprocess.Popen, path: Path, hang: float) -> None:
+    """Stop ``rosbag record`` as Ctrl-C does and wait (up to ``hang`` s) until its bag is closed: its
+    Python front exits at once, while the recorder it started (same process group) still writes
+    ``NAME.active`` and renames it to ``NAME`` when it closes. Raises when the bag stayed unclosed."""
+    _stop(rosbag, signal.SIGINT, hang)
+    active = path.with_name(path.name + ".active")
+    end = time.monotonic() + hang
+    while _group_alive(rosbag.pid) and (active.exists() or not path.exists()):
+        if time.monotonic() > end:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(rosbag.pid, signal.SIGKILL)
+            break
+        time.sleep(0.05)
+    if active.exists() and not path.exists():
+        raise BackendError(f"rosbag record did not close {path.name} within {hang:g} s (the machine may be very "
+                           f"busy); what it recorded is in {active.name}: `rosbag reindex` it, or run the cell again")
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
 
 
 def _stop(process: subprocess.Popen, sig: int, hang: float) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FileFormatError, InputTypeError, NotFiniteError, ShapeError, SnakekitError
+from .errors import CheckFailed, FileFormatError, InputTypeError, NotFiniteError, ShapeError, SnakekitError
 from .model import SPEC, SnakeSpec
 from .trajectory import Trajectory
 from .validate import (as_path, check_length, finite_array, frozen, number, quote, read_npz, real_array,
@@ -201,7 +201,7 @@ class Run:
         if path.suffix in bags.SUFFIXES:
             try:
                 return cls(**bags.read(path))
-            except FileFormatError:
+            except (FileFormatError, CheckFailed):   # a lesson's check (a forbidden reader) speaks for itself
                 raise
             except SnakekitError as e:
                 raise FileFormatError(f"{path} is not a snakekit run ({e}); save runs with Run.save") from None

@@ -106,16 +106,27 @@ def machine_paths(extra: dict[str, str] | None = None) -> list[tuple[str, str]]:
     return sorted(pairs.items(), key=lambda kv: -len(kv[0]))
 
 
+#: The file a kernel gives a cell's code in a traceback (``/tmp/ipykernel_4242/3140725618.py``), and a folder
+#: made by ``tempfile`` (``/tmp/tmpk2_x9q0a``): the grading machine's, wherever its temporary folder is
+KERNEL_CELL = re.compile(r"(?:/[\w.-]+)*/ipykernel_\d+/\d+\.py")
+TEMP_FOLDER = re.compile(r"(?:/[\w.-]+)*/tmp[a-z0-9_]{8}(?![\w.-])")
+
+
 def neutral(text: str, paths: list[tuple[str, str]]) -> str:
-    """``text`` with every machine path in ``paths`` replaced by its neutral name.
+    """``text`` with every machine path in ``paths`` replaced by its neutral name, a cell's file by
+    ``<notebook cell>`` and a temporary folder by ``<temporary folder>``.
 
     >>> neutral("File /opt/venv/lib/x.py, line 3", [("/opt/venv", "<python>")])
     'File <python>/lib/x.py, line 3'
+    >>> neutral("File /tmp/ipykernel_4242/3140725618.py:7, in read_joint_states(path)", [])
+    'File <notebook cell>:7, in read_joint_states(path)'
+    >>> neutral("/var/tmp/tmpk2_x9q0a/recorded.bag holds no /joint_states messages", [])
+    '<temporary folder>/recorded.bag holds no /joint_states messages'
     """
     for path, name in paths:
         if path in text:
             text = text.replace(path, name)
-    return text
+    return TEMP_FOLDER.sub("<temporary folder>", KERNEL_CELL.sub("<notebook cell>", text))
 
 
 def _neutral_output(out, paths):
@@ -193,6 +204,6 @@ def scrub_cell(cell, secret: set[str], paths=()) -> None:
             text = "".join(out["text"]) if isinstance(out.get("text"), list) else str(out.get("text", ""))
             if WALL_TIME.search(text):
                 out = nbformat.from_dict({**dict(out), "text": steady(text)})
-        keep.append(_neutral_output(nbformat.from_dict(dict(out)), paths) if paths else out)
+        keep.append(_neutral_output(nbformat.from_dict(dict(out)), paths))
     cell.outputs = keep
 

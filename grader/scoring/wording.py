@@ -192,9 +192,9 @@ class Wording:
             units = {p.unit for p in self.parts}
             return Part(" ".join(common) or "the result", units.pop() if len(units) == 1 else "")
         words = set(name.lower().split("_"))
-        for p in self.parts:
-            if words & set(re.findall(r"[a-z]+", p.what.lower())):
-                return p.at(self.values(case))
+        shared = [len(words & set(re.findall(r"[a-z]+", p.what.lower()))) for p in self.parts]
+        if any(shared):   # the most words in common: recorded_angles is "recorded angles", not "recorded times"
+            return self.parts[shared.index(max(shared))].at(self.values(case))
         units = {p.unit for p in self.parts}
         return Part(f"the {name.replace('_', ' ')}", units.pop() if len(units) == 1 else "")
 

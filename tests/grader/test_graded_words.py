@@ -161,3 +161,25 @@ def test_a_wrong_value_graded_names_the_unit_its_notebook_check_names(lesson, gi
     shown = {w for u in units for w in ((u, "mm") if u == "m" else (u,))}   # metres are also shown as mm
     # a value with a unit per entry (x, y in m, the heading in rad) shows the unit of the entry that is wrong
     assert any(re.search(rf"\d {re.escape(w)}(?!\w)", said) for w in shown), f"{gid}: its check names {units}; graded: {said}"
+
+
+def _named_outputs():
+    """Every handed-in value whose name is, word for word, what a compared value of its check is called."""
+    out = []
+    for lesson, gid in EXERCISES:
+        parts = wording("", markup.visible_part(_lesson(lesson)[0][gid])).parts
+        for name in _outputs(lesson, gid):
+            whats = [p.what for p in parts if set(name.lower().split("_")) == set(re.findall(r"[a-z]+", p.what.lower()))]
+            out += [(lesson, gid, name, whats[0])] if whats else []
+    return out
+
+
+NAMED = _named_outputs()
+
+
+@pytest.mark.parametrize("lesson, gid, name, what", NAMED, ids=[f"{g}-{n}" for _, g, n, _ in NAMED])
+def test_a_wrong_value_graded_is_called_what_its_own_check_calls_it(lesson, gid, name, what):
+    said = graded_messages(lesson, gid, each=True)
+    names = list(Reference.load(REFERENCES / f"{lesson}.npz").exercises[gid]["outputs"])
+    mine = said[names.index(name) * len(said) // len(names)]   # the message with this value alone wrong
+    assert re.search(rf": {re.escape(what)}(\[| is | has )", mine), (name, mine)

@@ -147,3 +147,19 @@ def test_the_live_part_is_left_out_while_graded_and_in_quick_mode_and_only_then(
     monkeypatch.delenv("SNAKEKIT_QUICK")
     monkeypatch.setenv("SNAKEKIT_CASES", "/tmp/grader.sock")   # the grader's socket: the notebook is being graded
     assert checks.live_off().startswith("a graded run leaves the live arm out")
+
+
+def test_a_run_loaded_where_reading_a_bag_is_forbidden_says_which_call_and_what_to_use_not_a_path(tmp_path):
+    import snakekit
+
+    bag = snakekit.side_sweep(points=20, rate=10.0, sweeps=1, amplitude=0.1)
+    with snakekit.make_robot("sim") as robot:
+        path = robot.run(bag).save(tmp_path / "recorded.bag")
+    for names in (("snakekit.bags.read",), ("snakekit.bags.read", "snakekit.Run.load")):
+        with checks.forbid(*names, what="the reading of a bag", instead="Read it with rosbags' AnyReader, as the lesson shows"):
+            with pytest.raises(ShortcutError) as e:
+                snakekit.Run.load(path)
+        assert str(e.value) == (f"this exercise asks you to write the reading of a bag yourself; `{names[-1]}` was called. "
+                                "Read it with rosbags' AnyReader, as the lesson shows (the library's version is for after "
+                                "the exercise).")
+    assert snakekit.Run.load(path).measured.positions.shape[1] == 5    # restored after the block

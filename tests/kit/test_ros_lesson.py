@@ -62,10 +62,9 @@ def test_a_field_of_the_wrong_type_is_named_before_anything_is_sent():
     bad.points[0].positions = [0.0] * 5  # a list where ROS's float64[] is asked
     with pytest.raises(FileFormatError, match="cannot be sent.*float64\\[\\] fields take numpy float arrays"):
         ros1_bytes(bad)
-    bad.points[0] = m.JointTrajectoryPoint(positions=np.zeros(5), velocities=np.zeros(0), accelerations=np.zeros(0),
-                                           effort=np.zeros(0), time_from_start=m.Duration(sec=0.5, nanosec=0))
-    with pytest.raises(FileFormatError, match="Duration's sec and nanosec whole numbers"):
-        ros1_bytes(bad)
+    with pytest.raises(snakekit.InputTypeError, match=r"a Duration's seconds must be a whole number \(int\), got float "
+                                                     r"0.5: split a time t into divmod\(round\(t \* 1e9\), 1000000000\)"):
+        m.Duration(sec=0.5, nanosec=0)    # refused as it is made, before any message holds it
 
 
 def test_a_joint_states_bag_is_read_back_by_debians_rosbag(tmp_path):
@@ -109,3 +108,74 @@ def test_the_live_arm_runs_a_sweep_rosbag_records_and_refuses_a_goal_beyond_the_
     # the sweep swung every joint both ways by most of its 0.2 rad, and came home
     assert (q.max(0) > 0.12).all() and (q.min(0) < -0.12).all(), (q.max(0), q.min(0))
     np.testing.assert_allclose(q[-1], 0.0, atol=0.02)
+
+
+# rosbag record's shape: a front that exits at Ctrl-C's signal, and a recorder (same process group) that
+# renames NAME.active to NAME only once it has closed the bag, a while later on a busy machine.
+FAKE_ROSBAG = r"""
+import os, signal, sys, time
+path = sys.argv[1]
+if os.fork() == 0:
+    def close(*_):
+        time.sleep(float(sys.argv[2]))
+        os.rename(path + ".active", path)
+        os._exit(0)
+    signal.signal(signal.SIGINT, close)
+    open(path + ".active", "w").write("218 messages")
+    while True:
+        time.sleep(1)
+signal.signal(signal.SIGINT, lambda *_: os._exit(0))
+while True:
+    time.sleep(1)
+"""
+
+
+def fake_rosbag(path, closing):
+    import sys
+    import time
+    rosbag = subprocess.Popen([sys.executable, "-c", FAKE_ROSBAG, str(path), str(closing)], start_new_session=True)
+    end = time.monotonic() + 60
+    while not path.with_name(path.name + ".active").exists():
+        assert time.monotonic() < end, "the fake recorder did not start"
+        time.sleep(0.02)
+    return rosbag
+
+
+def test_a_bag_still_closing_after_rosbag_record_stopped_is_waited_for(tmp_path):
+    from snakekit.ros import _close_bag
+
+    path = tmp_path / "sweep_recorded.bag"
+    _close_bag(fake_rosbag(path, 1.0), path, hang=30.0)
+    assert path.read_text() == "218 messages" and not path.with_name(path.name + ".active").exists()
+
+
+def test_a_bag_rosbag_never_closes_is_named_with_where_its_messages_are(tmp_path):
+    from snakekit.ros import _close_bag
+
+    path = tmp_path / "sweep_recorded.bag"
+    with pytest.raises(snakekit.BackendError, match=r"did not close sweep_recorded\.bag within 1 s .* "
+                                                    r"what it recorded is in sweep_recorded\.bag\.active"):
+        _close_bag(fake_rosbag(path, 100.0), path, hang=1.0)
+    assert path.with_name(path.name + ".active").read_text() == "218 messages"   # nothing lost
+
+
+@pytest.mark.parametrize("kind", ["Time", "Duration"])
+def test_a_time_takes_ros_1s_own_field_names_too(kind):
+    make = getattr(ros1_messages(), kind)
+    assert make(secs=3, nsecs=7) == make(sec=3, nanosec=7) == make(3, 7)
+    assert (make(secs=3, nsecs=7).sec, make(secs=3, nsecs=7).nanosec) == (3, 7)
+
+
+@pytest.mark.parametrize("kind", ["Time", "Duration"])
+@pytest.mark.parametrize("nanoseconds", [-1, 1_000_000_000, 2_500_000_000])
+def test_nanoseconds_outside_one_second_are_refused_as_ros_1_would_misread_them(kind, nanoseconds):
+    with pytest.raises(snakekit.ConfigurationError, match=rf"a {kind}'s nanoseconds must be 0 \.\.\. 999999999, "
+                                                         rf"got {nanoseconds}: carry whole seconds into sec"):
+        getattr(ros1_messages(), kind)(secs=1, nsecs=nanoseconds)
+
+
+def test_a_message_holding_a_duration_past_one_second_of_nanoseconds_is_not_sent():
+    goal = trajectory_message([1_000_000_000], [[0.1, 0, 0, 0, 0]])
+    goal.points[0].time_from_start = type(goal.points[0].time_from_start)(sec=0, nanosec=-500_000_000)  # rosbags' own
+    with pytest.raises(FileFormatError, match="a Duration has nanoseconds -500000000, outside 0 ... 999999999"):
+        ros1_bytes(goal)

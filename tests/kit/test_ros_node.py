@@ -175,7 +175,9 @@ def test_refused_goals_move_nothing(session):
 def test_joint_states_follow_the_sweep_as_the_kit_runs_it(session):
     seen, *_ = session
     with SimRobot() as robot:  # the run as the node makes it: recorded at 50 Hz, settling 0.5 s
-        assert node_words(seen)[2] == f"goal done: {len(SWEEP)} points, {robot.run(AS_SENT, record_rate=50.0).robot_time:.2f} s"
+        took = robot.run(AS_SENT, record_rate=50.0).robot_time
+    assert node_words(seen)[2] == (f"goal done: {len(SWEEP)} points, {took:.2f} s (the last goal at {AS_SENT.times[-1]:.2f} "
+                                   f"s, then {took - AS_SENT.times[-1]:.2f} s to settle)")
     assert all(names == NAMES for _, names in seen["states"])
     received = np.array([p for p, _ in seen["states"][seen["sent"][2]:]])
     # The kit's own run of the same sweep on a fresh simulator, recorded at the node's rate and

@@ -16,7 +16,7 @@ from tests.conftest import need, need_program
 
 ROOT = Path(__file__).resolve().parents[2]
 LESSON = ROOT / "course" / "source" / "08_ros"
-PROBE = ("import json\nprint(json.dumps({'rms': result['rms'].tolist(), 'swing': [positions.min(0).tolist(), "
+PROBE = ("import json\nprint(json.dumps({'rms': result['rms'].tolist(), 'largest': result['largest'], 'swing': [positions.min(0).tolist(), "
          "positions.max(0).tolist()], 'rate': (len(times) - 1) / times[-1], 'bag': sorted(AnyReader([Path("
          "'sweep_recorded.bag')]).__enter__().topics)}))")
 
@@ -43,3 +43,23 @@ def test_the_live_part_sends_the_sweep_records_it_and_it_follows_the_reference(t
     assert (high > 0.12).all() and (low < -0.12).all(), got["swing"]    # every joint swung both ways
     # the same simulator in real time against its own run: timing alone (0.005 rad on a quiet machine)
     assert (np.array(got["rms"]) < 0.05).all(), got["rms"]
+    # what the text says of a live run: the node's word, and the errors left (timing alone)
+    text = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
+    for quote in ("`goal done: 40 points, 4.40 s`, the motion's time, which runs 0.50 s past the last goal",
+                  "under a tenth of a degree rms, and under a degree at most"):
+        assert quote in text, quote
+    assert "goal done: 40 points, 4.40 s (the last goal at 3.90 s, then 0.50 s to settle)" in said["08-code-07"]
+    assert np.degrees(got["rms"]).max() < 0.1 and np.degrees(got["largest"]) < 1.0, (got["rms"], got["largest"])
+
+
+def test_a_cell_that_reads_the_recorded_bag_before_it_exists_says_so_and_blames_no_exercise(tmp_path, monkeypatch):
+    nbformat, nbclient = need("nbformat"), need("nbclient")
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    nb = nbformat.read(LESSON / "08_ros.ipynb", as_version=4)
+    cells = {c.id: c for c in nb.cells}
+    nb.cells = [cells[i] for i in ("08-code-02", "ex08_2_read_joint_states", "08-code-10")]   # set-up, 8.2, the bag's plot
+    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
+                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+    said = "".join(o.get("text", "") for o in nb.cells[-1].outputs if o.output_type == "stream")
+    assert said == ("There is no sweep_recorded.bag yet: the cell that sends the sweep (after exercise 8.1) "
+                    "records it; run it first.\n"), said
