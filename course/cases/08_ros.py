@@ -67,8 +67,9 @@ def ex08_2_read_joint_states_test(rng, spec):
 
 def ex08_3_compare_runs_test(rng, spec):
     """compare_runs(times, positions, ref_times, ref_positions): a reference sweep at 100 Hz and recordings of it
-    at 50 Hz that lag it by 0.05 to 0.2 s with noise: one inside it, one that starts before it, one that ends
-    after it, one on the reference's own times, and one that never overlaps it (it must raise ValueError)."""
+    at 50 Hz that lag it by 0.05 to 0.2 s with noise: one inside it (with one reading 0.1 to 0.3 rad further below the
+    reference than any other is off, so its largest error is a negative difference), one that starts before it, one that ends after it,
+    one on the reference's own times, and one that never overlaps it (it must raise ValueError)."""
     cases = []
     for kind in ("inside", "before", "after", "same", "apart"):
         duration = float(rng.uniform(2.0, 6.0))
@@ -81,5 +82,8 @@ def ex08_3_compare_runs_test(rng, spec):
         t = ref_t if kind == "same" else np.arange(start, end, 0.02) + float(rng.uniform(0, 0.02))
         lag = float(rng.uniform(0.05, 0.2))
         recorded = sweep(t - lag) + rng.normal(0, 0.002, (len(t), 5))
+        if kind == "inside":   # one reading far below the reference: the largest error is negative
+            k, j = int(rng.choice(np.flatnonzero((t > 0.1) & (t < duration - 0.1)))), int(rng.integers(5))
+            recorded[k, j] = sweep(t[k:k + 1])[0, j] - np.abs(recorded - sweep(t)).max() - float(rng.uniform(0.1, 0.3))
         cases.append((t, recorded, ref_t, sweep(ref_t)))
     return cases
