@@ -40,7 +40,7 @@ import nbformat
 import pytest
 
 from conftest import need, need_program
-from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, good_notebook, make_course, use_safe_grading
+from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, box_title, good_notebook, make_course, use_safe_grading
 from test_grader_week import notebook_bytes
 
 A = ASSIGNMENT
@@ -167,8 +167,11 @@ def on_page(course, student) -> tuple[float, dict[str, float], str]:
     """The score and each exercise's points as the student's page shows them, and the page's text."""
     text = (course / "feedback" / student / A / f"{A}.html").read_text()
     total = re.search(r"Score: <strong>([-\d.e+]+) / 7</strong>", text)
-    rows = re.findall(r"<td><code>(\w+)</code></td>\s*<td>([-\d.e+]+) / \d+</td>", text)
-    return float(total.group(1)), {gid: float(x) for gid, x in rows}, text
+    # the score table's rows, each exercise named as its lesson names it, read back to its test cell's id
+    names = {box_title(course / "source" / A / f"{A}.ipynb", gid): gid
+             for gid in ("ex1_tool_xy_test", "ex2_sweep_test", "ex3_peak_speed_test")}
+    rows = re.findall(r"<td>([^<]+)</td>\s*<td>([-\d.e+]+) / \d+</td>", text)
+    return float(total.group(1)), {names[name]: float(x) for name, x in rows if name in names}, text
 
 
 def exported(course, tmp, lms=None) -> dict[str, float]:
