@@ -52,7 +52,7 @@ def test_the_live_part_sends_the_sweep_records_it_and_it_follows_the_reference(t
     assert np.degrees(got["rms"]).max() < 0.1 and np.degrees(got["largest"]) < 1.0, (got["rms"], got["largest"])
 
 
-def test_a_cell_that_reads_the_recorded_bag_before_it_exists_says_so_and_blames_no_exercise(tmp_path, monkeypatch):
+def test_a_cell_that_reads_the_recorded_bag_before_it_exists_says_what_it_waits_for_and_blames_no_answer(tmp_path, monkeypatch):
     nbformat, nbclient = need("nbformat"), need("nbclient")
     monkeypatch.setenv("MPLBACKEND", "Agg")
     nb = nbformat.read(LESSON / "08_ros.ipynb", as_version=4)
@@ -61,5 +61,5 @@ def test_a_cell_that_reads_the_recorded_bag_before_it_exists_says_so_and_blames_
     nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
                             resources={"metadata": {"path": str(tmp_path)}}).execute()
     said = "".join(o.get("text", "") for o in nb.cells[-1].outputs if o.output_type == "stream")
-    assert said == ("There is no sweep_recorded.bag yet: the cell that sends the sweep (after exercise 8.1) "
-                    "records it; run it first.\n"), said
+    assert said == ("This cell waits for exercise 8.1 and the cell after it that sends the sweep: it records "
+                    "sweep_recorded.bag, which is not there yet; run them first.\n"), said
