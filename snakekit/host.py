@@ -11,6 +11,9 @@ One place decides what differs between Linux, macOS and Windows:
 - :func:`realtime`: the threads that keep the arm's timing (the loop that sends goals to the
   servos, the watchdog's keep-alive, the emulated servos' responder) run under Linux's
   ``SCHED_FIFO`` where the system allows it, so other work on the computer does not delay them.
+- :func:`kernel_sockets`: how the kit's own notebook runs (``snakekit check``, the grader's
+  instructor run) reach their Jupyter kernel: Unix sockets where the system has them, so two
+  kernels started at once never race for a TCP port.
 
 The platform table in README.md says which system runs what; ``tests/system/test_platform.py``
 keeps it true. Only the standard library is used here, so the checks run even when the
@@ -235,3 +238,29 @@ def realtime() -> Iterator[bool]:
             os.sched_setscheduler(0, *before)
         except OSError:
             pass
+
+
+#: the longest path of a Unix socket (108 bytes with its terminating zero on Linux, 104 on macOS),
+#: less room for the kernel's "-<n>" suffixes
+_SOCKET_PATH_MAX = 96
+
+
+def kernel_sockets(folder: str | os.PathLike, *, platform: str | None = None) -> dict:
+    """The Jupyter kernel manager's settings for a kernel reached over Unix sockets in ``folder``.
+
+    A kernel that listens on TCP gets its five ports from the client, which picks free ones and
+    closes them again; the kernel binds them a moment later. Another kernel started in that moment
+    (a class graded beside a lesson being checked) can take one, and the first kernel dies before it
+    answers ("Kernel died before replying to kernel_info"). Sockets in a folder of the run's own
+    have no such race. Pass the result as the notebook client's ``config``
+    (``nbclient.NotebookClient(..., config=traitlets.config.Config(kernel_sockets(folder)))``);
+    one kernel per folder.
+
+    Returns ``{"KernelManager": {"transport": "ipc", "ip": "<folder>/kernel"}}``; ``{}`` (TCP, as
+    Jupyter's default) on Windows, whose ZeroMQ has no Unix sockets, and when ``folder``'s path is
+    too long for a socket's.
+    """
+    ip = os.path.join(os.path.abspath(folder), "kernel")
+    if system(platform) == "win32" or len(os.fsencode(ip)) > _SOCKET_PATH_MAX:
+        return {}
+    return {"KernelManager": {"transport": "ipc", "ip": ip}}

@@ -18,6 +18,7 @@ import tempfile
 import warnings
 from pathlib import Path
 
+from . import host
 from .errors import FileFormatError
 
 #: What to do with a lesson file that can't be used as it is.
@@ -97,6 +98,7 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
     """
     import nbclient
     from nbclient.exceptions import CellTimeoutError, DeadKernelError
+    from traitlets.config import Config
 
     out = out or sys.stdout
     path = Path(path)
@@ -114,13 +116,15 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
             interrupted.add(running[-1])
             return await super()._async_handle_timeout(timeout, cell)
 
-    client = Client(nb, timeout=timeout, kernel_name="python3", allow_errors=True, interrupt_on_timeout=True,
-                    on_cell_start=lambda cell, cell_index: running.append(cell_index),
-                    resources={"metadata": {"path": str(path.resolve().parent)}})
     stopped = ""
     # The kernel's own log (its start-up notes, or a traceback when it is shut down in the middle of
     # a cell) is not the student's output: it goes to a file, and its last line is shown if it dies.
-    with tempfile.TemporaryFile("w+") as log:
+    # Its sockets are in a folder of this run's own (host.kernel_sockets).
+    with tempfile.TemporaryFile("w+") as log, tempfile.TemporaryDirectory(prefix="snakekit-kernel-") as sockets:
+        client = Client(nb, timeout=timeout, kernel_name="python3", allow_errors=True, interrupt_on_timeout=True,
+                        on_cell_start=lambda cell, cell_index: running.append(cell_index),
+                        resources={"metadata": {"path": str(path.resolve().parent)}},
+                        config=Config(host.kernel_sockets(sockets)))
         try:
             client.execute(stderr=log)
         except CellTimeoutError:

@@ -48,6 +48,28 @@ def need_program(name: str) -> str:
     return path
 
 
+_KERNEL_SOCKETS: list[str] = []
+
+
+def notebook_client(nb, **kwargs):
+    """``nbclient.NotebookClient(nb, **kwargs)`` whose kernel listens on Unix sockets in a folder of its
+    own (snakekit.host.kernel_sockets, as `snakekit check` and the grader's instructor run), not on
+    TCP ports: kernels started at once by the parallel workers never race for a port."""
+    import atexit
+    import tempfile
+
+    import nbclient
+    from traitlets.config import Config
+
+    from snakekit.host import kernel_sockets
+
+    if not _KERNEL_SOCKETS:  # one short folder per test process, removed when it ends
+        _KERNEL_SOCKETS.append(tempfile.mkdtemp(prefix="snakekit-kernels-"))
+        atexit.register(shutil.rmtree, _KERNEL_SOCKETS[0], True)
+    folder = tempfile.mkdtemp(dir=_KERNEL_SOCKETS[0])
+    return nbclient.NotebookClient(nb, config=Config(kernel_sockets(folder)), **kwargs)
+
+
 #: What a class adds to the course folder (and what a run of an instructor notebook writes beside it).
 def copy_course(dest):
     """A copy of the repository's course, as a class would grade it: its sources, cases, references and lab

@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from snakekit import host
 from snakekit.errors import SnakekitError
 from snakekit.handin import decode_results, encode_cases
 from grader.errors import CasesError
@@ -335,6 +336,7 @@ def execute(notebook: Path, batch: Draw, *, timeout: int = 600, allow_errors: bo
     served; returns what it handed in, by grade id. Not sandboxed: for trusted notebooks."""
     import nbclient
     import nbformat
+    from traitlets.config import Config
 
     notebook = Path(notebook)
     with tempfile.TemporaryDirectory(prefix="snakekit-cases-") as tmp, CaseServer(batch) as server:
@@ -348,7 +350,8 @@ def execute(notebook: Path, batch: Draw, *, timeout: int = 600, allow_errors: bo
         with _environ(env):
             client = nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3", allow_errors=allow_errors,
                                              resources={"metadata": {"path": str(work)}},
-                                             extra_arguments=["--IPKernelApp.log_level=ERROR"])  # no TCP warning
+                                             extra_arguments=["--IPKernelApp.log_level=ERROR"],  # no TCP warning
+                                             config=Config(host.kernel_sockets(tmp)))  # no port to race for
             try:
                 client.execute()
             except nbclient.exceptions.CellExecutionError as e:

@@ -21,7 +21,7 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from conftest import need
+from conftest import need, notebook_client
 from grader_helpers import ASSIGNMENT, make_course
 from test_grader_files import one_line_error, run, tree
 
@@ -123,11 +123,9 @@ def test_a_student_fetches_the_solution_and_it_passes_its_visible_checks(course,
     assert "def tool_xy(q):" in got.cells[4].source and "phi = np.cumsum(q)" in got.cells[4].source
     assert all(c.outputs == [] and c.execution_count is None for c in got.cells if c.cell_type == "code")
 
-    import nbclient
-
     monkeypatch.setenv("SNAKEKIT_TEST", "1")
-    nbclient.NotebookClient(got, timeout=300, kernel_name="python3", allow_errors=True,
-                            resources={"metadata": {"path": str(home / S)}}).execute()
+    notebook_client(got, timeout=300, kernel_name="python3", allow_errors=True,
+                    resources={"metadata": {"path": str(home / S)}}).execute()
     errors = {c.metadata.get("nbgrader", {}).get("grade_id"): "".join(o.get("evalue", "") for o in c.outputs
               if o.output_type == "error") for c in got.cells if c.cell_type == "code"}
     assert {k: v for k, v in errors.items() if v} == {}

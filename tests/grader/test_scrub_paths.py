@@ -8,7 +8,7 @@ import tempfile
 from pathlib import Path
 
 from grader.feedback.scrub import machine_paths, scrub_cell
-from tests.conftest import need
+from tests.conftest import need, notebook_client
 
 CELLS = ["import tempfile\nfrom pathlib import Path\nimport numpy as np\n\ndef read_joint_states(path):\n"
          "    raise ValueError(f'{path} holds no /joint_states messages')\n\ndef rms(e):\n    return np.sqrt(e)",
@@ -17,11 +17,12 @@ CELLS = ["import tempfile\nfrom pathlib import Path\nimport numpy as np\n\ndef r
 
 
 def test_a_traceback_through_a_cells_function_shows_no_kernel_file_and_no_temporary_folder(tmp_path, monkeypatch):
-    nbformat, nbclient = need("nbformat"), need("nbclient")
+    nbformat = need("nbformat")
+    need("nbclient")
     monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(c) for c in CELLS])
-    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", allow_errors=True,
-                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+    notebook_client(nb, timeout=300, kernel_name="python3", allow_errors=True,
+                    resources={"metadata": {"path": str(tmp_path)}}).execute()
     warned = next(o for o in nb.cells[1].outputs if o.output_type == "stream" and "RuntimeWarning" in o.text)
     assert "ipykernel_" in warned.text and f"{tempfile.gettempdir()}/tmp" in nb.cells[2].outputs[0].evalue  # as run
     for cell in nb.cells[1:]:

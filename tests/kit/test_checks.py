@@ -11,7 +11,7 @@ import pytest
 
 from snakekit import checks
 from snakekit.errors import CheckFailed, ShortcutError
-from tests.conftest import need
+from tests.conftest import need, notebook_client
 
 
 def message(call) -> str:
@@ -109,15 +109,16 @@ def test_a_shortcut_inside_a_checked_call_is_reported_as_the_shortcut():
 
 def test_a_check_cell_after_a_broken_answer_cell_says_the_answer_did_not_run(tmp_path, monkeypatch):
     """A syntax error in the answer cell defines nothing: the check cell says so, not a bare NameError."""
-    nbformat, nbclient = need("nbformat"), need("nbclient")
+    nbformat = need("nbformat")
+    need("nbclient")
     monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
     nb = nbformat.v4.new_notebook(cells=[
         nbformat.v4.new_code_cell("from snakekit import checks"),
         nbformat.v4.new_code_cell("def planar_fk(q)\n    return q"),           # the colon is missing
         nbformat.v4.new_code_cell('ex = checks.Exercise("1.1", "planar_fk")\nex(planar_fk, 0.0)'),
         nbformat.v4.new_code_cell("print(undefined_name)")])
-    nbclient.NotebookClient(nb, timeout=120, kernel_name="python3", allow_errors=True,
-                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+    notebook_client(nb, timeout=120, kernel_name="python3", allow_errors=True,
+                    resources={"metadata": {"path": str(tmp_path)}}).execute()
     assert nb.cells[1].outputs[0].ename == "SyntaxError"
     error = nb.cells[2].outputs[0]
     assert (error.ename, error.evalue) == (

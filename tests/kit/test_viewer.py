@@ -19,7 +19,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from tests.conftest import free_port, need
+from tests.conftest import free_port, need, notebook_client
 
 need("meshcat")
 psutil = need("psutil")
@@ -385,7 +385,7 @@ def _session(p) -> int | None:
 def test_running_the_viewer_cell_twice_in_a_kernel_leaves_one_server(tmp_path):
     """In a notebook, a new Viewer replaces the one made before: no server is left behind."""
     nbformat = need("nbformat")
-    nbclient = need("nbclient")
+    need("nbclient")
     cell = "from snakekit.viewer import Viewer\nviewer = Viewer()\nviewer"
     nb = nbformat.v4.new_notebook(cells=[
         nbformat.v4.new_code_cell(cell),
@@ -396,8 +396,8 @@ def test_running_the_viewer_cell_twice_in_a_kernel_leaves_one_server(tmp_path):
             "servers = [t for t in threading.enumerate() if t.name.startswith('snakekit viewer server')]\n"
             "print(first[0], first[1].rsplit(':', 1)[1], viewer.port, len(servers), os.getpid())"),
     ])
-    client = nbclient.NotebookClient(nb, timeout=60, kernel_name="python3",
-                                     resources={"metadata": {"path": str(tmp_path)}})
+    client = notebook_client(nb, timeout=60, kernel_name="python3",
+                             resources={"metadata": {"path": str(tmp_path)}})
     with client.setup_kernel():
         for i in range(4):
             client.execute_cell(nb.cells[i], i)

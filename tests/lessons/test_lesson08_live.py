@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.conftest import need, need_program
+from tests.conftest import need, need_program, notebook_client
 
 ROOT = Path(__file__).resolve().parents[2]
 LESSON = ROOT / "course" / "source" / "08_ros"
@@ -23,7 +23,8 @@ PROBE = ("import json\nprint(json.dumps({'rms': result['rms'].tolist(), 'largest
 
 def test_the_live_part_sends_the_sweep_records_it_and_it_follows_the_reference(tmp_path, monkeypatch):
     need_program("roscore"), need_program("rosbag")
-    nbformat, nbclient = need("nbformat"), need("nbclient")
+    nbformat = need("nbformat")
+    need("nbclient")
     shutil.copytree(LESSON, tmp_path / "lesson", ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.bag"))
     for switch in ("SNAKEKIT_TEST", "SNAKEKIT_QUICK", "SNAKEKIT_CASES", "SNAKEKIT_HANDIN_DIR"):
         monkeypatch.delenv(switch, raising=False)
@@ -31,8 +32,8 @@ def test_the_live_part_sends_the_sweep_records_it_and_it_follows_the_reference(t
     monkeypatch.setenv("MPLBACKEND", "Agg")
     nb = nbformat.read(tmp_path / "lesson" / "08_ros.ipynb", as_version=4)
     nb.cells.append(nbformat.v4.new_code_cell(PROBE))
-    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
-                            resources={"metadata": {"path": str(tmp_path / "lesson")}}).execute()
+    notebook_client(nb, timeout=300, kernel_name="python3",
+                    resources={"metadata": {"path": str(tmp_path / "lesson")}}).execute()
     said = {c.id: "".join(o.get("text", "") for o in c.outputs if o.output_type == "stream") for c in nb.cells
             if c.cell_type == "code"}
     assert "goal done: 40 points" in said["08-code-07"] and "left out" not in said["08-code-07"], said["08-code-07"]
@@ -53,13 +54,14 @@ def test_the_live_part_sends_the_sweep_records_it_and_it_follows_the_reference(t
 
 
 def test_a_cell_that_reads_the_recorded_bag_before_it_exists_says_what_it_waits_for_and_blames_no_answer(tmp_path, monkeypatch):
-    nbformat, nbclient = need("nbformat"), need("nbclient")
+    nbformat = need("nbformat")
+    need("nbclient")
     monkeypatch.setenv("MPLBACKEND", "Agg")
     nb = nbformat.read(LESSON / "08_ros.ipynb", as_version=4)
     cells = {c.id: c for c in nb.cells}
     nb.cells = [cells[i] for i in ("08-code-02", "ex08_2_read_joint_states", "08-code-10")]   # set-up, 8.2, the bag's plot
-    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
-                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+    notebook_client(nb, timeout=300, kernel_name="python3",
+                    resources={"metadata": {"path": str(tmp_path)}}).execute()
     said = "".join(o.get("text", "") for o in nb.cells[-1].outputs if o.output_type == "stream")
     assert said == ("This cell waits for exercise 8.1 and the cell after it that sends the sweep: it records "
                     "sweep_recorded.bag, which is not there yet; run them first.\n"), said

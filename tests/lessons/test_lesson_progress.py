@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import need
+from tests.conftest import need, notebook_client
 
 ROOT = Path(__file__).resolve().parents[2]
 L0, L1 = "00_meet_the_arm", "01_forward_kinematics"
@@ -25,7 +25,8 @@ def folder(tmp_path_factory):
     """The student's notebooks/: lesson 0 as handed out, never run; lesson 1 run in JupyterLab's
     way (top to bottom, errors and all) and saved, with 1.1 written right, 1.2 written with the
     angles not accumulated, 1.3 not written."""
-    nbformat, nbclient = need("nbformat"), need("nbclient")
+    nbformat = need("nbformat")
+    need("nbclient")
     work = tmp_path_factory.mktemp("notebooks")
     shutil.copy(ROOT / "notebooks" / f"{L0}.ipynb", work)
     source = nbformat.read(ROOT / "course" / "source" / L1 / f"{L1}.ipynb", as_version=4)
@@ -42,8 +43,8 @@ def folder(tmp_path_factory):
     old = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
     try:
-        nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", allow_errors=True,
-                                resources={"metadata": {"path": str(work)}}).execute()
+        notebook_client(nb, timeout=300, kernel_name="python3", allow_errors=True,
+                        resources={"metadata": {"path": str(work)}}).execute()
     finally:
         for k, v in old.items():
             os.environ.pop(k) if v is None else os.environ.__setitem__(k, v)

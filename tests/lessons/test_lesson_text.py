@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import need
+from tests.conftest import need, notebook_client
 
 ROOT = Path(__file__).resolve().parents[2]
 COURSE = ROOT / "course"
@@ -193,7 +193,8 @@ def markdown(nb) -> str:
 
 def computed(name: str, expressions: list[str], work: Path, monkeypatch) -> list:
     """Run the instructor version of ``name``, then evaluate ``expressions`` in its kernel."""
-    nbformat, nbclient = need("nbformat"), need("nbclient")
+    nbformat = need("nbformat")
+    need("nbclient")
     shutil.copytree(COURSE / "source" / name, work, ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.npz"))
     monkeypatch.setenv("SNAKEKIT_TEST", "1")
     monkeypatch.delenv("SNAKEKIT_HANDIN_DIR", raising=False)
@@ -202,7 +203,7 @@ def computed(name: str, expressions: list[str], work: Path, monkeypatch) -> list
     probe = PRELUDE + "import json\nprint(json.dumps([np.asarray(eval(e), dtype=float).tolist() for e in %r]))" % (
         expressions,)
     nb.cells.append(nbformat.v4.new_code_cell(probe))
-    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(work)}}).execute()
+    notebook_client(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(work)}}).execute()
     out = "".join(o.get("text", "") for o in nb.cells[-1].outputs if o.output_type == "stream")
     return json.loads(out.strip().splitlines()[-1])
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import need
+from tests.conftest import need, notebook_client
 
 ROOT = Path(__file__).resolve().parents[2]
 LESSONS = ["04_trajectories", "05_simulation", "06_coded_sweep", "07_real_robot"]
@@ -92,7 +92,7 @@ def graded(request):
     lesson per fixture, so lesson 07 (on the emulated bus in real time) runs with the ``serial``
     tests and the others beside them."""
     nbformat = need("nbformat")
-    nbclient = need("nbclient")
+    need("nbclient")
     from snakekit.handin import decode_results
 
     lesson = request.param
@@ -110,8 +110,8 @@ def graded(request):
         os.environ.update(env)
         try:
             nb = nbformat.read(work / f"{lesson}.ipynb", as_version=4)
-            nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
-                                    resources={"metadata": {"path": str(work)}}).execute()
+            notebook_client(nb, timeout=300, kernel_name="python3",
+                            resources={"metadata": {"path": str(work)}}).execute()
         finally:
             for k, v in old.items():
                 os.environ.pop(k) if v is None else os.environ.__setitem__(k, v)

@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from grader import markup
-from tests.conftest import need
+from tests.conftest import need, notebook_client
 
 ROOT = Path(__file__).resolve().parents[2]
 HIDDEN = "### BEGIN HIDDEN TESTS"
@@ -127,7 +127,7 @@ def answers_in_sight(instructor_path: Path, student_path: Path, work: Path,
     Returns (the stand-ins that passed a visible check, problems).
     """
     nbformat = need("nbformat")
-    nbclient = need("nbclient")
+    need("nbclient")
     instructor, student = read(instructor_path), read(student_path)
     shutil.copytree(instructor_path.parent, work, ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.npz"))
     found = exercises(instructor, student)
@@ -138,8 +138,8 @@ def answers_in_sight(instructor_path: Path, student_path: Path, work: Path,
         nb.cells[ex["test"]].source = ex["visible"]
     names = sorted({h for ex in found for h in helpers(ex["visible"])})
     passed, problems = [], []
-    client = nbclient.NotebookClient(nb, timeout=180, kernel_name="python3", allow_errors=True,
-                                     resources={"metadata": {"path": str(work)}})
+    client = notebook_client(nb, timeout=180, kernel_name="python3", allow_errors=True,
+                             resources={"metadata": {"path": str(work)}})
 
     lesson_cells = list(nb.cells)
     nb.cells.append(nbformat.v4.new_code_cell(""))     # where the trials run

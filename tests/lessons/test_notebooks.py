@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import need
+from tests.conftest import need, notebook_client
 
 ROOT = Path(__file__).resolve().parents[2]
 LESSONS = sorted((ROOT / "notebooks").glob("*.ipynb"))
@@ -55,15 +55,15 @@ def test_every_lesson_that_moves_the_arm_lets_the_student_watch_a_move_in_the_3d
 def execute(path: Path, work: Path, monkeypatch, **env):
     """Run a notebook in a fresh kernel in ``work`` (a copy of its folder); errors are kept."""
     nbformat = need("nbformat")
-    nbclient = need("nbclient")
+    need("nbclient")
     shutil.copytree(path.parent, work, ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.html", "*.npz"))
     monkeypatch.setenv("SNAKEKIT_TEST", "1")
     monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
     for k, v in env.items():
         monkeypatch.setenv(k, v)
     nb = nbformat.read(work / path.name, as_version=4)
-    client = nbclient.NotebookClient(nb, timeout=180, kernel_name="python3", allow_errors=True,
-                                     resources={"metadata": {"path": str(work)}})
+    client = notebook_client(nb, timeout=180, kernel_name="python3", allow_errors=True,
+                             resources={"metadata": {"path": str(work)}})
     client.execute()
     return nb
 
