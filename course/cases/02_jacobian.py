@@ -22,11 +22,14 @@ def ex02_1_planar_jacobian_test(rng, spec):
 
 def ex02_2_numerical_jacobian_test(rng, spec):
     """numerical_jacobian on the test functions the check cell names ("g", "tool"), at random
-    points and steps: (function name, q, h). 8 cases; one step large (0.03 to 0.2), where the
-    central difference is off the exact Jacobian by far more than the tolerance, so a function
-    that ignores its ``h`` is caught."""
-    cases = [("g", rng.uniform(-1.5, 1.5, 3), float(10 ** rng.uniform(-6.5, -4.5))) for _ in range(4)]
-    cases += [("tool", rng.uniform(spec.lower, spec.upper, spec.n_joints), float(10 ** rng.uniform(-6.5, -4.5)))
+    points and steps: (function name, q, h). 8 cases, the visible check's kinds:
+    - six at steps of 0.0003 to 0.002 (the visible 1e-3), where a one-sided difference is off the
+      central one by h |f''| / 2, far more than the tolerance (it is right at tiny steps only);
+    - one at the default step 1e-6;
+    - one large step (0.03 to 0.2, the visible 0.1), where the central difference is off the exact
+      Jacobian by far more than the tolerance, so a function that ignores its ``h`` is caught."""
+    cases = [("g", rng.uniform(-1.5, 1.5, 3), float(10 ** rng.uniform(-3.5, -2.7))) for _ in range(4)]
+    cases += [("tool", rng.uniform(spec.lower, spec.upper, spec.n_joints), float(10 ** rng.uniform(-3.5, -2.7)))
               for _ in range(2)]
     return cases + [("g", rng.uniform(-1.5, 1.5, 3), 1e-6),
                     ("g", rng.uniform(-1.5, 1.5, 3), float(rng.uniform(0.03, 0.2)))]
