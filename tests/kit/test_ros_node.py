@@ -12,6 +12,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -217,3 +218,29 @@ def test_without_a_master_it_says_how_to_start_one(tmp_path):
     assert r.returncode == 1 and r.stderr == (
         f"snakekit ros: no ROS master answers at {env['ROS_MASTER_URI']} (ROS_MASTER_URI): start one with roscore "
         "(roscore -p PORT for another port), or set ROS_MASTER_URI to the one that runs\n")
+
+
+def compose_config(*args: str, cwd) -> dict:
+    """What compose v2 makes of the files (``config``: no engine needed), as JSON."""
+    compose = Path(sys.executable).parent / "docker-compose"
+    if not compose.exists():
+        compose = Path(need_program("docker-compose"))
+    r = subprocess.run([str(compose), *args, "config", "--format", "json"], cwd=cwd, capture_output=True, text=True,
+                       timeout=HANG, env={k: v for k, v in os.environ.items() if not k.startswith(("COMPOSE_", "SNAKEKIT_"))})
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+def test_the_ros_profile_starts_from_the_repository_root_as_from_docker_compose_yaml():
+    """``docker compose --profile ros up`` typed at the repository root (the issue's command, docs/ros.md)
+    finds the services, with their build context and course folder where ``-f docker/compose.yaml`` puts them."""
+    root = Path(__file__).resolve().parents[2]
+    from_root = compose_config("--profile", "ros", cwd=root)
+    named = compose_config("-f", "docker/compose.yaml", "--profile", "ros", cwd=root)
+    assert from_root["name"] == named["name"] == "snakekit"
+    assert sorted(from_root["services"]) == ["arm", "lab", "roscore", "rviz", "state-publisher"]
+    assert from_root["services"] == named["services"]
+    assert {s["build"]["context"] for s in from_root["services"].values()} == {str(root)}
+    grader = compose_config("--profile", "grader", cwd=root)["services"]["grader"]
+    assert {v["source"] for v in grader["volumes"]} == {str(root / "course" / d)
+                                                       for d in ("submitted", "gradebook", "autograded", "feedback")}
