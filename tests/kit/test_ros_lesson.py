@@ -79,6 +79,36 @@ def test_a_joint_states_bag_is_read_back_by_debians_rosbag(tmp_path):
     np.testing.assert_array_equal([s["position"] for s in states], POSITIONS)
 
 
+# Debian's rosbag: each /joint_states message's header stamp and the time the bag filed it under, in whole ns
+RECEIVED_READER = r"""
+import json, sys
+import rosbag
+with rosbag.Bag(sys.argv[1]) as bag:
+    got = [(m.header.stamp.to_nsec(), t.to_nsec()) for _, m, t in bag.read_messages(topics=["/joint_states"])]
+print(json.dumps({"stamps": [s for s, _ in got], "received": [r for _, r in got]}))
+"""
+
+
+def test_a_live_recordings_messages_are_filed_when_received_and_keep_their_stamps(tmp_path):
+    received = STAMPS + np.array([3, 11, 4, 9, 15, 2, 7]) * 1_000_000   # 2 to 15 ms after they were stamped
+    path = write_joint_states(tmp_path / "live.bag", STAMPS, POSITIONS, NAMES, received_ns=received)
+    got = system_python(RECEIVED_READER, path)
+    assert got == {"stamps": STAMPS.tolist(), "received": received.tolist()}
+    need("mcap_ros2")
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with open(write_joint_states(tmp_path / "live.mcap", STAMPS, POSITIONS, NAMES, received_ns=received), "rb") as f:
+        got = [(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, message.log_time) for _, _, message, m
+               in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/joint_states"])]
+    assert got == list(zip(STAMPS.tolist(), received.tolist()))
+
+
+def test_received_times_that_do_not_match_the_stamps_are_refused():
+    with pytest.raises(snakekit.ConfigurationError, match="received_ns has 2 times for 7 stamps: give one per message"):
+        write_joint_states("unused.bag", STAMPS, POSITIONS, NAMES, received_ns=STAMPS[:2])
+
+
 def test_a_joint_states_mcap_is_read_back_by_mcap_ros2(tmp_path):
     need("mcap_ros2")
     got, _ = decoded_mcap(write_joint_states(tmp_path / "states.mcap", STAMPS, POSITIONS, NAMES))
