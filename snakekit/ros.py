@@ -117,10 +117,19 @@ def serve(backend: str = "sim", *, rate: float = 50.0, topic: str = COMMAND, out
             states = rospy.Publisher(JOINT_STATES, sensor_msgs.JointState, queue_size=50)  # 1 s of a slow reader
             rospy.Subscriber(topic, trajectory_msgs.JointTrajectory, goals.put, queue_size=10)
             names = list(robot.spec.joint_names)
+            # While a goal runs, a state is stamped when the arm was there: the wall clock at the goal's first
+            # state plus the robot's time since. A busy host that holds the node up delays the message, not its
+            # stamp (the run keeps its own pace, catching up after a stall).
+            during: dict = {}
 
             def publish(t, positions, velocities):
+                if "running" in during:
+                    wall, t0 = during.setdefault("origin", (rospy.Time.now(), t))
+                    stamp = wall + rospy.Duration.from_sec(t - t0)
+                else:
+                    stamp = rospy.Time.now()
                 states.publish(sensor_msgs.JointState(
-                    header=rospy.Header(stamp=rospy.Time.now()), name=names,
+                    header=rospy.Header(stamp=stamp), name=names,
                     position=[float(v) for v in positions], velocity=[float(v) for v in velocities]))
 
             robot.on_record = publish
@@ -136,7 +145,11 @@ def serve(backend: str = "sim", *, rate: float = 50.0, topic: str = COMMAND, out
                     s = robot.read()
                     publish(s.time, s.positions, s.velocities)
                     continue
-                _run_goal(robot, goal, rate, rospy)
+                during["running"] = True
+                try:
+                    _run_goal(robot, goal, rate, rospy)
+                finally:
+                    during.clear()
                 tick = time.monotonic()
         finally:
             rospy.signal_shutdown("snakekit ros stopped")
