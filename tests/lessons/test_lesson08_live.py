@@ -88,5 +88,5 @@ def test_a_cell_that_reads_the_recorded_bag_before_it_exists_says_what_it_waits_
     nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
                             resources={"metadata": {"path": str(tmp_path)}}).execute()
     said = "".join(o.get("text", "") for o in nb.cells[-1].outputs if o.output_type == "stream")
-    assert said == ("This cell waits for exercise 8.1 and the cell after it that sends the sweep: it records "
+    assert said == ("This cell waits for exercise 8.1 and the cells after it that send the sweep: they record "
                     "sweep_recorded.bag, which is not there yet; run them first.\n"), said
