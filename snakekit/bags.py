@@ -338,7 +338,8 @@ def write_joint_states(path: Path, stamps_ns, positions, names, *, description: 
     stamps = [int(s) for s in stamps_ns]
     received = stamps if received_ns is None else [int(r) for r in received_ns]
     if len(received) != len(stamps):
-        raise ConfigurationError(f"received_ns has {len(received)} times for {len(stamps)} stamps: give one per message")
+        raise ConfigurationError(f"received_ns has {len(received)} times for {len(stamps)} stamps: "
+                                 "give one per message")
     states = [(at, ts.types[_JOINT_STATE](header=_header(ts, ns, "", k, ros), name=list(names),
                                           position=np.array(q, dtype=np.float64), velocity=np.zeros(0),
                                           effort=np.zeros(0)))

@@ -19,8 +19,8 @@ compiled modules load too.
 For a notebook (lesson 8), :func:`live_arm` starts a master and the node of its own on a free port and
 points the notebook's process at that master, so the student's own node (``rospy.init_node``) joins it
 and publishes the goals; :meth:`LiveArm.recording` runs ``rosbag record`` while a block runs, and
-:meth:`LiveArm.send` (publish a goal and wait for the node's word) is the kit's own sender, for tests. :func:`ros_missing` says, in
-one line, what to use on a machine without Debian's ROS 1.
+:meth:`LiveArm.send` (publish a goal and wait for the node's word) is the kit's own sender, for tests.
+:func:`ros_missing` says, in one line, what to use on a machine without Debian's ROS 1.
 """
 
 from __future__ import annotations

@@ -238,8 +238,9 @@ def compose_config(*args: str, cwd) -> dict:
     compose = Path(sys.executable).parent / "docker-compose"
     if not compose.exists():
         compose = Path(need_program("docker-compose"))
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("COMPOSE_", "SNAKEKIT_"))}   # the defaults
     r = subprocess.run([str(compose), *args, "config", "--format", "json"], cwd=cwd, capture_output=True, text=True,
-                       timeout=HANG, env={k: v for k, v in os.environ.items() if not k.startswith(("COMPOSE_", "SNAKEKIT_"))})
+                       timeout=HANG, env=env)
     assert r.returncode == 0, r.stderr
     return json.loads(r.stdout)
 
