@@ -54,6 +54,8 @@ def test_the_students_node_sends_task_2_hears_the_arm_move_records_it_and_it_fol
     echoed = listed.split("\n", listed.count("published by") + listed.count("subscribed by") + 1)[-1]
     assert echoed.count("\n---\n") == 3 and echoed.count("  - joint1\n  - joint2\n  - joint3\n  - joint4\n  - joint5\n") == 3
     assert echoed.count("position: [0.0, 0.0, 0.0, 0.0, 0.0]") == 3 and echoed.count("effort: []") == 3, echoed
+    stamps = [int(s) * 10**9 + int(n) for s, n in re.findall(r"stamp: \n    secs: (\d+)\n    nsecs: +(\d+)", echoed)]
+    assert len(stamps) == 3 and all(0.01 < d * 1e-9 < 0.04 for d in np.diff(stamps)), stamps   # "20 ms apart"
     # the student's publish ran the whole sweep, and the student's subscriber heard the arm swing and come home
     sent = said["08-code-07h"]
     assert "published 500 points on /arm/command" in sent, sent
