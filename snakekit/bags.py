@@ -324,19 +324,26 @@ def ros1_message(data: bytes, kind: str):
     return _typestore(1).deserialize_ros1(data, kind)
 
 
-def write_joint_states(path: Path, stamps_ns, positions, names, *, description: str | None = None) -> Path:
+def write_joint_states(path: Path, stamps_ns, positions, names, *, description: str | None = None,
+                       received_ns=None) -> Path:
     """A bag of ``/joint_states`` alone, as ``rosbag record /joint_states`` writes one: a
     ``sensor_msgs/JointState`` per row of ``positions`` [rad], stamped ``stamps_ns`` [ns, ROS time],
-    joints named ``names`` in that order; ``.bag`` (ROS 1) or ``.mcap`` (ROS 2), by the suffix. With
+    joints named ``names`` in that order; ``.bag`` (ROS 1) or ``.mcap`` (ROS 2), by the suffix. Each
+    message is filed in the bag at ``received_ns`` [ns] (when the recorder got it; default its stamp),
+    as a live recording files a message a little after its publisher stamped it. With
     ``description``, a latched ``/robot_description`` message first."""
     path = Path(path)
     ros = 2 if path.suffix == ".mcap" else 1
     ts = _typestore(ros)
     stamps = [int(s) for s in stamps_ns]
-    states = [(ns, ts.types[_JOINT_STATE](header=_header(ts, ns, "", k, ros), name=list(names),
+    received = stamps if received_ns is None else [int(r) for r in received_ns]
+    if len(received) != len(stamps):
+        raise ConfigurationError(f"received_ns has {len(received)} times for {len(stamps)} stamps: "
+                                 "give one per message")
+    states = [(at, ts.types[_JOINT_STATE](header=_header(ts, ns, "", k, ros), name=list(names),
                                           position=np.array(q, dtype=np.float64), velocity=np.zeros(0),
                                           effort=np.zeros(0)))
-              for k, (ns, q) in enumerate(zip(stamps, positions))]
+              for k, (ns, at, q) in enumerate(zip(stamps, received, positions))]
     topics = [(JOINT_STATES, _JOINT_STATE, False, states)]
     if description is not None:
         first = stamps[0] if stamps else ORIGIN_NS

@@ -17,13 +17,15 @@ modules) comes from Debian. Both are the same CPython (3.11 on Debian 12), so De
 compiled modules load too.
 
 For a notebook (lesson 8), :func:`live_arm` starts a master and the node of its own on a free port and
-joins them from the notebook's process: :meth:`LiveArm.send` publishes a goal and waits for the node's
-word, :meth:`LiveArm.recording` runs ``rosbag record`` while a block runs. :func:`ros_missing` says, in
-one line, what to use on a machine without Debian's ROS 1.
+points the notebook's process at that master, so the student's own node (``rospy.init_node``) joins it
+and publishes the goals; :meth:`LiveArm.recording` runs ``rosbag record`` while a block runs, and
+:meth:`LiveArm.send` (publish a goal and wait for the node's word) is the kit's own sender, for tests.
+:func:`ros_missing` says, in one line, what to use on a machine without Debian's ROS 1.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
 import queue
@@ -115,10 +117,19 @@ def serve(backend: str = "sim", *, rate: float = 50.0, topic: str = COMMAND, out
             states = rospy.Publisher(JOINT_STATES, sensor_msgs.JointState, queue_size=50)  # 1 s of a slow reader
             rospy.Subscriber(topic, trajectory_msgs.JointTrajectory, goals.put, queue_size=10)
             names = list(robot.spec.joint_names)
+            # While a goal runs, a state is stamped when the arm was there: the wall clock at the goal's first
+            # state plus the robot's time since. A busy host that holds the node up delays the message, not its
+            # stamp (the run keeps its own pace, catching up after a stall).
+            during: dict = {}
 
             def publish(t, positions, velocities):
+                if "running" in during:
+                    wall, t0 = during.setdefault("origin", (rospy.Time.now(), t))
+                    stamp = wall + rospy.Duration.from_sec(t - t0)
+                else:
+                    stamp = rospy.Time.now()
                 states.publish(sensor_msgs.JointState(
-                    header=rospy.Header(stamp=rospy.Time.now()), name=names,
+                    header=rospy.Header(stamp=stamp), name=names,
                     position=[float(v) for v in positions], velocity=[float(v) for v in velocities]))
 
             robot.on_record = publish
@@ -134,7 +145,11 @@ def serve(backend: str = "sim", *, rate: float = 50.0, topic: str = COMMAND, out
                     s = robot.read()
                     publish(s.time, s.positions, s.velocities)
                     continue
-                _run_goal(robot, goal, rate, rospy)
+                during["running"] = True
+                try:
+                    _run_goal(robot, goal, rate, rospy)
+                finally:
+                    during.clear()
                 tick = time.monotonic()
         finally:
             rospy.signal_shutdown("snakekit ros stopped")
@@ -169,8 +184,8 @@ def _run_goal(robot, goal, rate: float, rospy) -> None:
 #: What a machine without Debian's ROS 1 uses for the live parts (one line).
 NO_ROS = ("no ROS 1 here (Debian's roscore and python3-rospy): run the live part in compose's ros profile "
           "(docs/ros.md: docker compose -f docker/compose.yaml --profile ros up); the rest runs here")
-#: ROS 1 lets a process be one node, on one master: the master this process joined, once it has.
-_JOINED: list[str] = []
+#: ROS 1 lets a process be one node, on one master: the live arm whose master this process joined, once it has.
+_JOINED: list = []
 
 
 def ros_missing() -> str | None:
@@ -186,35 +201,54 @@ def ros_missing() -> str | None:
 
 
 class LiveArm:
-    """The arm's node (``snakekit ros``) on a ``roscore`` of its own, and this process a node on the
-    same master (:func:`live_arm` makes it): send it goals, record what it publishes."""
+    """The arm's node (``snakekit ros``) on a ``roscore`` of its own (:func:`live_arm` starts them): a
+    notebook's own node (``rospy.init_node``) sends it goals on :data:`COMMAND` and hears its
+    ``/joint_states``; :meth:`recording` runs ``rosbag record``, :meth:`stop` stops both."""
 
-    def __init__(self, master: str, env: dict, hang: float, node: subprocess.Popen):
-        self.master, self.env, self.hang, self._node = master, env, hang, node
-        _, self._rospy, _, trajectory_msgs = import_ros()
-        from rosgraph_msgs.msg import Log
+    def __init__(self, master: str, env: dict, hang: float, started: list[subprocess.Popen]):
+        self.master, self.env, self.hang, self._started = master, env, hang, started
+        self._node, self._goals, self._words = started[1], None, []
+        self._wait("the arm's node on the master", lambda: "/" + NODE in self._publishers(JOINT_STATES)
+                   and "/" + NODE in self._subscribers(COMMAND))
 
-        self._JointTrajectory, self._words = trajectory_msgs.JointTrajectory, []
-        self._rospy.Subscriber("/rosout", Log, self._heard, queue_size=100)
-        self._goals = self._rospy.Publisher(COMMAND, trajectory_msgs.JointTrajectory, queue_size=10)
-        self._wait("the arm's node on the master", lambda: self._goals.get_num_connections() > 0
-                   and "/" + NODE in self._publishers(JOINT_STATES))
+    def __enter__(self) -> LiveArm:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    @property
+    def running(self) -> bool:
+        """Whether the master and the arm's node still run."""
+        return bool(self._started) and all(p.poll() is None for p in self._started)
+
+    def stop(self) -> None:
+        """Stop the arm's node (it closes the robot on SIGTERM) and the master; this process's ROS node, if it
+        joined, leaves with them (ROS 1 lets a process join one master: restart the kernel to start another)."""
+        started, self._started = self._started, []
+        rospy = import_ros()[1]
+        if rospy.core.is_initialized() and not rospy.is_shutdown():
+            rospy.signal_shutdown("the live arm stopped")
+        if len(started) > 1:
+            _stop(started[1], signal.SIGTERM, self.hang)  # the node closes the robot on SIGTERM
+        if started:
+            _stop(started[0], signal.SIGINT, self.hang)   # roscore's way out
+        shutil.rmtree(self.env["ROS_HOME"], ignore_errors=True)
 
     def _heard(self, log) -> None:
         if log.name == "/" + NODE and log.msg.startswith("goal "):
             self._words.append(log.msg)
 
-    def _publishers(self, topic: str) -> list[str]:
+    def _state(self) -> list:
         import rosgraph
 
-        publishers = rosgraph.Master("/snakekit_lesson").getSystemState()[0]
-        return next((nodes for name, nodes in publishers if name == topic), [])
+        return rosgraph.Master("/snakekit_lesson", master_uri=self.master).getSystemState()
+
+    def _publishers(self, topic: str) -> list[str]:
+        return next((nodes for name, nodes in self._state()[0] if name == topic), [])
 
     def _subscribers(self, topic: str) -> list[str]:
-        import rosgraph
-
-        subscribers = rosgraph.Master("/snakekit_lesson").getSystemState()[1]
-        return next((nodes for name, nodes in subscribers if name == topic), [])
+        return next((nodes for name, nodes in self._state()[1] if name == topic), [])
 
     def _wait(self, what: str, ready) -> None:
         end = time.monotonic() + self.hang
@@ -229,9 +263,22 @@ class LiveArm:
     def send(self, message) -> str:
         """Publish a ``trajectory_msgs/JointTrajectory`` (:func:`snakekit.bags.ros1_messages`' or rospy's)
         on :data:`COMMAND` and wait for the node's word on ``/rosout``: ``goal done: ...`` is returned,
-        ``goal refused: <why>`` raises :class:`~snakekit.TrajectoryError` (nothing moved)."""
-        if not isinstance(message, self._JointTrajectory):
-            message = self._JointTrajectory().deserialize(ros1_bytes(message))
+        ``goal refused: <why>`` raises :class:`~snakekit.TrajectoryError` (nothing moved). This process
+        joins the master as a node (``/snakekit_lesson_...``) first, unless it already has."""
+        if not self.running:
+            raise ConfigurationError("this live arm was stopped: start another with snakekit.ros.live_arm() "
+                                     "(in a notebook, after restarting the kernel)")
+        _, rospy, _, trajectory_msgs = import_ros()
+        if self._goals is None:
+            from rosgraph_msgs.msg import Log
+
+            if not rospy.core.is_initialized():
+                rospy.init_node("snakekit_lesson", anonymous=True, disable_signals=True)
+            rospy.Subscriber("/rosout", Log, self._heard, queue_size=100)
+            self._goals = rospy.Publisher(COMMAND, trajectory_msgs.JointTrajectory, queue_size=10)
+            self._wait("the arm's node on /arm/command", lambda: self._goals.get_num_connections() > 0)
+        if not isinstance(message, trajectory_msgs.JointTrajectory):
+            message = trajectory_msgs.JointTrajectory().deserialize(ros1_bytes(message))
         said = len(self._words)
         self._goals.publish(message)
         duration = message.points[-1].time_from_start.to_sec() if message.points else 0.0
@@ -300,18 +347,21 @@ def _stop(process: subprocess.Popen, sig: int, hang: float) -> None:
             process.wait()
 
 
-@contextlib.contextmanager
-def live_arm(backend: str = "sim", *, hang: float = 60.0):
-    """A ``roscore`` on a free port and the arm's node on it (``snakekit ros --backend backend``); this
-    process joins it as a node. Both are stopped after the block. ``hang``: how long a start or a word
-    may take on a busy machine [s]. ROS 1 makes a process one node on one master: a second live arm in
-    the same process (a notebook's kernel) raises :class:`~snakekit.ConfigurationError`."""
+def live_arm(backend: str = "sim", *, hang: float = 60.0) -> LiveArm:
+    """A ``roscore`` on a free port and the arm's node on it (``snakekit ros --backend backend``), running
+    until :meth:`LiveArm.stop` (or the end of a ``with`` block, or of the process). This process's
+    ``ROS_MASTER_URI`` names that master, so ``rospy.init_node`` joins it. ``hang``: how long a start or a
+    word may take on a busy machine [s]. Called again while the arm runs, it returns that arm; ROS 1 makes a
+    process one node on one master, so once this process joined a master that stopped, it raises
+    :class:`~snakekit.ConfigurationError` (restart the kernel)."""
     missing = ros_missing()
     if missing:
         raise MissingDependencyError(missing)
-    if _JOINED:
-        raise ConfigurationError(f"this process already joined the ROS master at {_JOINED[0]}; ROS 1 lets a process be "
-                                 "one node: restart the kernel to start another live arm")
+    if _JOINED and _JOINED[-1].running:
+        return _JOINED[-1]
+    if _JOINED and import_ros()[1].core.is_initialized():
+        raise ConfigurationError(f"this process already joined the ROS master at {_JOINED[-1].master}, which stopped; "
+                                 "ROS 1 lets a process be one node: restart the kernel to start another live arm")
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -319,12 +369,11 @@ def live_arm(backend: str = "sim", *, hang: float = 60.0):
     master = f"http://127.0.0.1:{port}"
     env = dict(os.environ, ROS_MASTER_URI=master, ROS_HOSTNAME="127.0.0.1", ROS_HOME=home,
                ROS_LOG_DIR=os.path.join(home, "log"))
-    started = []
+    started: list[subprocess.Popen] = []
     try:
         started.append(subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL,
                                         stderr=subprocess.STDOUT, start_new_session=True))
-        rosgraph, rospy, _, _ = import_ros()
-        os.environ.update({k: env[k] for k in ("ROS_MASTER_URI", "ROS_HOSTNAME", "ROS_HOME", "ROS_LOG_DIR")})
+        rosgraph = import_ros()[0]
         end = time.monotonic() + hang
         while not rosgraph.is_master_online(master):
             if started[0].poll() is not None or time.monotonic() > end:
@@ -332,14 +381,15 @@ def live_arm(backend: str = "sim", *, hang: float = 60.0):
             time.sleep(0.2)
         started.append(subprocess.Popen([sys.executable, "-m", "snakekit.cli", "ros", "--backend", backend], env=env,
                                         stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, start_new_session=True))
-        _JOINED.append(master)
-        rospy.init_node("snakekit_lesson", anonymous=True, disable_signals=True)
-        yield LiveArm(master, env, hang, started[1])
-    finally:
-        if _JOINED:
-            import_ros()[1].signal_shutdown("the live arm stopped")  # this process's node leaves with the master
+        arm = LiveArm(master, env, hang, started)
+    except BaseException:
         if len(started) > 1:
-            _stop(started[1], signal.SIGTERM, hang)  # the node closes the robot on SIGTERM
+            _stop(started[1], signal.SIGTERM, hang)
         if started:
-            _stop(started[0], signal.SIGINT, hang)   # roscore's way out
+            _stop(started[0], signal.SIGINT, hang)
         shutil.rmtree(home, ignore_errors=True)
+        raise
+    os.environ.update({k: env[k] for k in ("ROS_MASTER_URI", "ROS_HOSTNAME", "ROS_HOME", "ROS_LOG_DIR")})
+    _JOINED.append(arm)
+    atexit.register(arm.stop)   # a kernel that ends leaves no master or node behind
+    return arm

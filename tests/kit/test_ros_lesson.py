@@ -6,6 +6,7 @@ the arm's node of its own) taking a sweep that ``rosbag record`` records and a g
 
 import json
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -79,6 +80,36 @@ def test_a_joint_states_bag_is_read_back_by_debians_rosbag(tmp_path):
     np.testing.assert_array_equal([s["position"] for s in states], POSITIONS)
 
 
+# Debian's rosbag: each /joint_states message's header stamp and the time the bag filed it under, in whole ns
+RECEIVED_READER = r"""
+import json, sys
+import rosbag
+with rosbag.Bag(sys.argv[1]) as bag:
+    got = [(m.header.stamp.to_nsec(), t.to_nsec()) for _, m, t in bag.read_messages(topics=["/joint_states"])]
+print(json.dumps({"stamps": [s for s, _ in got], "received": [r for _, r in got]}))
+"""
+
+
+def test_a_live_recordings_messages_are_filed_when_received_and_keep_their_stamps(tmp_path):
+    received = STAMPS + np.array([3, 11, 4, 9, 15, 2, 7]) * 1_000_000   # 2 to 15 ms after they were stamped
+    path = write_joint_states(tmp_path / "live.bag", STAMPS, POSITIONS, NAMES, received_ns=received)
+    got = system_python(RECEIVED_READER, path)
+    assert got == {"stamps": STAMPS.tolist(), "received": received.tolist()}
+    need("mcap_ros2")
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with open(write_joint_states(tmp_path / "live.mcap", STAMPS, POSITIONS, NAMES, received_ns=received), "rb") as f:
+        got = [(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, message.log_time) for _, _, message, m
+               in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/joint_states"])]
+    assert got == list(zip(STAMPS.tolist(), received.tolist()))
+
+
+def test_received_times_that_do_not_match_the_stamps_are_refused():
+    with pytest.raises(snakekit.ConfigurationError, match="received_ns has 2 times for 7 stamps: give one per message"):
+        write_joint_states("unused.bag", STAMPS, POSITIONS, NAMES, received_ns=STAMPS[:2])
+
+
 def test_a_joint_states_mcap_is_read_back_by_mcap_ros2(tmp_path):
     need("mcap_ros2")
     got, _ = decoded_mcap(write_joint_states(tmp_path / "states.mcap", STAMPS, POSITIONS, NAMES))
@@ -108,6 +139,50 @@ def test_the_live_arm_runs_a_sweep_rosbag_records_and_refuses_a_goal_beyond_the_
     # the sweep swung every joint both ways by most of its 0.2 rad, and came home
     assert (q.max(0) > 0.12).all() and (q.min(0) < -0.12).all(), (q.max(0), q.min(0))
     np.testing.assert_allclose(q[-1], 0.0, atol=0.02)
+
+
+# A notebook's kernel, as lesson 8 uses the live arm across cells: started without a block, found running again,
+# joined by the kernel's own node, stopped; then, with the kernel's node gone with it, no second master.
+KERNEL = r"""
+import json, os, sys
+import snakekit
+from snakekit.ros import import_ros, live_arm
+
+arm = live_arm()
+again = live_arm() is arm
+pids = [p.pid for p in arm._started]
+rospy = import_ros()[1]
+rospy.init_node("sweep_sender", anonymous=True, disable_signals=True)
+joined = os.environ["ROS_MASTER_URI"] == arm.master == rospy.get_master().getUri()[2].rstrip("/")
+publishers = dict(arm._state()[0])
+arm.stop()
+alive = []
+for pid in pids:
+    try:
+        os.killpg(pid, 0)
+        alive.append(pid)
+    except ProcessLookupError:
+        pass
+try:
+    live_arm()
+    second = "started"
+except snakekit.ConfigurationError as e:
+    second = str(e)
+print(json.dumps({"again": again, "joined": joined, "me": rospy.get_name(), "publishers": publishers,
+                  "alive": alive, "running": arm.running, "second": second}))
+"""
+
+
+def test_a_live_arm_runs_across_cells_until_stopped_and_a_kernel_that_joined_it_is_told_to_restart(tmp_path):
+    need_program("roscore"), need_program("rosbag")
+    r = subprocess.run([sys.executable, "-c", KERNEL], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    got = json.loads(r.stdout.strip().splitlines()[-1])
+    assert got["again"] and got["joined"] and got["me"].startswith("/sweep_sender_")
+    assert got["publishers"]["/joint_states"] == ["/snakekit_arm"] and got["me"] in got["publishers"]["/rosout"]
+    assert got["alive"] == [] and got["running"] is False          # roscore and the arm's node are gone
+    assert got["second"].startswith("this process already joined the ROS master at http://127.0.0.1:")
+    assert got["second"].endswith("restart the kernel to start another live arm")
 
 
 # rosbag record's shape: a front that exits at Ctrl-C's signal, and a recorder (same process group) that

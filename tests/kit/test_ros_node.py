@@ -12,6 +12,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -43,7 +44,8 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 plan = json.load(open(sys.argv[1]))
 states, logs = [], []
 rospy.init_node("sweep_client", disable_signals=True)
-state_sub = rospy.Subscriber("/joint_states", JointState, lambda m: states.append([list(m.position), list(m.name)]))
+state_sub = rospy.Subscriber("/joint_states", JointState,
+                             lambda m: states.append([list(m.position), list(m.name), m.header.stamp.to_nsec()]))
 log_sub = rospy.Subscriber("/rosout", Log, lambda m: logs.append((m.name, m.level, m.msg)))
 pub = rospy.Publisher("/arm/command", JointTrajectory, queue_size=10)
 
@@ -166,7 +168,7 @@ def test_refused_goals_say_why_in_the_kits_words(session):
 
 def test_refused_goals_move_nothing(session):
     seen, *_ = session
-    before_sweep = np.array([p for p, _ in seen["states"][:seen["sent"][2]]])
+    before_sweep = np.array([p for p, *_ in seen["states"][:seen["sent"][2]]])
     assert len(before_sweep) > seen["sent"][1] > 0  # states were published while the refusals came in
     # the arm rests at home from the start; refused goals leave it there to the last bit
     assert np.abs(before_sweep).max() < 1e-9
@@ -178,8 +180,8 @@ def test_joint_states_follow_the_sweep_as_the_kit_runs_it(session):
         took = robot.run(AS_SENT, record_rate=50.0).robot_time
     assert node_words(seen)[2] == (f"goal done: {len(SWEEP)} points, {took:.2f} s (the last goal at {AS_SENT.times[-1]:.2f} "
                                    f"s, then {took - AS_SENT.times[-1]:.2f} s to settle)")
-    assert all(names == NAMES for _, names in seen["states"])
-    received = np.array([p for p, _ in seen["states"][seen["sent"][2]:]])
+    assert all(names == NAMES for _, names, _ in seen["states"])
+    received = np.array([p for p, *_ in seen["states"][seen["sent"][2]:]])
     # The kit's own run of the same sweep on a fresh simulator, recorded at the node's rate and
     # on past the run (the node goes on holding the last goal, as the run's settling does).
     with SimRobot() as robot:
@@ -202,6 +204,18 @@ def test_joint_states_follow_the_sweep_as_the_kit_runs_it(session):
     assert received[:, 0].max() == pytest.approx(swing.max(), abs=1e-6) and swing.max() > 0.15
 
 
+def test_a_goals_joint_states_are_stamped_when_the_arm_was_there_not_when_sent(session):
+    """While the sweep runs, each stamp is the wall clock at the goal's first state plus the robot's time since: the
+    stamps of the run step by the record period (20 ms at 50 Hz) to the nanosecond, however late a busy host
+    sent each message; the states before and after are stamped by the wall clock as they go out."""
+    seen, *_ = session
+    stamps = np.array([ns for *_, ns in seen["states"][seen["sent"][2]:]], dtype=np.int64)
+    on_the_robots_clock = np.abs(np.diff(stamps) - 20_000_000) <= 2       # Duration.from_sec cuts to the ns
+    longest = max(len(r) for r in "".join("1" if k else "0" for k in on_the_robots_clock).split("0"))
+    assert longest >= int(round(AS_SENT.duration * 50)), (longest, np.diff(stamps)[:50].tolist())
+    assert (np.diff(stamps) > 0).all()                                # and never back in time
+
+
 def test_sigterm_stops_the_node_closing_the_robot(session):
     _, returncode, out, err = session
     assert "goals (trajectory_msgs/JointTrajectory) on /arm/command" in out
@@ -217,3 +231,30 @@ def test_without_a_master_it_says_how_to_start_one(tmp_path):
     assert r.returncode == 1 and r.stderr == (
         f"snakekit ros: no ROS master answers at {env['ROS_MASTER_URI']} (ROS_MASTER_URI): start one with roscore "
         "(roscore -p PORT for another port), or set ROS_MASTER_URI to the one that runs\n")
+
+
+def compose_config(*args: str, cwd) -> dict:
+    """What compose v2 makes of the files (``config``: no engine needed), as JSON."""
+    compose = Path(sys.executable).parent / "docker-compose"
+    if not compose.exists():
+        compose = Path(need_program("docker-compose"))
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("COMPOSE_", "SNAKEKIT_"))}   # the defaults
+    r = subprocess.run([str(compose), *args, "config", "--format", "json"], cwd=cwd, capture_output=True, text=True,
+                       timeout=HANG, env=env)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+def test_the_ros_profile_starts_from_the_repository_root_as_from_docker_compose_yaml():
+    """``docker compose --profile ros up`` typed at the repository root (the issue's command, docs/ros.md)
+    finds the services, with their build context and course folder where ``-f docker/compose.yaml`` puts them."""
+    root = Path(__file__).resolve().parents[2]
+    from_root = compose_config("--profile", "ros", cwd=root)
+    named = compose_config("-f", "docker/compose.yaml", "--profile", "ros", cwd=root)
+    assert from_root["name"] == named["name"] == "snakekit"
+    assert sorted(from_root["services"]) == ["arm", "lab", "roscore", "rviz", "state-publisher"]
+    assert from_root["services"] == named["services"]
+    assert {s["build"]["context"] for s in from_root["services"].values()} == {str(root)}
+    grader = compose_config("--profile", "grader", cwd=root)["services"]["grader"]
+    assert {v["source"] for v in grader["volumes"]} == {str(root / "course" / d)
+                                                       for d in ("submitted", "gradebook", "autograded", "feedback")}

@@ -227,6 +227,18 @@ COMPARE = ("def compare_runs(times, positions, ref_times, ref_positions):\n"
 COMPARE_RIGHT = {"inside": "(times >= ref_times[0]) & (times <= ref_times[-1])", "rms": "np.sqrt(np.mean(error ** 2, axis=0))",
                  "largest": "float(np.abs(error[k, j]))", "joint": "int(j) + 1"}
 
+# lesson 08's read_joint_states, with its times (or what it returns) written as a student may slip
+READ = ("def read_joint_states(path):\n    with AnyReader([Path(path)]) as bag:\n"
+        "        wanted = [c for c in bag.connections if c.topic == '/joint_states']\n"
+        "        got = [(t, bag.deserialize(raw, c.msgtype)) for c, t, raw in bag.messages(connections=wanted)]\n"
+        "    if not wanted or not got:\n        raise ValueError('no /joint_states')\n"
+        "    messages = [m for _, m in got]\n"
+        "    {times}\n"
+        "    positions = np.array([[m.position[list(m.name).index(f'joint{{j}}')] for j in range(1, 6)] for m in messages])\n"
+        "    return {result}")
+READ_RIGHT = {"times": "ns = np.array([m.header.stamp.sec * 1000000000 + m.header.stamp.nanosec for m in messages]); "
+                       "times = (ns - ns[0]) * 1e-9", "result": "times, positions"}
+
 MISTAKES = {
     "00_meet_the_arm": [
         ("ex00_1_tool_distance_test", "def distance_mm(q, target):\n    x, y, _ = snakekit.tool_pose_2d(q)\n"
@@ -616,6 +628,14 @@ MISTAKES = {
          "    return msgs.JointTrajectory(header=msgs.Header(seq=0, stamp=msgs.Time(sec=0, nanosec=0), frame_id=''),\n"
          "                                joint_names=JOINTS, points=points)",
          "the positions are in degrees"),
+        ("ex08_1_sweep_message_test", "def sweep_message(trajectory):\n"
+         "    empty = np.zeros(0)\n"
+         "    points = [msgs.JointTrajectoryPoint(positions=np.array(q, dtype=float), velocities=empty, accelerations=empty, effort=empty,\n"
+         "                                        time_from_start=msgs.Duration(sec=int(t), nanosec=int(t % 1 * 1e9)))\n"
+         "              for t, q in zip(trajectory.times, trajectory.positions)]\n"
+         "    return msgs.JointTrajectory(header=msgs.Header(seq=0, stamp=msgs.Time(sec=0, nanosec=0), frame_id=''),\n"
+         "                                joint_names=JOINTS, points=points)",
+         "time_from_start is a nanosecond off"),
         ("ex08_2_read_joint_states_test", "def read_joint_states(path):\n    with AnyReader([Path(path)]) as bag:\n"
          "        wanted = [c for c in bag.connections if c.topic == '/joint_states']\n"
          "        messages = [bag.deserialize(raw, c.msgtype) for c, _, raw in bag.messages(connections=wanted)]\n"
@@ -629,6 +649,18 @@ MISTAKES = {
          "    if not wanted or not messages:\n        raise ValueError('no /joint_states')\n"
          "    ns = np.array([m.header.stamp.sec * 1000000000 + m.header.stamp.nanosec for m in messages])\n"
          "    return (ns - ns[0]) * 1e-9, np.array([m.position for m in messages])", "in its own order"),
+    ] + [("ex08_2_read_joint_states_test", READ.format(**{**READ_RIGHT, **slip}), *hint) for slip, hint in (
+        ({"times": "ns = np.array([t for t, _ in got]); times = (ns - ns[0]) * 1e-9"},
+         ("the times the bag received the messages",)),
+        ({"times": "s = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in messages]); "
+                   "times = s - s[0]"}, ("the stamps went through floats",)),
+        ({"times": "ns = np.array([m.header.stamp.sec * 1e9 + m.header.stamp.nanosec for m in messages]); "
+                   "times = (ns - ns[0]) * 1e-9"}, ("the stamps went through floats",)),
+        ({"times": "us = np.array([m.header.stamp.sec * 1000000 + m.header.stamp.nanosec // 1000 for m in messages]); "
+                   "times = (us - us[0]) * 1e-6"}, ("cut to whole microseconds",)),
+        ({"times": "ns = np.array([m.header.stamp.sec * 1000000000 + m.header.stamp.nanosec for m in messages]); "
+                   "times = ns - ns[0]"}, ("these are nanoseconds",)),
+        ({"result": "list(times), positions.tolist()"}, ("not a numpy array", True)))
     ] + [("ex08_3_compare_runs_test", COMPARE.format(**{**COMPARE_RIGHT, **slip}), hint) for slip, hint in (
         ({"rms": "np.mean(error ** 2, axis=0)"}, "take its square root"),
         ({"rms": "np.full(5, np.sqrt(np.mean(error ** 2)))"}, "over all five joints together"),
