@@ -251,7 +251,9 @@ class Exercise:
             tol: absolute tolerance [unit]; rtol: relative tolerance.
             why: the reason for the tolerance; default "exact math" when ``tol`` is 0.
             labels: names of the entries of a 1-D value ("x", "y", "heading"), or of the columns of a 2-D one
-                ("time", "joint", "kind": a message names ``violations[0] time``, not ``violations[0, 0]``).
+                ("time", "joint", "kind": a message names ``violations[0] time``, not ``violations[0, 0]``). Such a
+                table is read from the top: a message names its first wrong entry, as the grader's does; any other
+                value its entry furthest off.
             mistakes: ``{hint: value}``: answers a known mistake would give; when ``got``
                 matches one, its hint is shown.
             array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
@@ -281,13 +283,17 @@ class Exercise:
         if (diff <= bound).all():
             self.checked += 1
             return
-        i = np.unravel_index(int(np.argmax(diff - bound)), diff.shape)
+        table = labels is not None and arr.ndim == 2 and len(labels) == arr.shape[1]
+        if table:   # a table of rows is read from the top: its first wrong entry, as the grader names it
+            i = tuple(int(k) for k in np.argwhere(~(diff <= bound))[0])
+        else:
+            i = np.unravel_index(int(np.argmax(diff - bound)), diff.shape)
         units = unit if isinstance(unit, (tuple, list)) else None
         u = units[i[-1]] if units is not None and arr.ndim >= 1 else unit
         name = what
         if labels is not None and arr.ndim == 1:
             name = f"{what} {labels[i[0]]}"
-        elif labels is not None and arr.ndim == 2 and len(labels) == arr.shape[1]:   # a row's columns named
+        elif table:   # a row's columns named
             name = f"{what}[{int(i[0])}] {labels[i[1]]}"
         elif arr.ndim >= 1:
             name = f"{what}[{', '.join(str(int(k)) for k in i)}]"

@@ -189,3 +189,29 @@ def test_6_4s_visible_check_holds_a_run_whose_lag_lies_between_the_steps_of_a_50
     joints = [int(j) for j in re.findall(r"\(\w+_run, (\d), 0\.\d+,", source)]
     assert len(runs) == len(joints) - 1, (runs, joints)     # Task 2 (the defaults) is the first run
     assert any(_coarse_misses(int(n), 10.0, int(k), float(a), j) for (n, k, a), j in zip(runs, joints[1:])), runs
+
+
+def test_a_wrong_table_of_violations_is_named_at_its_first_wrong_entry_locally_and_graded():
+    """4.4's rows left unsorted (position rows, then speed rows): the notebook's check and the grader name the same
+    entry, the first wrong one from the top, in the same words (the largest, a kind, told the student less)."""
+    from grader.scoring.wording import signatures, wording
+
+    nbformat = need("nbformat")
+    want = np.array([[0.5, 5, 0], [0.5, 5, 1], [1.0, 4, 1], [1.0, 5, 0]], dtype=float)
+    got = want[[0, 3, 1, 2]]                      # the two position rows first: the sort forgotten
+    ex = checks.Exercise("4.4", "limit_violations")
+    with pytest.raises(checks.CheckFailed) as local:
+        ex.close(got, want, what="violations", where="a move beyond both limits", labels=("time", "joint", "kind"),
+                 unit=("s", "", ""))
+    said = "violations[1] time is 1 s, expected 0.5 s: off by 0.5 s (tolerance "
+    assert str(local.value).startswith("exercise 4.4 limit_violations: violations[1] time at a move beyond both "
+                                       "limits is 1 s, expected 0.5 s: off by 0.5 s (tolerance 5e-10 s")
+    nb = nbformat.read(COURSE / "source" / "04_trajectories" / "04_trajectories.ipynb", as_version=4)
+    source = dict((gid, src) for _, gid, src in CELLS)["ex04_4_limit_check_test"]
+    words = wording("ex04_4_limit_check_test", source, "graded_violations",
+                    signatures([c.source for c in nb.cells if c.cell_type == "code"]))
+    expected = Expected("ex04_4_limit_check_test", "values", cases=[(np.arange(3) * 0.5, np.zeros((3, 5)))],
+                        results=[{"value": want}], tolerances=DEFAULT_TOLERANCES["values"], wording=words)
+    graded = score_exercise("ex04_4_limit_check_test", decode_results(encode_results([got])), expected, 3.0)
+    assert graded.score == 0.0
+    assert f"]]: {said}" in graded.message, graded.message

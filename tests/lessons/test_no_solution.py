@@ -470,7 +470,8 @@ MISTAKES = {
         ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(p) > spec.upper", "p > spec.upper"),
          "breaks the position limit too: compare np.abs(q)"),
         ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(np.diff(p, axis=0))", "np.diff(p, axis=0)"),
-         "breaks the speed limit too")],
+         "breaks the speed limit too"),
+        ("ex04_4_limit_check_test", _LIMITS.replace("sorted(rows)", "rows"), "sort them by time, then joint")],
     "05_simulation": [
         ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
          "    progress = y / target\n"
