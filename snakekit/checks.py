@@ -122,6 +122,10 @@ ZERO = 1e-12
 
 #: exercise number -> whether its check cell passed, in this kernel (a composite reads its parts').
 _VERDICTS: dict[str, bool] = {}
+#: exercise number -> what its failed check said (its hint, else its message), for the cells that use it.
+_CAUSES: dict[str, str] = {}
+#: exercise number -> the exercises it builds on (its ``builds_on``), for the cells that use it.
+_BUILT_ON: dict[str, tuple] = {}
 
 
 def composite_note(number: str, parts: list) -> str:
@@ -152,6 +156,8 @@ class Exercise:
         self.builds_on = tuple(builds_on)
         self.checked = 0
         _VERDICTS.pop(number, None)      # run again: its verdict is this run's
+        _CAUSES.pop(number, None)
+        _BUILT_ON[number] = self.builds_on
 
     @property
     def prefix(self) -> str:
@@ -161,6 +167,7 @@ class Exercise:
         """Raise :class:`CheckFailed` with ``message`` (and a hint line, and, for a composite
         whose parts fail their own checks, which parts to fix first)."""
         _VERDICTS[self.number] = False
+        _CAUSES[self.number] = hint or message
         text = CheckFailed.compose(f"{self.prefix}: {message}", hint) + self._parts_note()
         raise _shorten(CheckFailed(text, student_frames)) from None
 
@@ -481,18 +488,50 @@ class waiting_for(contextlib.AbstractContextManager):
     ... except CheckFailed as e:
     ...     print(e)
     this cell uses your answer to exercise 6.3, and it stopped with ValueError: nothing was sent. Run exercise 6.3's check cell first: it says what is wrong.
+
+    When an exercise the answer builds on (``builds_on``, or what the exercise's check names) fails its
+    own check, that is the cause the cell names (the error it stopped with may advise a fix that does not
+    apply: moving the arm to a sweep's first goal, where the real slip is a sweep that does not start at home):
+
+    >>> _VERDICTS.update({"6.1": False}); _CAUSES.update({"6.1": "the times start at 1/rate."})
+    >>> try:
+    ...     with waiting_for("6.3", builds_on=("6.1", "6.2")):
+    ...         raise ValueError("the trajectory starts 0.118 rad away; nothing was sent. Move there first.")
+    ... except CheckFailed as e:
+    ...     print(e)
+    this cell uses your answer to exercise 6.3, which uses your 6.1, and 6.1 fails its check: the times start at 1/rate. That is why this cell stopped (ValueError: the trajectory starts 0.118 rad away; nothing was sent). Fix 6.1 first, run its check cell, then this cell again.
+    >>> _VERDICTS.clear(); _CAUSES.clear(); _BUILT_ON.clear()
     """
 
-    def __init__(self, exercise: str):
+    def __init__(self, exercise: str, *, builds_on: tuple = ()):
         self.exercise = exercise
+        self.builds_on = tuple(builds_on)
+
+    def _weak(self) -> list:
+        """The exercises the answer builds on (as this cell or the exercise's check names them) whose checks failed."""
+        return [n for n in self.builds_on or _BUILT_ON.get(self.exercise, ()) if _VERDICTS.get(n) is False]
 
     def __exit__(self, kind, value, tb):
         if kind is NotImplementedError or (kind is NameError and getattr(value, "name", None)):
             what = "" if kind is NotImplementedError else f" (`{value.name}` is not defined yet)"
+            weak = self._weak()
             print(f"This cell waits for exercise {self.exercise}{what}: write it, run it, then run this "
-                  "cell again.")
+                  "cell again." + (" " + composite_note(self.exercise, weak).split("; graded")[0] + "."
+                                   if weak and kind is NameError else ""))
             return True
         if kind is not None and issubclass(kind, Exception) and not issubclass(kind, CheckFailed):
+            weak = self._weak()
+            if weak:   # a part it builds on fails its check: that is the cause, whatever the error advises
+                names = " and ".join(weak)
+                fails, fix = ("fails its check", "its check cell") if len(weak) == 1 else \
+                    ("fail their checks", "their check cells")
+                causes = " ".join(f"{n}: {_CAUSES.get(n, 'see its check cell')}" if len(weak) > 1 else
+                                  _CAUSES.get(n, "see its check cell") for n in weak)
+                first = str(value).split(". ")[0].rstrip(".")
+                raise _shorten(CheckFailed(
+                    f"this cell uses your answer to exercise {self.exercise}, which uses your {names}, and {names} "
+                    f"{fails}: {causes.rstrip('.')}. That is why this cell stopped ({kind.__name__}: {first}). Fix "
+                    f"{names} first, run {fix}, then this cell again.", _student_frames(tb))) from None
             # most often the exercise's answer is not right yet (it returned None, a list...): its
             # check cell says what is wrong, in more words than this cell's error can
             raise _shorten(CheckFailed(
