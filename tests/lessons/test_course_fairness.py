@@ -215,3 +215,40 @@ def test_a_wrong_table_of_violations_is_named_at_its_first_wrong_entry_locally_a
     graded = score_exercise("ex04_4_limit_check_test", decode_results(encode_results([got])), expected, 3.0)
     assert graded.score == 0.0
     assert f"]]: {said}" in graded.message, graded.message
+
+
+def _ik_loop(target, q):
+    """3.3's loop as the lesson asks it, written here with the kit's DLS step (graded_ik's): the angles it ends at
+    within 1e-6 m of ``target`` from ``q``, else None."""
+    from snakekit.kinematics import dls_step, tool_pose_2d
+
+    for _ in range(200):
+        if np.linalg.norm(target - tool_pose_2d(q)[:2]) < 1e-6:
+            return q
+        q = np.clip(dls_step(q, target), SPEC.lower, SPEC.upper)
+    return None
+
+
+def _start_decides(target, q0) -> bool:
+    """Whether the loop from ``q0`` ends within 0.5 rad of it (the grader's START_NEAR) and one that ignores q0, from
+    home, does not (or reaches nothing)."""
+    from grader.scoring.rules import START_NEAR
+
+    started, ignored = _ik_loop(target, np.asarray(q0, dtype=float)), _ik_loop(target, np.zeros(SPEC.n_joints))
+    return started is not None and np.abs(started - q0).max() <= START_NEAR and (
+        ignored is None or np.abs(ignored - q0).max() > START_NEAR)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_every_draw_of_3_3_holds_starts_that_decide_the_solution_so_a_loop_that_ignores_q0_fails(seed):
+    given = [c for c in _cases("03_inverse_kinematics", "ex03_3_ik_loop_test", seed) if len(c) > 1]
+    assert len(given) == 2 and all(_start_decides(*c) for c in given), given
+
+
+def test_3_3s_visible_check_holds_a_start_that_decides_the_solution():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex03_3_ik_loop_test"]
+    calls = re.findall(r"check_ik\(np\.array\(\[([-\d., ]+)\]\), q0=np\.array\(\[([-\d., ]+)\]\), start_decides=True\)",
+                       source)
+    numbers = [(np.array([float(v) for v in t.split(",")]), np.array([float(v) for v in q.split(",")])) for t, q in calls]
+    assert numbers and all(_start_decides(t, q) for t, q in numbers), calls
+

@@ -436,7 +436,12 @@ MISTAKES = {
         ("ex03_3_ik_loop_test", _SOLVE.replace("< tol", "< 1e-4").replace("    return q", "    return q\n"
          "    raise ValueError('no solution')"), "does your loop stop once the distance is below `tol`"),
         ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])[:2]"),
-         "keep the heading too")],
+         "keep the heading too"),
+        ("ex03_4_task1_test", _TASK1.format("(x, y, heading)"), "these are the targets you set"),
+        ("ex03_3_ik_loop_test", "def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n    q = np.zeros(5)\n"
+         "    for _ in range(max_iter):\n        if np.linalg.norm(np.asarray(target) - snakekit.tool_pose_2d(q)[:2]) < tol:\n"
+         "            return q\n        q = np.clip(dls_step(q, target), spec.lower, spec.upper)\n"
+         "    raise ValueError('no solution')", "Start from q0 when it is given")],
     "04_trajectories": [
         ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)\n"
          "    return 3 * r ** 2 - 2 * r ** 3", "this is the cubic"),
