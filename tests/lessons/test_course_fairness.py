@@ -166,14 +166,14 @@ def _lag(run, joint, step):
     return float(lags[int(np.argmin(rms))])
 
 
-def _coarse_misses(points, rate, sweeps, amplitude, joint) -> bool:
-    """Whether lags tried 50 ms apart miss the lag of this sweep on the simulator by more than 6.4's tolerance."""
+def _coarse_misses(points, rate, sweeps, amplitude, joint, step=0.05) -> bool:
+    """Whether lags tried ``step`` apart miss the lag of this sweep on the simulator by more than 6.4's tolerance."""
     import snakekit
 
     with snakekit.make_robot("sim") as robot:
         run = robot.run(snakekit.side_sweep(points=points, rate=rate, sweeps=sweeps, amplitude=amplitude))
     tol = runpy.run_path(str(COURSE / "cases" / "06_coded_sweep.py"))["TOLERANCES"]["ex06_4_phase_lag_test"]["atol"]
-    return abs(_lag(run, joint, 0.05) - _lag(run, joint, 0.001)) > tol
+    return abs(_lag(run, joint, step) - _lag(run, joint, 0.001)) > tol
 
 
 # 40 draws, a simulator run each (the first case that tells the grids apart ends a draw): about 12 s
@@ -252,3 +252,16 @@ def test_3_3s_visible_check_holds_a_start_that_decides_the_solution():
     numbers = [(np.array([float(v) for v in t.split(",")]), np.array([float(v) for v in q.split(",")])) for t, q in calls]
     assert numbers and all(_start_decides(t, q) for t, q in numbers), calls
 
+
+# 40 draws, a simulator run each (the slow sweep, the first case, tells the grids apart): about 12 s
+@pytest.mark.parametrize("seed", range(40))
+def test_every_draw_of_6_4_holds_a_sweep_whose_lag_lies_between_the_steps_of_a_20_ms_grid(seed):
+    cases = _cases("06_coded_sweep", "ex06_4_phase_lag_test", seed)
+    assert any(_coarse_misses(*c, step=0.02) for c in cases), cases
+
+
+def test_6_4s_visible_check_holds_a_run_whose_lag_lies_between_the_steps_of_a_20_ms_grid():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex06_4_phase_lag_test"]
+    runs = re.findall(r"side_sweep\(points=(\d+), sweeps=(\d+), amplitude=([\d.]+)\)", source)
+    joints = [int(j) for j in re.findall(r"\(\w+_run, (\d), 0\.\d+,", source)]
+    assert any(_coarse_misses(int(n), 10.0, int(k), float(a), j, step=0.02) for (n, k, a), j in zip(runs, joints[1:]))

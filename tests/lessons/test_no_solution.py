@@ -577,6 +577,11 @@ MISTAKES = {
          "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
          "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 0.5 + 1e-9, 0.05)\n"
          "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag, ct, cq)) ** 2)) for lag in lags]\n"
+         "    return float(lags[int(np.argmin(rms))])", "between your grid's steps"),
+        ("ex06_4_phase_lag_test", "def estimate_lag(run, joint=0):\n    t = run.measured.times\n"
+         "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
+         "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 0.5 + 1e-9, 0.02)\n"
+         "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag, ct, cq)) ** 2)) for lag in lags]\n"
          "    return float(lags[int(np.argmin(rms))])", "between your grid's steps")],
     "07_real_robot": [
         ("ex07_1_ticks_test", "def to_ticks(q):\n"
