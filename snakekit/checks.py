@@ -51,6 +51,7 @@ import numpy as np
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
 from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
+from .verdicts import BUILDS_ON, CAUSES, PASSED, composite_note, failing_parts, stopped_note
 from .watch import calls_to, forgot_return, raised_in, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "live_off",
@@ -120,28 +121,6 @@ def _where(where) -> str:
 #: (``grader.score.DEFAULT_TOLERANCES``: atol 1e-12).
 ZERO = 1e-12
 
-#: exercise number -> whether its check cell passed, in this kernel (a composite reads its parts').
-_VERDICTS: dict[str, bool] = {}
-#: exercise number -> what its failed check said (its hint, else its message), for the cells that use it.
-_CAUSES: dict[str, str] = {}
-#: exercise number -> the exercises it builds on (its ``builds_on``), for the cells that use it.
-_BUILT_ON: dict[str, tuple] = {}
-
-
-def composite_note(number: str, parts: list) -> str:
-    """What a composite's failed check adds when parts it builds on fail their own checks: the one
-    rule of the course, the same locally and graded.
-
-    >>> print(composite_note("6.3", ["6.1"]))
-    6.3 uses your 6.1, which fails its check: fix 6.1 first; graded, 6.3 is run with the lesson's own 6.1.
-    >>> print(composite_note("6.3", ["6.1", "6.2"]))
-    6.3 uses your 6.1 and 6.2, which fail their checks: fix them first; graded, 6.3 is run with the lesson's own 6.1 and 6.2.
-    """
-    names = " and ".join(parts)
-    fails, fix = ("fails its check", f"fix {names}") if len(parts) == 1 else ("fail their checks", "fix them")
-    return f"{number} uses your {names}, which {fails}: {fix} first; graded, {number} is run with the lesson's own {names}."
-
-
 
 class Exercise:
     """The checks of one exercise: every message starts with its number and name.
@@ -155,9 +134,9 @@ class Exercise:
         self.number, self.name = number, name
         self.builds_on = tuple(builds_on)
         self.checked = 0
-        _VERDICTS.pop(number, None)      # run again: its verdict is this run's
-        _CAUSES.pop(number, None)
-        _BUILT_ON[number] = self.builds_on
+        PASSED.pop(number, None)      # run again: its verdict is this run's
+        CAUSES.pop(number, None)
+        BUILDS_ON[number] = self.builds_on
 
     @property
     def prefix(self) -> str:
@@ -166,15 +145,15 @@ class Exercise:
     def fail(self, message: str, hint: str = "", student_frames: str = ""):
         """Raise :class:`CheckFailed` with ``message`` (and a hint line, and, for a composite
         whose parts fail their own checks, which parts to fix first)."""
-        _VERDICTS[self.number] = False
-        _CAUSES[self.number] = hint or message
+        PASSED[self.number] = False
+        CAUSES[self.number] = hint or message
         text = CheckFailed.compose(f"{self.prefix}: {message}", hint) + self._parts_note()
         raise _shorten(CheckFailed(text, student_frames)) from None
 
     def _parts_note(self) -> str:
         """For an exercise built on earlier ones: the line naming the parts whose own checks failed
         (or have not passed yet), since a slip there shows up here too."""
-        weak = [n for n in self.builds_on if not _VERDICTS.get(n, False)]
+        weak = [n for n in self.builds_on if not PASSED.get(n, False)]
         return "\n" + composite_note(self.number, weak) if weak else ""
 
     def __call__(self, fn, *args, where=None, **kwargs):
@@ -369,7 +348,7 @@ class Exercise:
 
     def done(self, note: str = "") -> None:
         """Print that the checks passed (the last line of a test cell)."""
-        _VERDICTS[self.number] = True
+        PASSED[self.number] = True
         print(f"exercise {self.number} {self.name}: {self.checked} check(s) passed" + (f"; {note}" if note else ""))
 
 
@@ -490,48 +469,25 @@ class waiting_for(contextlib.AbstractContextManager):
     this cell uses your answer to exercise 6.3, and it stopped with ValueError: nothing was sent. Run exercise 6.3's check cell first: it says what is wrong.
 
     When an exercise the answer builds on (``builds_on``, or what the exercise's check names) fails its
-    own check, that is the cause the cell names (the error it stopped with may advise a fix that does not
-    apply: moving the arm to a sweep's first goal, where the real slip is a sweep that does not start at home):
-
-    >>> _VERDICTS.update({"6.1": False}); _CAUSES.update({"6.1": "the times start at 1/rate."})
-    >>> try:
-    ...     with waiting_for("6.3", builds_on=("6.1", "6.2")):
-    ...         raise ValueError("the trajectory starts 0.118 rad away; nothing was sent. Move there first.")
-    ... except CheckFailed as e:
-    ...     print(e)
-    this cell uses your answer to exercise 6.3, which uses your 6.1, and 6.1 fails its check: the times start at 1/rate. That is why this cell stopped (ValueError: the trajectory starts 0.118 rad away; nothing was sent). Fix 6.1 first, run its check cell, then this cell again.
-    >>> _VERDICTS.clear(); _CAUSES.clear(); _BUILT_ON.clear()
+    own check, the cell names that part instead (:func:`snakekit.verdicts.stopped_note`).
     """
 
     def __init__(self, exercise: str, *, builds_on: tuple = ()):
         self.exercise = exercise
         self.builds_on = tuple(builds_on)
 
-    def _weak(self) -> list:
-        """The exercises the answer builds on (as this cell or the exercise's check names them) whose checks failed."""
-        return [n for n in self.builds_on or _BUILT_ON.get(self.exercise, ()) if _VERDICTS.get(n) is False]
-
     def __exit__(self, kind, value, tb):
         if kind is NotImplementedError or (kind is NameError and getattr(value, "name", None)):
             what = "" if kind is NotImplementedError else f" (`{value.name}` is not defined yet)"
-            weak = self._weak()
+            weak = failing_parts(self.exercise, self.builds_on)
             print(f"This cell waits for exercise {self.exercise}{what}: write it, run it, then run this "
                   "cell again." + (" " + composite_note(self.exercise, weak).split("; graded")[0] + "."
                                    if weak and kind is NameError else ""))
             return True
         if kind is not None and issubclass(kind, Exception) and not issubclass(kind, CheckFailed):
-            weak = self._weak()
+            weak = failing_parts(self.exercise, self.builds_on)
             if weak:   # a part it builds on fails its check: that is the cause, whatever the error advises
-                names = " and ".join(weak)
-                fails, fix = ("fails its check", "its check cell") if len(weak) == 1 else \
-                    ("fail their checks", "their check cells")
-                causes = " ".join(f"{n}: {_CAUSES.get(n, 'see its check cell')}" if len(weak) > 1 else
-                                  _CAUSES.get(n, "see its check cell") for n in weak)
-                first = str(value).split(". ")[0].rstrip(".")
-                raise _shorten(CheckFailed(
-                    f"this cell uses your answer to exercise {self.exercise}, which uses your {names}, and {names} "
-                    f"{fails}: {causes.rstrip('.')}. That is why this cell stopped ({kind.__name__}: {first}). Fix "
-                    f"{names} first, run {fix}, then this cell again.", _student_frames(tb))) from None
+                raise _shorten(CheckFailed(stopped_note(self.exercise, weak, value), _student_frames(tb))) from None
             # most often the exercise's answer is not right yet (it returned None, a list...): its
             # check cell says what is wrong, in more words than this cell's error can
             raise _shorten(CheckFailed(
