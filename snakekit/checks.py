@@ -51,6 +51,7 @@ import numpy as np
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
 from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
+from .verdicts import BUILDS_ON, CAUSES, PASSED, composite_note, failing_parts, stopped_note
 from .watch import calls_to, forgot_return, raised_in, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "live_off",
@@ -120,24 +121,6 @@ def _where(where) -> str:
 #: (``grader.score.DEFAULT_TOLERANCES``: atol 1e-12).
 ZERO = 1e-12
 
-#: exercise number -> whether its check cell passed, in this kernel (a composite reads its parts').
-_VERDICTS: dict[str, bool] = {}
-
-
-def composite_note(number: str, parts: list) -> str:
-    """What a composite's failed check adds when parts it builds on fail their own checks: the one
-    rule of the course, the same locally and graded.
-
-    >>> print(composite_note("6.3", ["6.1"]))
-    6.3 uses your 6.1, which fails its check: fix 6.1 first; graded, 6.3 is run with the lesson's own 6.1.
-    >>> print(composite_note("6.3", ["6.1", "6.2"]))
-    6.3 uses your 6.1 and 6.2, which fail their checks: fix them first; graded, 6.3 is run with the lesson's own 6.1 and 6.2.
-    """
-    names = " and ".join(parts)
-    fails, fix = ("fails its check", f"fix {names}") if len(parts) == 1 else ("fail their checks", "fix them")
-    return f"{number} uses your {names}, which {fails}: {fix} first; graded, {number} is run with the lesson's own {names}."
-
-
 
 class Exercise:
     """The checks of one exercise: every message starts with its number and name.
@@ -151,7 +134,9 @@ class Exercise:
         self.number, self.name = number, name
         self.builds_on = tuple(builds_on)
         self.checked = 0
-        _VERDICTS.pop(number, None)      # run again: its verdict is this run's
+        PASSED.pop(number, None)      # run again: its verdict is this run's
+        CAUSES.pop(number, None)
+        BUILDS_ON[number] = self.builds_on
 
     @property
     def prefix(self) -> str:
@@ -160,14 +145,15 @@ class Exercise:
     def fail(self, message: str, hint: str = "", student_frames: str = ""):
         """Raise :class:`CheckFailed` with ``message`` (and a hint line, and, for a composite
         whose parts fail their own checks, which parts to fix first)."""
-        _VERDICTS[self.number] = False
+        PASSED[self.number] = False
+        CAUSES[self.number] = hint or message
         text = CheckFailed.compose(f"{self.prefix}: {message}", hint) + self._parts_note()
         raise _shorten(CheckFailed(text, student_frames)) from None
 
     def _parts_note(self) -> str:
         """For an exercise built on earlier ones: the line naming the parts whose own checks failed
         (or have not passed yet), since a slip there shows up here too."""
-        weak = [n for n in self.builds_on if not _VERDICTS.get(n, False)]
+        weak = [n for n in self.builds_on if not PASSED.get(n, False)]
         return "\n" + composite_note(self.number, weak) if weak else ""
 
     def __call__(self, fn, *args, where=None, **kwargs):
@@ -251,7 +237,9 @@ class Exercise:
             tol: absolute tolerance [unit]; rtol: relative tolerance.
             why: the reason for the tolerance; default "exact math" when ``tol`` is 0.
             labels: names of the entries of a 1-D value ("x", "y", "heading"), or of the columns of a 2-D one
-                ("time", "joint", "kind": a message names ``violations[0] time``, not ``violations[0, 0]``).
+                ("time", "joint", "kind": a message names ``violations[0] time``, not ``violations[0, 0]``). Such a
+                table is read from the top: a message names its first wrong entry, as the grader's does; any other
+                value its entry furthest off.
             mistakes: ``{hint: value}``: answers a known mistake would give; when ``got``
                 matches one, its hint is shown.
             array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
@@ -281,13 +269,17 @@ class Exercise:
         if (diff <= bound).all():
             self.checked += 1
             return
-        i = np.unravel_index(int(np.argmax(diff - bound)), diff.shape)
+        table = labels is not None and arr.ndim == 2 and len(labels) == arr.shape[1]
+        if table:   # a table of rows is read from the top: its first wrong entry, as the grader names it
+            i = tuple(int(k) for k in np.argwhere(~(diff <= bound))[0])
+        else:
+            i = np.unravel_index(int(np.argmax(diff - bound)), diff.shape)
         units = unit if isinstance(unit, (tuple, list)) else None
         u = units[i[-1]] if units is not None and arr.ndim >= 1 else unit
         name = what
         if labels is not None and arr.ndim == 1:
             name = f"{what} {labels[i[0]]}"
-        elif labels is not None and arr.ndim == 2 and len(labels) == arr.shape[1]:   # a row's columns named
+        elif table:   # a row's columns named
             name = f"{what}[{int(i[0])}] {labels[i[1]]}"
         elif arr.ndim >= 1:
             name = f"{what}[{', '.join(str(int(k)) for k in i)}]"
@@ -356,7 +348,7 @@ class Exercise:
 
     def done(self, note: str = "") -> None:
         """Print that the checks passed (the last line of a test cell)."""
-        _VERDICTS[self.number] = True
+        PASSED[self.number] = True
         print(f"exercise {self.number} {self.name}: {self.checked} check(s) passed" + (f"; {note}" if note else ""))
 
 
@@ -475,18 +467,27 @@ class waiting_for(contextlib.AbstractContextManager):
     ... except CheckFailed as e:
     ...     print(e)
     this cell uses your answer to exercise 6.3, and it stopped with ValueError: nothing was sent. Run exercise 6.3's check cell first: it says what is wrong.
+
+    When an exercise the answer builds on (``builds_on``, or what the exercise's check names) fails its
+    own check, the cell names that part instead (:func:`snakekit.verdicts.stopped_note`).
     """
 
-    def __init__(self, exercise: str):
+    def __init__(self, exercise: str, *, builds_on: tuple = ()):
         self.exercise = exercise
+        self.builds_on = tuple(builds_on)
 
     def __exit__(self, kind, value, tb):
         if kind is NotImplementedError or (kind is NameError and getattr(value, "name", None)):
             what = "" if kind is NotImplementedError else f" (`{value.name}` is not defined yet)"
+            weak = failing_parts(self.exercise, self.builds_on)
             print(f"This cell waits for exercise {self.exercise}{what}: write it, run it, then run this "
-                  "cell again.")
+                  "cell again." + (" " + composite_note(self.exercise, weak).split("; graded")[0] + "."
+                                   if weak and kind is NameError else ""))
             return True
         if kind is not None and issubclass(kind, Exception) and not issubclass(kind, CheckFailed):
+            weak = failing_parts(self.exercise, self.builds_on)
+            if weak:   # a part it builds on fails its check: that is the cause, whatever the error advises
+                raise _shorten(CheckFailed(stopped_note(self.exercise, weak, value), _student_frames(tb))) from None
             # most often the exercise's answer is not right yet (it returned None, a list...): its
             # check cell says what is wrong, in more words than this cell's error can
             raise _shorten(CheckFailed(

@@ -1,7 +1,8 @@
 """Lesson 03's hidden cases, drawn by the grader anew for every grading batch.
 
-3.1 and 3.3 are judged by a property (the tip on the target, inside the joint limits), 3.4 by
-where its moves end; an unreachable target is a case too: the instructor's function raises a
+3.1 and 3.3 are judged by a property (the tip on the target, inside the joint limits; 3.3 from a
+start q0 that decides the solution, near q0), 3.4 by where its moves end and the poses the arm
+measured there; an unreachable target is a case too: the instructor's function raises a
 ValueError there, so the student's must raise one.
 """
 
@@ -103,19 +104,34 @@ def _needs_clamping(target, spec):
         q is None or bool(((q < spec.lower) | (q > spec.upper)).any()))
 
 
+def _decided_by_start(rng, spec):
+    """(target, q0) where the start decides the solution: q0 a zigzag pose (every joint 0.5 to 1.2 rad
+    either way) a little off one that reaches the target; the loop from q0 ends within 0.25 rad of it,
+    and from home (q0 ignored) it ends 1 rad away or more, bent another way, or not at all. The grader
+    asks the solution to lie within ``grader.scoring.rules.START_NEAR`` (0.5 rad) of q0 there."""
+    while True:
+        bent = rng.uniform(0.5, 1.2, spec.n_joints) * rng.choice([-1.0, 1.0], spec.n_joints)
+        t = _tool_xy(bent, spec)
+        q0 = np.clip(bent + rng.uniform(-0.1, 0.1, spec.n_joints), spec.lower, spec.upper)
+        if not _inside_unclamped(t, q0, spec) or np.abs(_loop(t, q0, spec) - q0).max() > 0.25:
+            continue
+        home = _loop(t, np.zeros(spec.n_joints), spec)
+        if home is None or np.abs(home - q0).max() >= 1.0:
+            return t, q0
+
+
 def ex03_3_ik_loop_test(rng, spec):
     """solve_ik(target[, q0]): 9 cases; five targets the arm reaches inside its limits whether the
-    loop clamps or not (from home, and from a given start), three whose unclamped solution leaves
-    the limits (the loop must clamp), and one out of reach (a ValueError expected)."""
+    loop clamps or not (three from home, two from a start q0 that decides the solution: a loop that
+    ignores q0 ends elsewhere), three whose unclamped solution leaves the limits (the loop must
+    clamp), and one out of reach (a ValueError expected)."""
     cases = []
     while len(cases) < 3:
         t = _tool_xy(rng.uniform(-0.9, 0.9, spec.n_joints), spec)
         if _inside_unclamped(t, np.zeros(spec.n_joints), spec):
             cases.append((t,))
     while len(cases) < 5:
-        t, q0 = _tool_xy(rng.uniform(-0.9, 0.9, spec.n_joints), spec), rng.uniform(-0.5, 0.5, spec.n_joints)
-        if _inside_unclamped(t, q0, spec):
-            cases.append((t, q0))
+        cases.append(_decided_by_start(rng, spec))
     while len(cases) < 8:   # about a third of bent poses' targets: a few tries each
         t = _tool_xy(rng.uniform(-1.5, 1.5, spec.n_joints), spec)
         if _needs_clamping(t, spec):

@@ -73,7 +73,9 @@ def two_link_ik(args, result, tol):
 
 
 def ik_loop(args, result, tol):
-    """``solve_ik(target[, q0])``: angles inside the joint limits that put the tool on the target."""
+    """``solve_ik(target[, q0])``: angles inside the joint limits that put the tool on the target; from a
+    given start ``q0`` (a zigzag pose near a solution: the cases module's ``_decided_by_start``), angles
+    within :data:`START_NEAR` of it, as a loop that starts there ends."""
     target = np.asarray(args[0], dtype=float)[:2]
     q, why = _value(result, (SPEC.n_joints,), "solve_ik")
     if q is None:
@@ -81,6 +83,13 @@ def ik_loop(args, result, tol):
     off = float(np.abs(_tool_xy(q)[0] - target).max())
     if ((q < SPEC.lower - 1e-12) | (q > SPEC.upper + 1e-12)).any():
         return False, f"q={np.round(q, 4).tolist()} is outside the joint limits {SPEC.lower}..{SPEC.upper} rad."
+    if len(args) > 1 and args[1] is not None:
+        q0 = np.asarray(args[1], dtype=float)
+        far = np.abs(q - q0)
+        if far.max() > START_NEAR:
+            j = int(far.argmax())
+            return False, (f"q={np.round(q, 4).tolist()} is {far[j]:.3g} rad from the start q0 at joint {j + 1}; a loop "
+                           f"that starts at q0 ends within {START_NEAR:g} rad of it here. " + START_HINT)
     if off > tol["atol"]:
         # near but not within the tolerance asked (a loop that stops too early): half the case
         near = off <= NEAR * tol["atol"]
@@ -91,6 +100,11 @@ def ik_loop(args, result, tol):
 
 #: 3.3: a tool within NEAR times the tolerance (1 mm at 1e-5 m) is near the target: half a case.
 NEAR = 100.0
+#: 3.3: from a start q0 near a solution the lesson's loop ends within 0.25 rad of q0 (the cases are drawn so);
+#: ignoring q0 it ends 1 rad away or more. 0.5 rad [each joint] lies between the two.
+START_NEAR = 0.5
+#: 3.3: what to do, in the words of the notebook's check.
+START_HINT = "Start from q0 when it is given: q = np.zeros(5) if q0 is None else np.asarray(q0, dtype=float)."
 
 
 def task1(args, result, tol):
@@ -98,7 +112,8 @@ def task1(args, result, tol):
 
     Where each move ended is the recorded run's last angles (``final_q``: the grader computes
     the tool from them); the poses the function returned (``poses``, one (x, y, heading) per
-    move) must say the same."""
+    move) must be the poses the arm measured there, within :data:`POSE_TOL` (the targets
+    themselves are a few tenths of a millimetre off: they are not what the exercise asks)."""
     from snakekit.kinematics import tool_pose_2d
 
     targets = np.atleast_2d(np.asarray(args[0], dtype=float))
@@ -120,12 +135,22 @@ def task1(args, result, tol):
             kind = known_mistake(np.asarray(result["poses"], dtype=float),
                                  pose_mistakes(q, [tool_pose_2d(row) for row in q]), tol=1e-9)
             return False, why + " " + (kind[0].upper() + kind[1:] if kind else "One tool pose (x, y, heading) per move.")
-        off = np.abs(poses[:, :2] - tool).max(axis=1)
-        if (off > tol["atol"]).any():
-            k = int(np.argmax(off))
-            return False, (f"task1 returned the pose ({poses[k, 0]:.4f}, {poses[k, 1]:.4f}) m for move {k + 1}, but "
-                           f"that move ended with the tool at ({tool[k, 0]:.4f}, {tool[k, 1]:.4f}) m.")
+        measured = np.array([tool_pose_2d(row) for row in q])
+        off = np.abs(poses - measured).max(axis=1)
+        if (off > POSE_TOL).any():
+            k = int(np.argmax(off > POSE_TOL))
+            said = (f"task1 returned the pose ({poses[k, 0]:.4f} m, {poses[k, 1]:.4f} m, {poses[k, 2]:.4f} rad) for "
+                    f"move {k + 1}, but the arm measured ({measured[k, 0]:.4f} m, {measured[k, 1]:.4f} m, "
+                    f"{measured[k, 2]:.4f} rad) at its end (tolerance {POSE_TOL:g}).")
+            if np.allclose(poses, targets[:, :3], rtol=0.0, atol=1e-9):
+                said += (" These are the targets you set, not where the arm ended: return the pose it measured, "
+                         "snakekit.tool_pose_2d(run.measured.positions[-1]), for each move.")
+            return False, said
     return True, ""
+
+
+#: 3.4: a returned pose is the measured one within 1e-6 (m, rad): the same numbers, computed as the exercise says.
+POSE_TOL = 1e-6
 
 
 #: grade id -> rule. The tolerances come from the reference (the cases module's TOLERANCES, else references.OVERRIDES).

@@ -277,7 +277,8 @@ def test_a_wrong_entry_is_named_by_its_label_and_unit_locally_and_graded(lesson,
         unit = part.unit_at((column,))
         name = f"{part.what}[0] {label}" if rows else f"{part.what} {label}"
         shown = f"is 2{' ' + unit if unit else ''}, expected 1{' ' + unit if unit else ''}"
-        graded = _compare_case(w, {"value": got}, {"value": want}, {"rtol": 1e-9, "atol": 1e-12})
+        key = "_".join(part.what.split())   # a result named in the part's words (3.4 compares two: pose and tool)
+        graded = _compare_case(w, {key: got}, {key: want}, {"rtol": 1e-9, "atol": 1e-12})
         assert f"{name} {shown}" in graded, graded
         with pytest.raises(CheckFailed) as local:
             checks.Exercise("9.9", "f").close(got, want, what=part.what, labels=part.labels, unit=part.unit)

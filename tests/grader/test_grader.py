@@ -575,6 +575,36 @@ def test_ik_solutions_judged_by_the_graders_own_kinematics():
     assert home.score == 0 and "put the tool 0." in home.message and "from the target" in home.message
 
 
+def _loop_from(target, q):
+    """The lesson's loop written out here: the kit's DLS step (as graded_ik uses it), clamped, until within 1e-6 m."""
+    from snakekit import SPEC, tool_pose_2d
+    from snakekit.kinematics import dls_step
+
+    for _ in range(200):
+        if np.linalg.norm(target - tool_pose_2d(q)[:2]) < 1e-6:
+            return q
+        q = np.clip(dls_step(q, target), SPEC.lower, SPEC.upper)
+    return None
+
+
+def test_an_ik_solution_from_a_start_that_decides_it_lies_near_that_start():
+    """From a zigzag start q0 near a solution the loop ends near q0; a loop that ignores q0 (from home) reaches the
+    target too, bent another way, and loses the case, with what to do."""
+    q0 = np.array([0.6, 0.9, -1.0, 0.8, -0.9])
+    target = np.array([0.19, 0.23])
+    started, ignored = _loop_from(target, q0), _loop_from(target, np.zeros(5))
+    assert np.abs(started - q0).max() < 0.25 and np.abs(ignored - q0).max() > 1.0
+    e = Expected("ex03_3_ik_loop_test", "values", [(target, q0)], [{"value": started}], {"rtol": 0.0, "atol": 1e-5},
+                 "solve_ik")
+    assert score_exercise(e.grade_id, [{"value": started}], e, 4).score == 4
+    wrong = score_exercise(e.grade_id, [{"value": ignored}], e, 4)
+    far = np.abs(ignored - q0)
+    assert wrong.score == 0 and wrong.message.endswith(
+        f"q={np.round(ignored, 4).tolist()} is {far.max():.3g} rad from the start q0 at joint {int(far.argmax()) + 1}; a "
+        "loop that starts at q0 ends within 0.5 rad of it here. Start from q0 when it is given: q = np.zeros(5) if q0 "
+        "is None else np.asarray(q0, dtype=float)."), wrong.message
+
+
 def test_task1_judged_by_where_each_move_ends():
     from snakekit import tool_pose_2d
 
@@ -597,7 +627,15 @@ def test_task1_judged_by_where_each_move_ends():
     points = score_exercise(e.grade_id, [{"final_q": finals, "poses": poses[:, :2]}], e, 2)
     assert "This looks like tool points (x, y) without the heading" in points.message
     lied = score_exercise(e.grade_id, [{"final_q": finals, "poses": poses[::-1]}], e, 2)
-    assert lied.score == 0 and "but that move ended with the tool at" in lied.message
+    assert lied.score == 0 and "but the arm measured (" in lied.message
+    # the targets themselves, 1 mm from where the arm ended (within the 3 mm a move may end off): not what is asked
+    aimed = score_exercise(e.grade_id, [{"final_q": finals, "poses": targets}], e, 2)
+    x, y, heading = (f"{v:.4f}" for v in targets[0])
+    mx, my, mh = (f"{v:.4f}" for v in poses[0])
+    assert aimed.score == 0 and aimed.message.endswith(
+        f"task1 returned the pose ({x} m, {y} m, {heading} rad) for move 1, but the arm measured ({mx} m, {my} m, "
+        f"{mh} rad) at its end (tolerance 1e-06). These are the targets you set, not where the arm ended: return the "
+        "pose it measured, snakekit.tool_pose_2d(run.measured.positions[-1]), for each move."), aimed.message
 
 
 def run_in_sandbox(script: str, tmp_path: Path) -> tuple[int, str]:

@@ -144,3 +144,36 @@ def test_a_composites_check_cell_needs_nothing_another_check_or_demonstration_de
         bound |= {n.name for n in ast.walk(tree) if isinstance(n, ast.ExceptHandler) and n.name}
         used = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)} - bound
         assert not used & others, f"{gid} uses {sorted(used & others)}, defined in another check or demonstration cell"
+
+
+def test_a_demonstration_after_a_composite_names_the_part_that_fails_not_the_fix_its_error_advises(tmp_path, monkeypatch):
+    """Lesson 06 with 6.1's times starting at 1/rate: the cell that runs Task 2 stops because the sweep's first goal
+    is not home. It says so, and names the cause, 6.1 and its check's hint, not the robot's advice to move the arm
+    to the first goal first (the wrong fix); the cells after it that need its run name 6.1 too."""
+    nbformat, nbclient = need("nbformat"), need("nbclient")
+    import os
+    import sys
+
+    monkeypatch.setenv("SNAKEKIT_TEST", "1")
+    monkeypatch.delenv("SNAKEKIT_HANDIN_DIR", raising=False)
+    monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    nb = nbformat.read(COURSE / "source" / "06_coded_sweep" / "06_coded_sweep.ipynb", as_version=4)
+    ids = [c.get("id") for c in nb.cells]
+    answer = next(c for c in nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex06_1_sweep_times")
+    answer.source = "def sweep_times(points, rate):\n    return np.arange(1, points + 1) / rate"
+    nb.cells = nb.cells[:ids.index("06-code-14b") + 1]
+    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", allow_errors=True,
+                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+
+    def said(cell_id):
+        cell = nb.cells[ids.index(cell_id)]
+        return " ".join(" ".join(o.get("evalue", "") + o.get("text", "") for o in cell.outputs).split())
+
+    assert "the times start at 1/rate" in said("ex06_1_sweep_times_test")
+    assert said("06-code-14") == (
+        "this cell uses your answer to exercise 6.3, which uses your 6.1, and 6.1 fails its check: the times start at "
+        "1/rate: the first goal goes out at t = 0. That is why this cell stopped (LimitError: the trajectory starts "
+        "0.118 rad away from the arm's present position (joint 1: +0.000 -> +0.118 rad); nothing was sent). Fix 6.1 "
+        "first, run its check cell, then this cell again.")
+    assert said("06-code-14b") == ("This cell waits for exercise 6.3 (`run` is not defined yet): write it, run it, then "
+                                   "run this cell again. 6.3 uses your 6.1, which fails its check: fix 6.1 first.")

@@ -166,14 +166,14 @@ def _lag(run, joint, step):
     return float(lags[int(np.argmin(rms))])
 
 
-def _coarse_misses(points, rate, sweeps, amplitude, joint) -> bool:
-    """Whether lags tried 50 ms apart miss the lag of this sweep on the simulator by more than 6.4's tolerance."""
+def _coarse_misses(points, rate, sweeps, amplitude, joint, step=0.05) -> bool:
+    """Whether lags tried ``step`` apart miss the lag of this sweep on the simulator by more than 6.4's tolerance."""
     import snakekit
 
     with snakekit.make_robot("sim") as robot:
         run = robot.run(snakekit.side_sweep(points=points, rate=rate, sweeps=sweeps, amplitude=amplitude))
     tol = runpy.run_path(str(COURSE / "cases" / "06_coded_sweep.py"))["TOLERANCES"]["ex06_4_phase_lag_test"]["atol"]
-    return abs(_lag(run, joint, 0.05) - _lag(run, joint, 0.001)) > tol
+    return abs(_lag(run, joint, step) - _lag(run, joint, 0.001)) > tol
 
 
 # 40 draws, a simulator run each (the first case that tells the grids apart ends a draw): about 12 s
@@ -189,3 +189,79 @@ def test_6_4s_visible_check_holds_a_run_whose_lag_lies_between_the_steps_of_a_50
     joints = [int(j) for j in re.findall(r"\(\w+_run, (\d), 0\.\d+,", source)]
     assert len(runs) == len(joints) - 1, (runs, joints)     # Task 2 (the defaults) is the first run
     assert any(_coarse_misses(int(n), 10.0, int(k), float(a), j) for (n, k, a), j in zip(runs, joints[1:])), runs
+
+
+def test_a_wrong_table_of_violations_is_named_at_its_first_wrong_entry_locally_and_graded():
+    """4.4's rows left unsorted (position rows, then speed rows): the notebook's check and the grader name the same
+    entry, the first wrong one from the top, in the same words (the largest, a kind, told the student less)."""
+    from grader.scoring.wording import signatures, wording
+
+    nbformat = need("nbformat")
+    want = np.array([[0.5, 5, 0], [0.5, 5, 1], [1.0, 4, 1], [1.0, 5, 0]], dtype=float)
+    got = want[[0, 3, 1, 2]]                      # the two position rows first: the sort forgotten
+    ex = checks.Exercise("4.4", "limit_violations")
+    with pytest.raises(checks.CheckFailed) as local:
+        ex.close(got, want, what="violations", where="a move beyond both limits", labels=("time", "joint", "kind"),
+                 unit=("s", "", ""))
+    said = "violations[1] time is 1 s, expected 0.5 s: off by 0.5 s (tolerance "
+    assert str(local.value).startswith("exercise 4.4 limit_violations: violations[1] time at a move beyond both "
+                                       "limits is 1 s, expected 0.5 s: off by 0.5 s (tolerance 5e-10 s")
+    nb = nbformat.read(COURSE / "source" / "04_trajectories" / "04_trajectories.ipynb", as_version=4)
+    source = dict((gid, src) for _, gid, src in CELLS)["ex04_4_limit_check_test"]
+    words = wording("ex04_4_limit_check_test", source, "graded_violations",
+                    signatures([c.source for c in nb.cells if c.cell_type == "code"]))
+    expected = Expected("ex04_4_limit_check_test", "values", cases=[(np.arange(3) * 0.5, np.zeros((3, 5)))],
+                        results=[{"value": want}], tolerances=DEFAULT_TOLERANCES["values"], wording=words)
+    graded = score_exercise("ex04_4_limit_check_test", decode_results(encode_results([got])), expected, 3.0)
+    assert graded.score == 0.0
+    assert f"]]: {said}" in graded.message, graded.message
+
+
+def _ik_loop(target, q):
+    """3.3's loop as the lesson asks it, written here with the kit's DLS step (graded_ik's): the angles it ends at
+    within 1e-6 m of ``target`` from ``q``, else None."""
+    from snakekit.kinematics import dls_step, tool_pose_2d
+
+    for _ in range(200):
+        if np.linalg.norm(target - tool_pose_2d(q)[:2]) < 1e-6:
+            return q
+        q = np.clip(dls_step(q, target), SPEC.lower, SPEC.upper)
+    return None
+
+
+def _start_decides(target, q0) -> bool:
+    """Whether the loop from ``q0`` ends within 0.5 rad of it (the grader's START_NEAR) and one that ignores q0, from
+    home, does not (or reaches nothing)."""
+    from grader.scoring.rules import START_NEAR
+
+    started, ignored = _ik_loop(target, np.asarray(q0, dtype=float)), _ik_loop(target, np.zeros(SPEC.n_joints))
+    return started is not None and np.abs(started - q0).max() <= START_NEAR and (
+        ignored is None or np.abs(ignored - q0).max() > START_NEAR)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_every_draw_of_3_3_holds_starts_that_decide_the_solution_so_a_loop_that_ignores_q0_fails(seed):
+    given = [c for c in _cases("03_inverse_kinematics", "ex03_3_ik_loop_test", seed) if len(c) > 1]
+    assert len(given) == 2 and all(_start_decides(*c) for c in given), given
+
+
+def test_3_3s_visible_check_holds_a_start_that_decides_the_solution():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex03_3_ik_loop_test"]
+    calls = re.findall(r"check_ik\(np\.array\(\[([-\d., ]+)\]\), q0=np\.array\(\[([-\d., ]+)\]\), start_decides=True\)",
+                       source)
+    numbers = [(np.array([float(v) for v in t.split(",")]), np.array([float(v) for v in q.split(",")])) for t, q in calls]
+    assert numbers and all(_start_decides(t, q) for t, q in numbers), calls
+
+
+# 40 draws, a simulator run each (the slow sweep, the first case, tells the grids apart): about 12 s
+@pytest.mark.parametrize("seed", range(40))
+def test_every_draw_of_6_4_holds_a_sweep_whose_lag_lies_between_the_steps_of_a_20_ms_grid(seed):
+    cases = _cases("06_coded_sweep", "ex06_4_phase_lag_test", seed)
+    assert any(_coarse_misses(*c, step=0.02) for c in cases), cases
+
+
+def test_6_4s_visible_check_holds_a_run_whose_lag_lies_between_the_steps_of_a_20_ms_grid():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex06_4_phase_lag_test"]
+    runs = re.findall(r"side_sweep\(points=(\d+), sweeps=(\d+), amplitude=([\d.]+)\)", source)
+    joints = [int(j) for j in re.findall(r"\(\w+_run, (\d), 0\.\d+,", source)]
+    assert any(_coarse_misses(int(n), 10.0, int(k), float(a), j, step=0.02) for (n, k, a), j in zip(runs, joints[1:]))

@@ -448,7 +448,12 @@ MISTAKES = {
         ("ex03_3_ik_loop_test", _SOLVE.replace("< tol", "< 1e-4").replace("    return q", "    return q\n"
          "    raise ValueError('no solution')"), "does your loop stop once the distance is below `tol`"),
         ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])[:2]"),
-         "keep the heading too")],
+         "keep the heading too"),
+        ("ex03_4_task1_test", _TASK1.format("(x, y, heading)"), "these are the targets you set"),
+        ("ex03_3_ik_loop_test", "def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n    q = np.zeros(5)\n"
+         "    for _ in range(max_iter):\n        if np.linalg.norm(np.asarray(target) - snakekit.tool_pose_2d(q)[:2]) < tol:\n"
+         "            return q\n        q = np.clip(dls_step(q, target), spec.lower, spec.upper)\n"
+         "    raise ValueError('no solution')", "Start from q0 when it is given")],
     "04_trajectories": [
         ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)\n"
          "    return 3 * r ** 2 - 2 * r ** 3", "this is the cubic"),
@@ -482,7 +487,8 @@ MISTAKES = {
         ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(p) > spec.upper", "p > spec.upper"),
          "breaks the position limit too: compare np.abs(q)"),
         ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(np.diff(p, axis=0))", "np.diff(p, axis=0)"),
-         "breaks the speed limit too")],
+         "breaks the speed limit too"),
+        ("ex04_4_limit_check_test", _LIMITS.replace("sorted(rows)", "rows"), "sort them by time, then joint")],
     "05_simulation": [
         ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
          "    progress = y / target\n"
@@ -582,6 +588,11 @@ MISTAKES = {
         ("ex06_4_phase_lag_test", "def estimate_lag(run, joint=0):\n    t = run.measured.times\n"
          "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
          "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 0.5 + 1e-9, 0.05)\n"
+         "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag, ct, cq)) ** 2)) for lag in lags]\n"
+         "    return float(lags[int(np.argmin(rms))])", "between your grid's steps"),
+        ("ex06_4_phase_lag_test", "def estimate_lag(run, joint=0):\n    t = run.measured.times\n"
+         "    m = run.measured.positions[:, joint]\n    ct, cq = run.commanded.times, run.commanded.positions[:, joint]\n"
+         "    inside = (t >= ct[0] + 0.5) & (t <= ct[-1])\n    lags = np.arange(0, 0.5 + 1e-9, 0.02)\n"
          "    rms = [np.sqrt(np.mean((m[inside] - np.interp(t[inside] - lag, ct, cq)) ** 2)) for lag in lags]\n"
          "    return float(lags[int(np.argmin(rms))])", "between your grid's steps")],
     "07_real_robot": [
