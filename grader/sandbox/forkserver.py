@@ -37,7 +37,7 @@ import time
 from pathlib import Path
 
 from grader.sandbox.namespaces import STOP, TICK
-from grader.errors import Stopped
+from grader.errors import SandboxError, Stopped
 
 CLONE_NEWNS, CLONE_NEWUSER, CLONE_NEWPID, CLONE_NEWNET = 0x00020000, 0x10000000, 0x20000000, 0x40000000
 PR_SET_PDEATHSIG = 1
@@ -166,17 +166,61 @@ class ForkServer:
 
     def __init__(self, env: dict, *, start_timeout: float = 120.0):
         """Start the server; :meth:`wait_ready` before the first :meth:`run`."""
+        self._lock = threading.Lock()
+        self._env = env
+        self._start_timeout = start_timeout
+        self.restarts = 0
+        self._start()
+
+    def _start(self) -> None:
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         theirs.set_inheritable(True)
-        self._lock = threading.Lock()
         self._ctl = ours
         self._errors = tempfile.TemporaryFile()
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "grader.sandbox.forkserver", str(theirs.fileno())], env=env,
+            [sys.executable, "-m", "grader.sandbox.forkserver", str(theirs.fileno())], env=self._env,
             cwd=str(Path(__file__).resolve().parents[2]), pass_fds=(theirs.fileno(),),
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors)
         theirs.close()
-        self._start_timeout = start_timeout
+
+    def _last_words(self) -> str:
+        """The server's exit status and the last line it wrote, once it has ended."""
+        try:
+            code = self.proc.wait(5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            code = self.proc.wait()
+        self._errors.seek(0)
+        lines = self._errors.read().decode(errors="replace").strip().splitlines()
+        why = f"signal {signal.Signals(-code).name}" if code < 0 else f"exit status {code}"
+        return why + (f"; its last words: {lines[-1][:300]}" if lines else "")
+
+    def _send(self, cfg: dict, child: socket.socket) -> None:
+        """Hand one sandbox to the server. A server that has ended (killed by the system, or out of
+        processes) is started again once, and said so on stderr: the batch goes on, no student's
+        notebook is lost; a second failure raises SandboxError with what the server said."""
+        with self._lock:
+            if self._ctl.fileno() < 0:
+                raise Stopped("the batch's sandboxes were closed")
+            try:
+                socket.send_fds(self._ctl, [json.dumps(cfg).encode()], [child.fileno()])
+                return
+            except OSError as e:
+                if not isinstance(e, (BrokenPipeError, ConnectionError)):
+                    raise
+            said = self._last_words()
+            self._ctl.close()
+            self._errors.close()
+            print(f"snakekit grade: the grader's fork server ended ({said}); starting it again", file=sys.stderr,
+                  flush=True)
+            self.restarts += 1
+            self._start()
+            try:
+                self.wait_ready()
+                socket.send_fds(self._ctl, [json.dumps(cfg).encode()], [child.fileno()])
+            except (OSError, RuntimeError) as e:
+                raise SandboxError(f"the grader's fork server ended ({said}) and did not start again ({e}); "
+                                   "nothing was graded wrong: grade the ungraded students again") from None
 
     def wait_ready(self) -> "ForkServer":
         """Wait until the server has imported everything; raises RuntimeError if it could not."""
@@ -198,8 +242,7 @@ class ForkServer:
         """Run one sandbox (``cfg`` as grader.sandbox.namespaces builds it, plus ``log``): (exit code or None, timed out)."""
         mine, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
-            with self._lock:
-                socket.send_fds(self._ctl, [json.dumps(cfg).encode()], [child.fileno()])
+            self._send(cfg, child)
             child.close()
             deadline = time.monotonic() + wall
             pid, code, buf, stopped = None, None, b"", False

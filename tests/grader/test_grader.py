@@ -770,6 +770,45 @@ def test_fork_server_that_cannot_start_says_why(tmp_path):
     assert server.proc.poll() is not None  # not left running
 
 
+def test_a_fork_server_that_ends_mid_batch_is_started_again_and_every_student_is_graded(tmp_path, monkeypatch, capfd):
+    """The batch's fork server killed (as the system's out-of-memory killer would) after the reference
+    run and after each student's sandbox: the next sandbox starts it again and says so; every student gets
+    the grade a batch without the kill gives."""
+    need_program("unshare")
+    import signal
+
+    from grader import batch
+    from grader.sandbox import runner
+
+    course = make_course(tmp_path / "killed")
+    submit(course, "alice")
+    submit(course, "bob", {"ex1_tool_xy": "def tool_xy(q):\n    return np.array([0.3315, 0.0]) + 0 * q[:2]"})
+    real_execute = runner.Runner.execute
+    servers, killed = [], []
+
+    def execute(self, work, student, **kw):
+        if self.server is not None and self.server.proc.poll() is None:
+            servers.append(self.server)
+            os.kill(self.server.proc.pid, signal.SIGKILL)   # gone before this sandbox is handed to it
+            self.server.proc.wait()
+            killed.append(student)
+        return real_execute(self, work, student, **kw)
+
+    monkeypatch.setattr(runner.Runner, "execute", execute)
+    results = batch.Grader(course, ASSIGNMENT, jobs=1, timeout=60, references=REFERENCES, seed=5).run()
+    monkeypatch.undo()
+    got = {r.student: (r.status, r.score) for r in results}
+    err = capfd.readouterr().err
+    assert len(killed) >= 2 and servers[0].restarts == len(killed), (killed, [s.restarts for s in servers])
+    assert err.count("snakekit grade: the grader's fork server ended (signal SIGKILL); starting it again") == len(killed), err
+    fresh = make_course(tmp_path / "fresh")
+    submit(fresh, "alice")
+    submit(fresh, "bob", {"ex1_tool_xy": "def tool_xy(q):\n    return np.array([0.3315, 0.0]) + 0 * q[:2]"})
+    want = {r.student: (r.status, r.score)
+            for r in batch.Grader(fresh, ASSIGNMENT, jobs=1, timeout=60, references=REFERENCES, seed=5).run()}
+    assert got == want and got["alice"] == ("graded", 7.0) and got["bob"][0] == "graded", (got, want)
+
+
 def test_a_cell_whose_reply_never_comes_counts_as_finished_once_its_kernel_is_idle(tmp_path, monkeypatch):
     """About once in 2,000 notebooks a kernel ran a cell to its end (IOPub: its outputs, then idle) and
     its execute_reply never arrived: the notebook waited out its whole timeout. The worker gives the
