@@ -71,12 +71,16 @@ def goal_in_message(message: str) -> np.ndarray:
     return np.array([float(x) for x in m.group(1).split(",")])
 
 
-def assert_told_the_last_goal(message: str, bus, socket_between: bool) -> None:
+def assert_told_the_last_goal(message: str, bus, socket_between: bool, step: float = 0.0) -> None:
     """The message's goal is the last that reached the servos (the emulator's own record); through
-    a socket, the last goal that left the driver, which may have been lost on the way (it says so)."""
+    a socket, the last goal that left the driver, which may have been lost on the way (it says so).
+    On the pty itself (``step``: the largest change between two goals of the run), the servos' record
+    may end one goal before it: the line was cut while that goal was written into it, before the
+    emulator, held up by a loaded machine, had read it (a real adapter pulled out loses it the same way)."""
     told, arrived = goal_in_message(message), last_goal_on_the_bus(bus)
     if not socket_between:
-        assert np.allclose(told, arrived, atol=1e-3)
+        one_on = np.all(np.abs(told) >= np.abs(arrived) - 1e-3) and np.abs(told - arrived).max() <= step + 1e-3
+        assert np.allclose(told, arrived, atol=1e-3) or one_on, (told, arrived, step)
         return
     assert "; it may not have reached the arm)" in message
     assert np.all(np.abs(told) >= np.abs(arrived) - 1e-3) and np.allclose(told, arrived, atol=0.03)  # on the way out
@@ -275,12 +279,13 @@ def test_the_pty_closed_mid_run_is_a_port_lost_error_not_a_serial_exception():
     robot = make_emulated_robot(motion="profile")
     bus = robot.emulator
     threading.Timer(0.4, bus.stop).start()
+    move = snakekit.joint_trajectory(np.zeros(5), TARGET, duration=1.0)
     with pytest.raises(PortLostError) as e:
-        robot.run(snakekit.joint_trajectory(np.zeros(5), TARGET, duration=1.0))
+        robot.run(move)
     message = str(e.value)
     assert re.match(rf"the servo bus at {bus.port} is gone \(.+\): the USB adapter was unplugged or lost "
                     r"power\. The arm was last told, \d\.\d\d s before this was noticed: goal \[", message), message
-    assert_told_the_last_goal(message, bus, socket_between=False)
+    assert_told_the_last_goal(message, bus, socket_between=False, step=np.abs(np.diff(move.positions, axis=0)).max())
     assert isinstance(e.value.__cause__, br.PORT_ERRORS)  # termios.error or SerialException, kept as the cause
     robot.close()
 
