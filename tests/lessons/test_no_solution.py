@@ -677,6 +677,7 @@ MISTAKES = {
         ({"rms": "np.full(5, np.sqrt(np.mean(error ** 2)))"}, "over all five joints together"),
         ({"inside": "np.ones(len(times), dtype=bool)"}, "after the reference ends there is nothing to compare with"),
         ({"largest": "float(error[k, j])"}, "the largest |e| (its size)"),
+        ({"largest": "float(np.max(error))"}, "the largest e itself misses errors below the reference"),
         ({"joint": "int(j)"}, "the joints count from 1"))],
 }
 
