@@ -425,16 +425,22 @@ class Bus:
               tries: int | None = None) -> tuple[int, object]:
         """:meth:`attempt` ``call()`` (one packet exchange, returning ``(result, value)``), again
         after each failure, at most ``retries + 1`` times (``tries + 1`` when given). Returns the last ``(result, value)``:
-        ``result`` is ``COMM_SUCCESS`` unless every try failed.
+        ``result`` is ``COMM_SUCCESS`` unless every try failed. When every try failed and one of them
+        got a corrupt status packet, that is the result: a servo answered, on a noisy line or at
+        another baud rate, even if a later try timed out (on a busy computer, the answer came late),
+        and the message then points at the line, not at the servo's power or id.
         """
         retries = self.retries if tries is None else tries
+        corrupt = None
         for attempt in range(retries + 1):
             result, value = self.attempt(call, answered=answered)
             if result == sdk.COMM_SUCCESS:
-                break
+                return result, value
+            if result == sdk.COMM_RX_CORRUPT:
+                corrupt = result, value
             if attempt < retries:
                 self.retried += 1
-        return result, value
+        return corrupt or (result, value)
 
     def read(self, servo_id: int, address: int, size: int, *, tries: int | None = None) -> tuple[int, int, int]:
         """One READ with retries (``tries``: how many, default :attr:`retries`): ``(result, value,

@@ -287,6 +287,26 @@ def test_a_corrupt_bus_raises_communication_error_and_leaves_torque_off(robot):
     assert torques(bus) == [0] * 5
 
 
+def test_the_retries_report_a_corrupt_answer_over_a_later_timeout(robot):
+    """A try that got a corrupt status packet shows a servo answered on a noisy line; a later try
+    that timed out (its answer came late on a busy computer) must not turn the message into "check
+    the power or the id". Every try scripted, as the SDK returns them."""
+    import dynamixel_sdk as sdk
+
+    def tries(*results):
+        it = iter(results)
+        return lambda: next(it)
+
+    bus = robot.bus
+    T, C, OK = (sdk.COMM_RX_TIMEOUT, None), (sdk.COMM_RX_CORRUPT, None), (sdk.COMM_SUCCESS, 7)
+    assert bus.retry(tries(C, T, T, T), tries=3) == C
+    assert bus.retry(tries(T, T, C, T), tries=3) == C
+    assert bus.retry(tries(T, T, T, T), tries=3) == T
+    assert bus.retry(tries(C, T, OK), tries=3) == OK
+    before = bus.retried
+    assert bus.retry(tries(C, C, C, C), tries=3) == C and bus.retried == before + 3  # 3 sent again
+
+
 def test_noisy_bus_never_carries_a_goal_outside_the_limits(robot):
     bus = robot.emulator
     bus.faults = Faults(drop=0.02, corrupt=0.01, delay=0.01, delay_time=0.04, seed=7)
