@@ -199,11 +199,12 @@ class ForkServer:
         """Hand one sandbox to the server. A server that has ended (killed by the system, or out of
         processes) is started again once, and said so on stderr: the batch goes on, no student's
         notebook is lost; a second failure raises SandboxError with what the server said."""
+        request = [json.dumps(cfg).encode()], [child.fileno()]
         with self._lock:
             if self._ctl.fileno() < 0:
                 raise Stopped("the batch's sandboxes were closed")
             try:
-                socket.send_fds(self._ctl, [json.dumps(cfg).encode()], [child.fileno()])
+                socket.send_fds(self._ctl, *request)
                 return
             except OSError as e:
                 if not isinstance(e, (BrokenPipeError, ConnectionError)):
@@ -217,7 +218,7 @@ class ForkServer:
             self._start()
             try:
                 self.wait_ready()
-                socket.send_fds(self._ctl, [json.dumps(cfg).encode()], [child.fileno()])
+                socket.send_fds(self._ctl, *request)
             except (OSError, RuntimeError) as e:
                 raise SandboxError(f"the grader's fork server ended ({said}) and did not start again ({e}); "
                                    "nothing was graded wrong: grade the ungraded students again") from None
