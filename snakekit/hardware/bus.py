@@ -242,6 +242,13 @@ class SyncRead(sdk.GroupSyncRead):
         self.check = check
         #: why the last exchange's data was refused, when a check refused it
         self.implausible: str | None = None
+        #: the first refused block since :meth:`forget`: ``(servo id, why)``. A read whose every
+        #: try failed names it even when a later try timed out or came back corrupt.
+        self.refused: tuple[int, str] | None = None
+
+    def forget(self) -> None:
+        """Forget the refused block of earlier tries (call before a new read's tries)."""
+        self.refused = None
 
     def rxPacket(self):
         self.last_result = False
@@ -268,6 +275,7 @@ class SyncRead(sdk.GroupSyncRead):
                 why = self.check(i, bytes(self.data_dict[i]))
                 if why:
                     self.failed_id, self.implausible = i, why
+                    self.refused = self.refused or (i, why)
                     return sdk.COMM_RX_CORRUPT, None
         return result, None
 

@@ -296,9 +296,11 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
         self._check_open()
         reader = self._reader
         t_sent = self._now()
+        reader.forget()
         result, _ = self.bus.retry(reader.exchange)
-        if result != sdk.COMM_SUCCESS and reader.implausible:
-            self._fail(f"servo {reader.failed_id} on {self.port_name} reported {reader.implausible}, which no "
+        if result != sdk.COMM_SUCCESS and reader.refused:
+            servo, why = reader.refused  # a servo's reading no servo can give, at any try: name it
+            self._fail(f"servo {servo} on {self.port_name} reported {why}, which no "
                        f"true reading holds: a corrupt or misread reply ({self._tries()})", result)
         if result != sdk.COMM_SUCCESS:
             self._fail(f"servo {reader.failed_id} on {self.port_name} did not answer the SyncRead of the "

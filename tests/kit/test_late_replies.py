@@ -196,6 +196,34 @@ def test_a_reading_no_servo_can_give_is_a_communication_error_naming_servo_and_v
         bus.stop()
 
 
+@pytest.mark.parametrize("later", ["timed out", "corrupt"])
+def test_a_reading_no_servo_can_give_is_named_when_a_later_try_fails_otherwise(later):
+    """The first try reads joint 2 at 20 rad/s; the next tries time out (the answer came late on a
+    busy computer) or come back corrupt. The message still names the reading: it is what tells the
+    student the line or the servo lies, where "did not answer" sends them to the power."""
+    import dynamixel_sdk as sdk
+
+    bus = BusEmulator(motion=_Racing(np.zeros(5))).start()
+    try:
+        robot = hw.DynamixelSnake(bus.port, watchdog=0, retries=2)
+        robot._release.append(bus.stop)
+        reader = robot._reader
+        other = {"timed out": sdk.COMM_RX_TIMEOUT, "corrupt": sdk.COMM_RX_CORRUPT}[later]
+        tries = iter([reader.exchange, lambda: (other, None), lambda: (other, None)])
+        reader.exchange = lambda: next(tries)()
+        with pytest.raises(snakekit.CommunicationError) as e:
+            robot.read()
+        assert "servo 2" in str(e.value) and "3 tries" in str(e.value)
+        assert "Present Velocity 834 (20.0 rad/s; the MX-28 turns at most 5.8 rad/s)" in str(e.value)
+        assert next(tries, None) is None  # all three tries were made
+        reader.exchange = lambda: (sdk.COMM_RX_TIMEOUT, None)
+        with pytest.raises(snakekit.CommunicationError) as e:  # a new read forgets the old refusal
+            robot.read()
+        assert "did not answer" in str(e.value) and "Present Velocity" not in str(e.value)
+    finally:
+        bus.stop()
+
+
 def test_a_status_from_another_request_is_refused():
     """A 35-byte status block read where a 10-byte one was asked: refused, not cut to 10 bytes."""
     bus = BusEmulator(motion="profile").start()
