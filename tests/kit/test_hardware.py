@@ -428,8 +428,12 @@ def test_task2_sweep_on_the_emulator_matches_the_simulator():
     assert ((run.measured.positions >= lower) & (run.measured.positions <= upper)).all()
     # The measured speed is what the servos did: goals sent late make a joint catch up, so it
     # depends on the machine's load, and the simulator given the same goal times shows it too.
-    assert np.allclose(run.peak_speeds(), reference.peak_speeds(), atol=0.05)
+    # Compared at the times the servos were read: a loaded machine reads them less often, and its
+    # samples can miss the top of a sweep that the simulator's every-step record catches.
     t = run.measured.times
+    ref_speed = np.column_stack([np.interp(t, reference.measured.times, reference.measured.velocities[:, j])
+                                 for j in range(5)])
+    assert np.allclose(run.peak_speeds(), np.abs(ref_speed).max(axis=0), atol=0.05)
     ref = np.column_stack([np.interp(t, reference.measured.times, reference.measured.positions[:, j])
                            for j in range(5)])
     diff = np.abs(run.measured.positions - ref)

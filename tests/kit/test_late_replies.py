@@ -241,3 +241,59 @@ def test_a_status_from_another_request_is_refused():
         robot.close()
     finally:
         bus.stop()
+
+
+def _hold(bus, seconds):
+    """Hold the emulator's serve loop up for ``seconds``, as a busy computer can: it cannot answer
+    meanwhile (its firmware's lock is taken)."""
+    import threading
+
+    started = threading.Event()
+
+    def hold():
+        with bus._lock:
+            started.set()
+            time.sleep(seconds)
+
+    t = threading.Thread(target=hold, daemon=True)
+    t.start()
+    started.wait()
+    return t
+
+
+def test_a_try_in_which_the_computer_held_the_emulated_servos_up_is_made_again_uncounted():
+    """Real servos answer whatever the computer does; emulated ones share its processor. A read whose
+    two tries (about 0.1 s each) both fall in a 0.4 s hold-up is read once the emulator is back, and
+    those tries are counted apart (robot.bus.held_up_tries), not as failures of the bus."""
+    with make_emulated_robot(motion="profile", q0=np.full(5, 0.2), watchdog=0, retries=1) as robot:
+        bus = robot.emulator
+        held = _hold(bus, 0.4)
+        t0 = time.perf_counter()
+        state = robot.read()
+        took = time.perf_counter() - t0
+        held.join()
+        assert np.allclose(state.positions, 0.2, atol=1e-3)
+        assert robot.bus.held_up_tries >= 2 and robot.bus.retried == 0, (robot.bus.held_up_tries, robot.bus.retried)
+        assert took >= 0.35   # it waited the hold-up out
+
+
+def test_a_servo_that_does_not_answer_still_fails_after_its_tries_and_a_hold_up_is_waited_out_only_so_long(monkeypatch):
+    """The uncounted tries are for the computer's hold-ups only: packets lost on the line still cost
+    their tries (2 here), and a hold-up longer than MAX_HELD_UP fails as any silence does."""
+    from snakekit.hardware import bus as hw_bus
+
+    with make_emulated_robot(motion="profile", watchdog=0, retries=1) as robot:
+        bus = robot.emulator
+        bus.faults = Faults(drop=1.0)
+        with pytest.raises(snakekit.CommunicationError, match=r"did not answer .*\(timed out, 2 tries\)"):
+            robot.read()
+        assert robot.bus.held_up_tries == 0
+    with make_emulated_robot(motion="profile", watchdog=0, retries=1) as robot:
+        monkeypatch.setattr(hw_bus, "MAX_HELD_UP", 0.3)
+        held = _hold(robot.emulator, 3.0)
+        t0 = time.perf_counter()
+        with pytest.raises(snakekit.CommunicationError, match=r"did not answer .*\(timed out, 2 tries\)"):
+            robot.read()
+        assert held.is_alive()   # given up within the hold-up: after MAX_HELD_UP and two counted tries
+        assert time.perf_counter() - t0 >= 0.3 and robot.bus.held_up_tries >= 1
+        held.join()
