@@ -49,7 +49,7 @@ PRELOAD = (
     "jupyter_client.manager", "ipykernel.kernelapp", "ipykernel.ipkernel", "IPython",
     "ipykernel.debugger", "numpy", "matplotlib.pyplot", "matplotlib_inline.backend_inline",
     "snakekit", "snakekit.kinematics", "snakekit.trajectory", "snakekit.sim", "snakekit.plots",
-    "snakekit.checks", "snakekit.profile_planner",
+    "snakekit.checks", "snakekit.profile_planner", "snakekit.widgets", "snakekit.viewer",
     "grader.sandbox.inside.worker", "grader.sandbox.inside.warmkernel", "grader.sandbox.inside.enter",
 )
 
@@ -71,6 +71,9 @@ def _preload() -> None:
     ax.plot([0, 1])
     fig.savefig(io.BytesIO(), format="png")
     plt.close(fig)
+    from snakekit.kinematics import workspace_boundary
+
+    workspace_boundary()  # the kit's arm's reach (lru_cache'd; 1 s), drawn by lesson 00's viewer
     from nbformat import v4, validator
 
     for relax in (False, True):  # the notebook schema, compiled (70 ms) once, not in every sandbox
