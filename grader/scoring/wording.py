@@ -11,10 +11,13 @@ but its check.
 from __future__ import annotations
 
 import ast
+import dataclasses
 import re
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from snakekit.closeness import entry_name
 
 __all__ = ["Part", "Wording", "wording", "title", "points", "shown", "signatures"]
 
@@ -104,12 +107,14 @@ def signatures(sources) -> dict:
 @dataclass(frozen=True)
 class Part:
     """A value as the notebook's check names it: ``what`` ("send times"), its ``unit`` (one, or one per
-    entry of a 1-D value) and the ``labels`` of its entries ("x", "y")."""
+    entry of a 1-D value), the ``labels`` of its entries ("x", "y") and ``why`` its tolerance is what it is
+    (the check's ``why=``, as its message says it; None: exact math)."""
 
     what: str
     unit: str | tuple = ""
     labels: tuple | None = None
     template: str = field(default="", repr=False)
+    why: str | None = field(default=None, repr=False, compare=False)
 
     def at(self, values: dict) -> "Part":
         """The part at a hidden case whose named values are ``values``: a name the check makes of a value of
@@ -120,7 +125,7 @@ class Part:
             what = re.sub(r"\{([^{}]+)\}", lambda m: _number(_evaluate(m.group(1), values)), self.template)
         except (KeyError, ValueError, SyntaxError):
             return self
-        return Part(what, self.unit, self.labels)
+        return Part(what, self.unit, self.labels, why=self.why)
 
     def unit_at(self, index: tuple) -> str:
         """The unit of the entry at ``index`` (the last axis picks a unit of a per-entry tuple)."""
@@ -129,14 +134,9 @@ class Part:
         return self.unit
 
     def name_at(self, index: tuple, ndim: int) -> str:
-        """The entry at ``index`` as the check names it: ``move duration``, ``send times[3]``."""
-        if not index:
-            return self.what
-        if self.labels is not None and ndim == 1 and index[0] < len(self.labels):
-            return f"{self.what} {self.labels[index[0]]}"
-        if self.labels is not None and ndim == 2 and index[1] < len(self.labels):   # a row's column, by its name
-            return f"{self.what}[{int(index[0])}] {self.labels[index[1]]}"
-        return f"{self.what}[{', '.join(str(int(k)) for k in index)}]"
+        """The entry at ``index`` as the check names it: ``move duration``, ``send times[3]``
+        (:func:`snakekit.closeness.entry_name`)."""
+        return entry_name(self.what, index, ndim, self.labels)
 
 
 @dataclass(frozen=True)
@@ -255,26 +255,36 @@ def _keywords(call: ast.Call, shared: dict) -> dict:
     return out
 
 
+def _labels(node, names: dict) -> tuple | None:
+    """A check's ``labels=``: a tuple of strings, or the name of one the cell assigns (``labels=FIELDS``)."""
+    if isinstance(node, ast.Name):
+        node = names.get(node.id)
+    if isinstance(node, ast.Tuple):
+        return tuple(_text(e) or "" for e in node.elts)
+    return None
+
+
 def _parts(tree: ast.Module) -> tuple:
-    shared = {}
+    shared, names = {}, {}
     for node in ast.walk(tree):
-        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name) \
-                and isinstance(node.value, ast.Call) and getattr(node.value.func, "id", None) == "dict":
-            shared[node.targets[0].id] = {k.arg: k.value for k in node.value.keywords if k.arg}
-    parts = []
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            names[node.targets[0].id] = node.value
+            if isinstance(node.value, ast.Call) and getattr(node.value.func, "id", None) == "dict":
+                shared[node.targets[0].id] = {k.arg: k.value for k in node.value.keywords if k.arg}
+    parts, whys = [], {}
     for node in ast.walk(tree):
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "close":
             kw = _keywords(node, shared)
             what = _text(kw["what"]) if "what" in kw else None
             if not what:
                 continue
-            labels = None
-            if isinstance(kw.get("labels"), ast.Tuple):
-                labels = tuple(_text(e) or "" for e in kw["labels"].elts)
-            part = Part(what, _unit(kw["unit"]) if "unit" in kw else "", labels, _template(kw["what"]))
+            part = Part(what, _unit(kw["unit"]) if "unit" in kw else "", _labels(kw.get("labels"), names),
+                        _template(kw["what"]))
+            # the reason of the first check of it in the cell's order (its visible case's, as the lesson reads)
+            whys.setdefault(part, []).append((node.lineno, node.col_offset, _text(kw["why"]) if "why" in kw else None))
             if part not in parts:
                 parts.append(part)
-    return tuple(parts)
+    return tuple(dataclasses.replace(p, why=min(whys[p])[2]) for p in parts)
 
 
 def _params(tree: ast.Module, handed: str, student: str) -> tuple:
