@@ -188,9 +188,12 @@ class Wording:
             if len(self.parts) <= 1:
                 return self.parts[0].at(self.values(case)) if self.parts else Part("the result")
             words = [p.what.split() for p in self.parts]
-            common = [w[0] for w in zip(*words) if len(set(w)) == 1]
+            common = " ".join(w[0] for w in zip(*words) if len(set(w)) == 1)
+            whole = [p for p in self.parts if p.what == common]
+            if whole:   # one compared value is named by just those words (2.1's "Jacobian", beside its row 3)
+                return whole[0].at(self.values(case))
             units = {p.unit for p in self.parts}
-            return Part(" ".join(common) or "the result", units.pop() if len(units) == 1 else "")
+            return Part(common or "the result", units.pop() if len(units) == 1 else "")
         words = set(name.lower().split("_"))
         shared = [len(words & set(re.findall(r"[a-z]+", p.what.lower()))) for p in self.parts]
         if any(shared):   # the most words in common: recorded_angles is "recorded angles", not "recorded times"
