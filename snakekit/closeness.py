@@ -5,7 +5,7 @@ the same words.
 
 Which entry a message names (:func:`worst`): of the entries beyond their tolerance, the one furthest
 from its expected value, ``|got - expected|`` in the value's own numbers (the first of equals, in reading
-order). That is the entry a student learns most from: the first wrong entry is often a rounding-sized
+order: a time vector that starts one step late is named at its first entry). That is the entry a student learns most from: the first wrong entry is often a rounding-sized
 slip while the real mistake sits further on (a last row that is not home, a heading not accumulated),
 and an entry far off is seldom a tolerance question. The one exception is a table of rows read from the
 top (a row's columns named: 4.4's ``violations`` of time, joint and kind): a row missed or one too many
@@ -24,11 +24,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ZERO", "bound", "entry_name", "is_table", "sentence", "tolerance", "worst"]
+__all__ = ["TIE", "ZERO", "bound", "entry_name", "is_table", "sentence", "tolerance", "worst"]
 
 #: The absolute floor of every closeness check [unit of the value]: a result within it of the
 #: expected one passes (a last row of 3.9e-16 where the text asks exactly 0), locally as graded.
 ZERO = 1e-12
+
+
+#: How close two differences are to count as equal when choosing the entry to name (relative): a time vector
+#: shifted by one step is off by the same step everywhere, give or take rounding, and its first entry is named.
+TIE = 1e-9
 
 
 def bound(expected, *, atol: float, rtol: float) -> np.ndarray:
@@ -54,15 +59,18 @@ def worst(got, expected, tol, *, table: bool = False) -> tuple | None:
     (0, 1)
     >>> worst(np.array([[0.0, 0.0], [5.0, 1.0]]), np.zeros((2, 2)), np.full((2, 2), 1e-9), table=True)
     (1, 0)
+    >>> worst(np.arange(1, 418) / 63.2, np.arange(417) / 63.2, np.full(417, 1e-9))   # one step late throughout
+    (0,)
     """
     g, e = np.asarray(got, dtype=float), np.asarray(expected, dtype=float)
     diff = np.abs(g - e)
     wrong = ~(diff <= tol)
     if not wrong.any():
         return None
-    if table:
-        return tuple(int(k) for k in np.argwhere(wrong)[0])
-    return tuple(int(k) for k in np.unravel_index(int(np.argmax(np.where(wrong, diff, -1.0))), diff.shape))
+    if not table:   # the first of the entries furthest off, equal past floating-point rounding
+        far = np.where(wrong, diff, -1.0)
+        wrong = far >= far.max() * (1 - TIE)
+    return tuple(int(k) for k in np.argwhere(wrong)[0])
 
 
 def entry_name(what: str, index: tuple, ndim: int, labels=None) -> str:
