@@ -21,6 +21,9 @@ from snakekit.closeness import entry_name
 
 __all__ = ["Part", "Wording", "wording", "title", "points", "shown", "signatures"]
 
+#: Words that cannot end a value's name: what the compared values of a check share stops before them.
+DANGLING = {"of", "at", "in", "for", "to", "the", "a", "an", "and"}
+
 #: A test cell's ``checks.Exercise("6.3", "task2_sweep")``: the exercise's number and the student's function.
 EXERCISE = re.compile(r"checks\.Exercise\(\s*[\"']([\w.]+)[\"']\s*,\s*[\"'](\w+)[\"']")
 
@@ -188,7 +191,10 @@ class Wording:
             if len(self.parts) <= 1:
                 return self.parts[0].at(self.values(case)) if self.parts else Part("the result")
             words = [p.what.split() for p in self.parts]
-            common = " ".join(w[0] for w in zip(*words) if len(set(w)) == 1)
+            common = [w[0] for w in zip(*words) if len(set(w)) == 1]
+            while common and common[-1] in DANGLING:   # "Jacobian of q0*q1", "Jacobian of g": the Jacobian
+                common.pop()
+            common = " ".join(common)
             whole = [p for p in self.parts if p.what == common]
             if whole:   # one compared value is named by just those words (2.1's "Jacobian", beside its row 3)
                 return whole[0].at(self.values(case))
