@@ -3,9 +3,9 @@
 A test cell often hands in through a helper of its own (``graded_move``, ``graded_lag``) that calls the
 student's function and returns named arrays (``goal_times``). A student never wrote those names: a
 graded message names the student's function (``checks.Exercise("4.3", "sample_move")``), the arguments
-it was called with, and each value as the check's ``ex.close(..., what=, unit=, labels=)`` says it
-("send times", in s). All of it is read from the test cell's source, so it needs nothing of a lesson
-but its check.
+it was called with, and each value as the check's ``ex.close(..., what=, unit=, labels=, why=)`` says it
+("send times", in s, its tolerance for the check's reason). All of it is read from the test cell's source,
+so it needs nothing of a lesson but its check.
 """
 
 from __future__ import annotations
