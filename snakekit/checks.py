@@ -51,6 +51,7 @@ import numpy as np
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
 from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
+from .closeness import ZERO, bound, entry_name, is_table, sentence, worst
 from .verdicts import BUILDS_ON, CAUSES, PASSED, composite_note, failing_parts, stopped_note
 from .watch import calls_to, forgot_return, raised_in, returns_none
 
@@ -73,29 +74,6 @@ def _student_frames(tb) -> str:
 
 # --- numbers in messages -----------------------------------------------------------------
 
-# How a difference is shown: metres as millimetres, radians also in degrees.
-def _fmt(v: float, unit: str) -> str:
-    s = f"{v:.4g}" if abs(v) >= 1e-3 or v == 0 else f"{v:.3g}"
-    return f"{s} {unit}".rstrip()
-
-
-def _fmt_pair(got: float, want: float, unit: str) -> tuple[str, str]:
-    """A value and the expected one, with as many digits as it takes to tell them apart."""
-    a, b = _fmt(got, unit), _fmt(want, unit)
-    digits = 5
-    while a == b and got != want and digits <= 17:
-        a, b = (f"{x:.{digits}g} {unit}".rstrip() for x in (got, want))
-        digits += 1
-    return a, b
-
-
-def _fmt_diff(d: float, unit: str) -> str:
-    if unit == "m":
-        return f"{d * 1000:.4g} mm"
-    if unit == "rad":
-        return f"{d:.4g} rad ({np.degrees(d):.3g} deg)"
-    return _fmt(d, unit)
-
 
 def _fmt_array(a) -> str:
     a = np.asarray(a, dtype=float)
@@ -115,11 +93,6 @@ def _where(where) -> str:
 
 
 # --- the exercise object ---------------------------------------------------------------
-
-#: The absolute floor of every closeness check [unit of the value]: a result within it of the
-#: expected one passes (a last row of 3.9e-16 where the text asks exactly 0), locally as graded
-#: (``grader.score.DEFAULT_TOLERANCES``: atol 1e-12).
-ZERO = 1e-12
 
 
 class Exercise:
@@ -238,8 +211,9 @@ class Exercise:
             why: the reason for the tolerance; default "exact math" when ``tol`` is 0.
             labels: names of the entries of a 1-D value ("x", "y", "heading"), or of the columns of a 2-D one
                 ("time", "joint", "kind": a message names ``violations[0] time``, not ``violations[0, 0]``). Such a
-                table is read from the top: a message names its first wrong entry, as the grader's does; any other
-                value its entry furthest off.
+                table is read from the top: a message names its first wrong entry; any other value the entry
+                furthest from its expected one. The grader names the same entry in the same words
+                (:mod:`snakekit.closeness`).
             mistakes: ``{hint: value}``: answers a known mistake would give; when ``got``
                 matches one, its hint is shown.
             array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
@@ -263,36 +237,18 @@ class Exercise:
         if not np.isfinite(arr).all():
             idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
             self.fail(f"{what}{_where(where)} holds {arr[idx]} at index {idx}; every value must be finite.")
-        # near zero is zero: what is within ZERO of an exact 0 passes, as the grader's own floor
-        bound = np.maximum(tol + rtol * np.abs(exp), ZERO)
-        diff = np.abs(arr - exp)
-        if (diff <= bound).all():
+        # near zero is zero: what is within ZERO of an exact 0 passes, as graded (snakekit.closeness)
+        tolerances = bound(exp, atol=tol, rtol=rtol)
+        table = is_table(labels, arr.shape)
+        i = worst(arr, exp, tolerances, table=table)   # the entry the grader names too
+        if i is None:
             self.checked += 1
             return
-        table = labels is not None and arr.ndim == 2 and len(labels) == arr.shape[1]
-        if table:   # a table of rows is read from the top: its first wrong entry, as the grader names it
-            i = tuple(int(k) for k in np.argwhere(~(diff <= bound))[0])
-        else:
-            i = np.unravel_index(int(np.argmax(diff - bound)), diff.shape)
         units = unit if isinstance(unit, (tuple, list)) else None
         u = units[i[-1]] if units is not None and arr.ndim >= 1 else unit
-        name = what
-        if labels is not None and arr.ndim == 1:
-            name = f"{what} {labels[i[0]]}"
-        elif table:   # a row's columns named
-            name = f"{what}[{int(i[0])}] {labels[i[1]]}"
-        elif arr.ndim >= 1:
-            name = f"{what}[{', '.join(str(int(k)) for k in i)}]"
-        # Without a stated reason the check is exact math: 1e-9 relative, plus a tiny absolute
-        # floor (when given) for expected values at or near 0.
-        tol_text = f"{_fmt_diff(float(bound[i]), u)}: {why or 'exact math'}"
-        if why is None:
-            tol_text += ", " + f"{rtol:g}".replace("e-0", "e-") + " relative"
-            tol_text += f" + {_fmt_diff(tol, u)}" if tol else ""
-        hint = mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()) * 10 + 1e-9)
-        shown, wanted = _fmt_pair(float(arr[i]), float(exp[i]), u)
-        self.fail(f"{name}{_where(where)} is {shown}, expected {wanted}: "
-                  f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
+        hint = mistake_hint(arr, exp, units or unit, mistakes, tol=float(tolerances.max()) * 10 + 1e-9)
+        self.fail(sentence(entry_name(what, i, arr.ndim, labels), arr[i], exp[i], tolerances[i], u, atol=tol,
+                           rtol=rtol, why=why, where=_where(where)), hint)
 
     def hand_in(self, grade_id: str, fn, *, forbid: tuple = (), what: str = "", instead: str = "",
                 array: bool = False) -> int:

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from snakekit.checks import _fmt_diff, _fmt_pair
+from snakekit.closeness import bound, is_table, sentence, worst
 from snakekit.errors import SnakekitError
 from snakekit.handin import decode_results
 from snakekit.watch import forgot_return
@@ -232,7 +232,8 @@ def _kind(w: Wording) -> str:
 
 def _compare_case(w: Wording, got: dict, want: dict, tol: dict, case=()) -> str:
     """Why a case's results differ from the instructor's ("" when they agree), worded as the notebook's
-    check words it: the value's name and unit, the numbers with the check's digits (:mod:`snakekit.checks`)."""
+    check words it: the entry its check would name, the value's name and unit, the numbers with the check's
+    digits and the tolerance with the check's reason (:mod:`snakekit.closeness`)."""
     for name, e in want.items():
         part = w.part(name, case)
         if name not in got:
@@ -247,14 +248,12 @@ def _compare_case(w: Wording, got: dict, want: dict, tol: dict, case=()) -> str:
         if not np.isfinite(g).all():
             idx = tuple(int(i) for i in np.argwhere(~np.isfinite(g))[0])
             return f"{part.what} holds {g[idx]} at index {idx}: every value must be a finite number."
-        bound = tol["atol"] + tol["rtol"] * np.abs(e)
-        bad = ~(np.abs(g - e) <= bound)
-        if bad.any():
-            idx = tuple(int(i) for i in np.argwhere(bad)[0])
-            unit = part.unit_at(idx)
-            shown, wanted = _fmt_pair(float(g[idx]), float(e[idx]), unit)
-            return (f"{part.name_at(idx, g.ndim)} is {shown}, expected {wanted}: off by "
-                    f"{_fmt_diff(abs(float(g[idx] - e[idx])), unit)} (tolerance {_fmt_diff(float(bound[idx]), unit)}).")
+        # the entry the notebook's check names, in its words (snakekit.closeness), at the grader's tolerances
+        at = bound(e, atol=tol["atol"], rtol=tol["rtol"])
+        idx = worst(g, e, at, table=is_table(part.labels, e.shape))
+        if idx is not None:
+            return sentence(part.name_at(idx, g.ndim), g[idx], e[idx], at[idx], part.unit_at(idx), atol=tol["atol"],
+                            rtol=tol["rtol"], why=part.why)
     return ""
 
 

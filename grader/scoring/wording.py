@@ -3,20 +3,26 @@
 A test cell often hands in through a helper of its own (``graded_move``, ``graded_lag``) that calls the
 student's function and returns named arrays (``goal_times``). A student never wrote those names: a
 graded message names the student's function (``checks.Exercise("4.3", "sample_move")``), the arguments
-it was called with, and each value as the check's ``ex.close(..., what=, unit=, labels=)`` says it
-("send times", in s). All of it is read from the test cell's source, so it needs nothing of a lesson
-but its check.
+it was called with, and each value as the check's ``ex.close(..., what=, unit=, labels=, why=)`` says it
+("send times", in s, its tolerance for the check's reason). All of it is read from the test cell's source,
+so it needs nothing of a lesson but its check.
 """
 
 from __future__ import annotations
 
 import ast
+import dataclasses
 import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from snakekit.closeness import entry_name
+
 __all__ = ["Part", "Wording", "wording", "title", "points", "shown", "signatures"]
+
+#: Words that cannot end a value's name: what the compared values of a check share stops before them.
+DANGLING = {"of", "at", "in", "for", "to", "the", "a", "an", "and"}
 
 #: A test cell's ``checks.Exercise("6.3", "task2_sweep")``: the exercise's number and the student's function.
 EXERCISE = re.compile(r"checks\.Exercise\(\s*[\"']([\w.]+)[\"']\s*,\s*[\"'](\w+)[\"']")
@@ -104,12 +110,14 @@ def signatures(sources) -> dict:
 @dataclass(frozen=True)
 class Part:
     """A value as the notebook's check names it: ``what`` ("send times"), its ``unit`` (one, or one per
-    entry of a 1-D value) and the ``labels`` of its entries ("x", "y")."""
+    entry of a 1-D value), the ``labels`` of its entries ("x", "y") and ``why`` its tolerance is what it is
+    (the check's ``why=``, as its message says it; None: exact math)."""
 
     what: str
     unit: str | tuple = ""
     labels: tuple | None = None
     template: str = field(default="", repr=False)
+    why: str | None = field(default=None, repr=False, compare=False)
 
     def at(self, values: dict) -> "Part":
         """The part at a hidden case whose named values are ``values``: a name the check makes of a value of
@@ -120,7 +128,7 @@ class Part:
             what = re.sub(r"\{([^{}]+)\}", lambda m: _number(_evaluate(m.group(1), values)), self.template)
         except (KeyError, ValueError, SyntaxError):
             return self
-        return Part(what, self.unit, self.labels)
+        return Part(what, self.unit, self.labels, why=self.why)
 
     def unit_at(self, index: tuple) -> str:
         """The unit of the entry at ``index`` (the last axis picks a unit of a per-entry tuple)."""
@@ -129,14 +137,9 @@ class Part:
         return self.unit
 
     def name_at(self, index: tuple, ndim: int) -> str:
-        """The entry at ``index`` as the check names it: ``move duration``, ``send times[3]``."""
-        if not index:
-            return self.what
-        if self.labels is not None and ndim == 1 and index[0] < len(self.labels):
-            return f"{self.what} {self.labels[index[0]]}"
-        if self.labels is not None and ndim == 2 and index[1] < len(self.labels):   # a row's column, by its name
-            return f"{self.what}[{int(index[0])}] {self.labels[index[1]]}"
-        return f"{self.what}[{', '.join(str(int(k)) for k in index)}]"
+        """The entry at ``index`` as the check names it: ``move duration``, ``send times[3]``
+        (:func:`snakekit.closeness.entry_name`)."""
+        return entry_name(self.what, index, ndim, self.labels)
 
 
 @dataclass(frozen=True)
@@ -189,8 +192,14 @@ class Wording:
                 return self.parts[0].at(self.values(case)) if self.parts else Part("the result")
             words = [p.what.split() for p in self.parts]
             common = [w[0] for w in zip(*words) if len(set(w)) == 1]
+            while common and common[-1] in DANGLING:   # "Jacobian of q0*q1", "Jacobian of g": the Jacobian
+                common.pop()
+            common = " ".join(common)
+            whole = [p for p in self.parts if p.what == common]
+            if whole:   # one compared value is named by just those words (2.1's "Jacobian", beside its row 3)
+                return whole[0].at(self.values(case))
             units = {p.unit for p in self.parts}
-            return Part(" ".join(common) or "the result", units.pop() if len(units) == 1 else "")
+            return Part(common or "the result", units.pop() if len(units) == 1 else "")
         words = set(name.lower().split("_"))
         shared = [len(words & set(re.findall(r"[a-z]+", p.what.lower()))) for p in self.parts]
         if any(shared):   # the most words in common: recorded_angles is "recorded angles", not "recorded times"
@@ -255,26 +264,36 @@ def _keywords(call: ast.Call, shared: dict) -> dict:
     return out
 
 
+def _labels(node, names: dict) -> tuple | None:
+    """A check's ``labels=``: a tuple of strings, or the name of one the cell assigns (``labels=FIELDS``)."""
+    if isinstance(node, ast.Name):
+        node = names.get(node.id)
+    if isinstance(node, ast.Tuple):
+        return tuple(_text(e) or "" for e in node.elts)
+    return None
+
+
 def _parts(tree: ast.Module) -> tuple:
-    shared = {}
+    shared, names = {}, {}
     for node in ast.walk(tree):
-        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name) \
-                and isinstance(node.value, ast.Call) and getattr(node.value.func, "id", None) == "dict":
-            shared[node.targets[0].id] = {k.arg: k.value for k in node.value.keywords if k.arg}
-    parts = []
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            names[node.targets[0].id] = node.value
+            if isinstance(node.value, ast.Call) and getattr(node.value.func, "id", None) == "dict":
+                shared[node.targets[0].id] = {k.arg: k.value for k in node.value.keywords if k.arg}
+    parts, whys = [], {}
     for node in ast.walk(tree):
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "close":
             kw = _keywords(node, shared)
             what = _text(kw["what"]) if "what" in kw else None
             if not what:
                 continue
-            labels = None
-            if isinstance(kw.get("labels"), ast.Tuple):
-                labels = tuple(_text(e) or "" for e in kw["labels"].elts)
-            part = Part(what, _unit(kw["unit"]) if "unit" in kw else "", labels, _template(kw["what"]))
+            part = Part(what, _unit(kw["unit"]) if "unit" in kw else "", _labels(kw.get("labels"), names),
+                        _template(kw["what"]))
+            # the reason of the first check of it in the cell's order (its visible case's, as the lesson reads)
+            whys.setdefault(part, []).append((node.lineno, node.col_offset, _text(kw["why"]) if "why" in kw else None))
             if part not in parts:
                 parts.append(part)
-    return tuple(parts)
+    return tuple(dataclasses.replace(p, why=min(whys[p])[2]) for p in parts)
 
 
 def _params(tree: ast.Module, handed: str, student: str) -> tuple:

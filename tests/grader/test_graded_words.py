@@ -75,9 +75,11 @@ def _sweep(points, rate, sweeps, amplitude):
     return t, np.repeat((amplitude * np.sin(2 * np.pi * sweeps * t / t[-1]))[:, None], 5, axis=1)
 
 
-#: The exercises judged by a rule (grader.scoring.rules) look at their result's shape first: per case, the
-#: shape of each value a right answer has there.
-SHAPES = {"ex03_1_two_link_ik_test": lambda args: {"value": (2, 2)},
+#: The exercises judged by a rule (grader.scoring.rules) look at their result's shape first, and a table of
+#: rows (4.4's violations: time, joint, kind) is named by its row and column: per case, the shape of each value
+#: a right answer has there.
+SHAPES = {"ex04_4_limit_check_test": lambda args: {"value": (2, 3)},
+          "ex03_1_two_link_ik_test": lambda args: {"value": (2, 2)},
           "ex03_3_ik_loop_test": lambda args: {"value": (5,)},
           "ex03_4_task1_test": lambda args: {"final_q": (len(args[0]), 5), "poses": (len(args[0]), 3)}}
 

@@ -202,8 +202,8 @@ def test_lesson6_hands_in_sweeps_runs_and_lags(graded):
     for (n, f), r in zip(run["cases"]["ex06_1_sweep_times_test"], run["results"]["ex06_1_sweep_times_test"]):
         assert np.allclose(value(r), np.arange(n) / f, rtol=1e-12)
     for (t, k, a), r in zip(run["cases"]["ex06_2_sweep_positions_test"], run["results"]["ex06_2_sweep_positions_test"]):
-        assert r["positions"].shape == (len(t), 5) and bool(r["last_row_home"])
-        assert np.allclose(r["positions"][:-1, 2], a * np.sin(2 * np.pi * k * t[:-1] / t[-1]), atol=1e-12)
+        assert r["joint_goals"].shape == (len(t), 5) and bool(r["last_row_home"])
+        assert np.allclose(r["joint_goals"][:-1, 2], a * np.sin(2 * np.pi * k * t[:-1] / t[-1]), atol=1e-12)
     cases, results = run["cases"]["ex06_3_task2_test"], run["results"]["ex06_3_task2_test"]
     assert cases[-1] == (), "the last case is Task 2 itself: task2_sweep() at its defaults"
     task2 = snakekit.side_sweep()
