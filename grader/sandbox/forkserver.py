@@ -27,6 +27,7 @@ import ctypes.util
 import gc
 import json
 import os
+import select
 import signal
 import socket
 import subprocess
@@ -156,7 +157,21 @@ def _supervise(cfg: dict, report_fd: int) -> int:
             os.environ.update(cfg["env"])
             return worker.main(cfg["argv"][3:], warm=True)
         exit_child(sandbox)
-    _, status = os.waitpid(pid, 0)
+    try:
+        ended = os.pidfd_open(pid)  # readable when the sandbox ends (Linux 5.3)
+    except (AttributeError, OSError):
+        ended = None
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        # the grader only reads this socket: readable means it closed, the grader is gone (killed with
+        # SIGKILL, say), and nobody will wait for this sandbox or kill it at its deadline: end it now
+        ready = select.select([report] + ([ended] if ended is not None else []), [], [], 0.05 if ended is None else None)[0]
+        if report in ready:
+            os.kill(pid, signal.SIGKILL)  # PID 1 of the namespace: every process in it goes too
+            os.waitpid(pid, 0)
+            return 0
     report.sendall(f"exit {os.waitstatus_to_exitcode(status)}\n".encode())
     return 0
 

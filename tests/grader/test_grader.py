@@ -809,6 +809,97 @@ def test_a_fork_server_that_ends_mid_batch_is_started_again_and_every_student_is
     assert got == want and got["alice"] == ("graded", 7.0) and got["bob"][0] == "graded", (got, want)
 
 
+def _descendants(pid: int) -> set[int]:
+    """Every process below ``pid`` (from /proc's children lists)."""
+    out, todo = set(), [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            tasks = os.listdir(f"/proc/{p}/task")
+        except OSError:
+            continue
+        for t in tasks:
+            try:
+                kids = Path(f"/proc/{p}/task/{t}/children").read_text().split()
+            except OSError:
+                continue
+            for k in map(int, kids):
+                if k not in out:
+                    out.add(k)
+                    todo.append(k)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_a_grader_killed_mid_batch_leaves_no_sandbox_running(tmp_path):
+    """`snakekit grade` killed with SIGKILL (the TA's `kill -9`, the out-of-memory killer) while a
+    student's cell sleeps for 300 s: its fork server, the sandbox's supervisor, the sandbox and the
+    student's kernel all end within seconds, not at the notebook's 600 s deadline that nobody is left
+    to enforce."""
+    need_program("unshare")
+    import signal
+    import time
+
+    course = make_course(tmp_path / "course")
+    submit(course, "sleeper", {"ex1_tool_xy": "import time\ntime.sleep(300)\ndef tool_xy(q):\n    return q[:2]"})
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+    grade = subprocess.Popen([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
+                              "--jobs", "1", "--timeout", "600", "--references", str(REFERENCES)],
+                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline, seen = time.monotonic() + 120, set()
+        while time.monotonic() < deadline and grade.poll() is None:
+            seen |= _descendants(grade.pid)
+            # the server, its helpers, a supervisor, the sandbox's PID 1 and its kernel: the sleeping cell runs
+            if len(seen) >= 5 and any("ipykernel" in _cmdline(p) or _depth(p, grade.pid) >= 4 for p in seen):
+                break
+            time.sleep(0.2)
+        time.sleep(2.0)
+        seen |= _descendants(grade.pid)
+        assert grade.poll() is None and len(seen) >= 4, (grade.poll(), seen, grade.stderr.read().decode()[-2000:])
+        os.kill(grade.pid, signal.SIGKILL)
+        grade.wait()
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(_alive(p) for p in seen):
+            time.sleep(0.2)
+        left = {p: _cmdline(p) for p in seen if _alive(p)}
+        assert not left, f"still running after the grader was killed: {left}"
+    finally:
+        for p in _descendants(grade.pid) | seen:
+            try:
+                os.kill(p, signal.SIGKILL)
+            except OSError:
+                pass
+        if grade.poll() is None:
+            grade.kill()
+            grade.wait()
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
+
+
+def _depth(pid: int, top: int) -> int:
+    """How many parents up ``top`` is from ``pid`` (0 when it is not an ancestor)."""
+    n = 0
+    while pid not in (0, 1, top):
+        try:
+            pid = int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+        except OSError:
+            return 0
+        n += 1
+    return n if pid == top else 0
+
+
 def test_a_cell_whose_reply_never_comes_counts_as_finished_once_its_kernel_is_idle(tmp_path, monkeypatch):
     """About once in 2,000 notebooks a kernel ran a cell to its end (IOPub: its outputs, then idle) and
     its execute_reply never arrived: the notebook waited out its whole timeout. The worker gives the
