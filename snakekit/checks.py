@@ -50,12 +50,12 @@ import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
-from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
+from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint, times, within
 from .verdicts import BUILDS_ON, CAUSES, PASSED, composite_note, failing_parts, stopped_note
 from .watch import calls_to, forgot_return, raised_in, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "live_off",
-           "pose_mistakes", "quick", "waiting_for"]
+           "pose_mistakes", "quick", "times", "waiting_for", "within"]
 
 _HERE = os.path.abspath(__file__)
 
@@ -240,8 +240,10 @@ class Exercise:
                 ("time", "joint", "kind": a message names ``violations[0] time``, not ``violations[0, 0]``). Such a
                 table is read from the top: a message names its first wrong entry, as the grader's does; any other
                 value its entry furthest off.
-            mistakes: ``{hint: value}``: answers a known mistake would give; when ``got``
-                matches one, its hint is shown.
+            mistakes: ``{hint: value}``: answers a known mistake would give (a value, ``either(...)`` of
+                several, ``times(factor)`` of ``expected``: a unit slip, or ``within(value, spread)``: answers
+                near a value, a loop stopped too early); when ``got`` is one, within the check's own tolerance
+                (the tolerance times the factor for ``times``, the spread for ``within``), its hint is shown.
             array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
                 since the lesson's later cells index the result as an array.
         """
@@ -257,9 +259,9 @@ class Exercise:
             self.fail(f"{what}{_where(where)} should be numbers of shape {exp.shape}, got {type(got).__name__}: "
                       f"{str(got)[:80]}")
         if arr.shape != exp.shape:   # a known mistake may give another shape (one time too many)
-            near = 10 * (tol + rtol * float(np.abs(exp).max(initial=0.0))) + 1e-9
+            near = max(tol + rtol * float(np.abs(exp).max(initial=0.0)), ZERO)
             self.fail(f"{what}{_where(where)} has shape {arr.shape}, expected shape {exp.shape}.",
-                      known_mistake(arr, mistakes, tol=near) or shape_hint(arr, exp))
+                      known_mistake(arr, mistakes, tol=near, expected=exp) or shape_hint(arr, exp))
         if not np.isfinite(arr).all():
             idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
             self.fail(f"{what}{_where(where)} holds {arr[idx]} at index {idx}; every value must be finite.")
@@ -289,7 +291,7 @@ class Exercise:
         if why is None:
             tol_text += ", " + f"{rtol:g}".replace("e-0", "e-") + " relative"
             tol_text += f" + {_fmt_diff(tol, u)}" if tol else ""
-        hint = mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()) * 10 + 1e-9)
+        hint = mistake_hint(arr, exp, units or unit, mistakes, tol=float(bound.max()))   # the mistake, and only it
         shown, wanted = _fmt_pair(float(arr[i]), float(exp[i]), u)
         self.fail(f"{name}{_where(where)} is {shown}, expected {wanted}: "
                   f"off by {_fmt_diff(float(diff[i]), u)} (tolerance {tol_text}).", hint)
