@@ -65,9 +65,9 @@ class within:
 
 def _near(a, b, tol: float) -> bool:
     """Whether ``a`` is the value ``b`` a mistake gives: within ``tol``, the exercise's own tolerance (and
-    within 1e-6 of ``b`` relative, the digits of a worked number pasted into a check)."""
+    1e-9 of ``b`` relative: the rounding of a worked number, as exact math allows)."""
     b = np.asarray(b, dtype=float)
-    return b.shape == a.shape and bool(np.allclose(a, b, rtol=1e-6, atol=tol))
+    return b.shape == a.shape and bool(np.allclose(a, b, rtol=1e-9, atol=tol))
 
 
 def known_mistake(arr, mistakes, *, tol: float, expected=None) -> str:
