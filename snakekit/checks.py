@@ -50,12 +50,12 @@ import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
-from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint, times, within
+from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint, scaled, within
 from .verdicts import BUILDS_ON, CAUSES, PASSED, composite_note, failing_parts, stopped_note
 from .watch import calls_to, forgot_return, raised_in, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "live_off",
-           "pose_mistakes", "quick", "times", "waiting_for", "within"]
+           "pose_mistakes", "quick", "scaled", "waiting_for", "within"]
 
 _HERE = os.path.abspath(__file__)
 
@@ -241,9 +241,9 @@ class Exercise:
                 table is read from the top: a message names its first wrong entry, as the grader's does; any other
                 value its entry furthest off.
             mistakes: ``{hint: value}``: answers a known mistake would give (a value, ``either(...)`` of
-                several, ``times(factor)`` of ``expected``: a unit slip, or ``within(value, spread)``: answers
+                several, ``scaled(factor)`` of ``expected``: a unit slip, or ``within(value, spread)``: answers
                 near a value, a loop stopped too early); when ``got`` is one, within the check's own tolerance
-                (the tolerance times the factor for ``times``, the spread for ``within``), its hint is shown.
+                (the tolerance times the factor for ``scaled``, the spread for ``within``), its hint is shown.
             array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
                 since the lesson's later cells index the result as an array.
         """

@@ -30,13 +30,13 @@ class either(tuple):
         return super().__new__(cls, values)
 
 
-class times(float):
+class scaled(float):
     """A known mistake that multiplies the right answer by a factor (a value of ``Exercise.close``'s
     ``mistakes``): a unit slip, 1000 for milliseconds where seconds were asked. A result that is right
     but for the slip lies within the factor times the tolerance of the factor times the expected value,
     so that is where its hint is shown.
 
-    >>> ms = {"this is in milliseconds; give seconds.": times(1000)}
+    >>> ms = {"this is in milliseconds; give seconds.": scaled(1000)}
     >>> mistake_hint(np.array(161.0), np.array(0.159), "s", ms, tol=0.005)
     'this is in milliseconds; give seconds.'
     >>> mistake_hint(np.array(0.17), np.array(0.159), "s", ms, tol=0.005)
@@ -72,7 +72,7 @@ def _near(a, b, tol: float) -> bool:
 
 def known_mistake(arr, mistakes, *, tol: float, expected=None) -> str:
     """The hint of the known mistake (``mistakes``: hint -> the value, or :class:`either` of the
-    values, it gives; :class:`times` a factor of the ``expected`` value; :class:`within` a spread of values)
+    values, it gives; :class:`scaled` a factor of the ``expected`` value; :class:`within` a spread of values)
     whose value ``arr`` is
     within ``tol`` (the exercise's tolerance: a result that only this mistake makes wrong lies there),
     even where its shape is not the expected one (a forgotten ``abs`` leaves rows out), "" when none is.
@@ -84,7 +84,7 @@ def known_mistake(arr, mistakes, *, tol: float, expected=None) -> str:
     ''
     """
     for hint, value in (mistakes or {}).items():
-        if isinstance(value, times):
+        if isinstance(value, scaled):
             if expected is not None and _near(arr, float(value) * np.asarray(expected, dtype=float),
                                               abs(float(value)) * tol):
                 return hint

@@ -176,7 +176,7 @@ def _lag_hint(got) -> str:
     """6.4's check at Task 2 (the lag 0.159 s, tolerance 6 ms): the hint ``got`` is told."""
     said = message(lambda: checks.Exercise("6.4", "estimate_lag").close(
         got, 0.159, what="lag", unit="s", tol=0.006, why="the method of the text",
-        mistakes={COARSE: 0.15, MS: checks.times(1000)}))
+        mistakes={COARSE: 0.15, MS: checks.scaled(1000)}))
     return CheckFailed.hint_of(said)
 
 

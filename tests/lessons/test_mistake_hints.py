@@ -35,7 +35,7 @@ import snakekit.checks as _checks
 _recorded, _close = [], _checks.Exercise.close
 
 def _plain(value):
-    if isinstance(value, _checks.times):
+    if isinstance(value, _checks.scaled):
         return ("times", float(value))
     if isinstance(value, _checks.within):
         return ("within", (value.value, value.spread))
@@ -91,7 +91,7 @@ def _values(kind, value, expected, number, name, options, mistakes):
 
 
 def _mistakes(recorded):
-    made = {"times": checks.times, "either": lambda v: checks.either(*v), "within": lambda v: checks.within(*v)}
+    made = {"times": checks.scaled, "either": lambda v: checks.either(*v), "within": lambda v: checks.within(*v)}
     return {hint: made.get(kind, lambda v: v)(value) for hint, kind, value in recorded}
 
 
