@@ -50,13 +50,13 @@ import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
-from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, shape_hint
+from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, scaled, shape_hint, within
 from .closeness import ZERO, bound, entry_name, is_table, sentence, worst
 from .verdicts import BUILDS_ON, CAUSES, PASSED, composite_note, failing_parts, stopped_note
 from .watch import calls_to, forgot_return, raised_in, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "live_off",
-           "pose_mistakes", "quick", "waiting_for"]
+           "pose_mistakes", "quick", "scaled", "waiting_for", "within"]
 
 _HERE = os.path.abspath(__file__)
 
@@ -214,8 +214,10 @@ class Exercise:
                 table is read from the top: a message names its first wrong entry; any other value the entry
                 furthest from its expected one. The grader names the same entry in the same words
                 (:mod:`snakekit.closeness`).
-            mistakes: ``{hint: value}``: answers a known mistake would give; when ``got``
-                matches one, its hint is shown.
+            mistakes: ``{hint: value}``: answers a known mistake would give (a value, ``either(...)`` of
+                several, ``scaled(factor)`` of ``expected``: a unit slip, or ``within(value, spread)``: answers
+                near a value, a loop stopped too early); when ``got`` is one, within the check's own tolerance
+                (the tolerance times the factor for ``scaled``, the spread for ``within``), its hint is shown.
             array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
                 since the lesson's later cells index the result as an array.
         """
@@ -231,9 +233,9 @@ class Exercise:
             self.fail(f"{what}{_where(where)} should be numbers of shape {exp.shape}, got {type(got).__name__}: "
                       f"{str(got)[:80]}")
         if arr.shape != exp.shape:   # a known mistake may give another shape (one time too many)
-            near = 10 * (tol + rtol * float(np.abs(exp).max(initial=0.0))) + 1e-9
+            near = max(tol + rtol * float(np.abs(exp).max(initial=0.0)), ZERO)
             self.fail(f"{what}{_where(where)} has shape {arr.shape}, expected shape {exp.shape}.",
-                      known_mistake(arr, mistakes, tol=near) or shape_hint(arr, exp))
+                      known_mistake(arr, mistakes, tol=near, expected=exp) or shape_hint(arr, exp))
         if not np.isfinite(arr).all():
             idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
             self.fail(f"{what}{_where(where)} holds {arr[idx]} at index {idx}; every value must be finite.")
@@ -246,7 +248,7 @@ class Exercise:
             return
         units = unit if isinstance(unit, (tuple, list)) else None
         u = units[i[-1]] if units is not None and arr.ndim >= 1 else unit
-        hint = mistake_hint(arr, exp, units or unit, mistakes, tol=float(tolerances.max()) * 10 + 1e-9)
+        hint = mistake_hint(arr, exp, units or unit, mistakes, tol=float(tolerances.max()))   # the mistake, and only it
         self.fail(sentence(entry_name(what, i, arr.ndim, labels), arr[i], exp[i], tolerances[i], u, atol=tol,
                            rtol=rtol, why=why, where=_where(where)), hint)
 

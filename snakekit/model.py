@@ -181,6 +181,13 @@ def _base_geometry(spec: SnakeSpec) -> list[_Box]:
     ]
 
 
+def base_plate(spec: SnakeSpec = SPEC) -> tuple[np.ndarray, np.ndarray]:
+    """The base plate under joint 1: its centre and its size (x, y, z) [m], in the world frame
+    (what a drawing of the arm seen from above puts under it)."""
+    plate = next(b for b in _base_geometry(spec) if b.name == "base_plate")
+    return np.array(plate.centre, dtype=float), np.array(plate.size, dtype=float)
+
+
 def body_names(spec: SnakeSpec = SPEC) -> tuple[str, ...]:
     """The arm's rigid bodies from base to tip, as the URDF and MJCF name them."""
     return ("base_link", *(f"link{i + 1}" for i in range(spec.n_joints)))

@@ -1,4 +1,4 @@
-"""Plots of runs, with matplotlib (no display needed).
+"""Plots of runs and of a move's clearance, with matplotlib (no display needed).
 
 Angles are drawn in degrees, the unit people read at a glance (the API stays in radians);
 every axis says its unit. The figures are not attached to pyplot (no global state, nothing
@@ -12,8 +12,12 @@ import io
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
+from matplotlib.ticker import MaxNLocator
 
+from .model import SPEC, SnakeSpec, base_plate
 from .robot import Run
+from .validate import as_configuration, check_count
 
 #: the unit of every angle in a plot or a summary
 ANGLE_UNIT = "deg"
@@ -94,4 +98,48 @@ def plot_move(run: Run, *, title: str | None = None):
                           f"largest tracking error {np.degrees(np.max(run.tracking_error())):.2f} {ANGLE_UNIT}")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8, frameon=False)
+    return fig
+
+
+def plot_clearance(a, b, *, steps: int = 101, spec: SnakeSpec = SPEC):
+    """How close the links come along the straight joint-space line from pose ``a`` to pose ``b`` [rad].
+
+    Left: the distance [mm] between the closest pair of links that are not neighbours
+    (:func:`snakekit.clearance`) at ``steps`` evenly spaced fractions of the way, with the
+    safety margin (``spec.collision_margin``). Right: the arm seen from above [mm] at ``a``, at
+    ``b`` and at the closest pose on the way, over the base plate; the legend sits outside the
+    drawing, so it hides no link. Returns the figure (a notebook shows it as a picture).
+
+    Raises:
+        ShapeError, NotFiniteError: ``a`` or ``b`` is not one finite angle per joint.
+        ConfigurationError: ``steps`` is not a whole number from 2 to 10000.
+    """
+    from .collision import clearance          # Pinocchio and coal, only when a clearance is drawn
+    from .kinematics import joint_frames
+
+    a, b = as_configuration(a, spec, "a"), as_configuration(b, spec, "b")
+    s = np.linspace(0.0, 1.0, check_count(steps, "steps", 2, 10_000))
+    d = np.array([clearance(a + x * (b - a), spec=spec).distance for x in s])
+    closest = a + s[int(np.argmin(d))] * (b - a)
+
+    fig = RunFigure(figsize=(11, 4.0), layout="constrained")
+    left, right = fig.subplots(1, 2, width_ratios=[1, 1.15])
+    left.plot(s, 1000 * d, label="closest links")
+    left.axhline(1000 * spec.collision_margin, color="tab:red", ls="--", label="margin")
+    left.set(xlabel="fraction of the move a -> b", ylabel="closest links [mm]", title="Clearance along the move")
+    left.legend(loc="upper right", fontsize=8)
+    left.grid(alpha=0.3)
+
+    centre, size = base_plate(spec)
+    right.add_patch(Rectangle(1000 * (centre[:2] - size[:2] / 2), 1000 * size[0], 1000 * size[1], color="0.75",
+                              label="base plate", zorder=0))
+    for q, style, label in ((a, "-o", "a"), (b, "-s", "b"), (closest, "r-o", "closest on the way")):
+        xy = 1000 * joint_frames(q, spec=spec)[:, :2, 3]
+        right.plot(xy[:, 0], xy[:, 1], style, label=label)
+    right.set_aspect("equal")
+    right.xaxis.set_major_locator(MaxNLocator(nbins=5, steps=[1, 2, 5, 10]))   # round millimetres, room between
+    right.yaxis.set_major_locator(MaxNLocator(nbins=5, steps=[1, 2, 5, 10]))
+    right.grid(alpha=0.3)
+    right.set(xlabel="x [mm]", ylabel="y [mm]", title="The arm at a, at b, and in between")
+    right.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0.0)
     return fig

@@ -29,13 +29,13 @@ from ..validate import as_configuration, check_count, check_flag, check_spec, le
 from . import protocol as p
 from .control_table import FIRMWARE_VERSION_ADDRESS, MODEL_NUMBER_ADDRESS, field_at, to_signed
 from .faults import NO_FAULTS, Faults
+from .holdups import STALL, HoldUps, precise_sleep
 from .motion import MOTION_SOURCES, MotionSource
 from .record import Received, Write
 from .servo import OVERLOAD, EmulatedServo
 from .tcp import FtdiChip, PtyLine, TcpLine
 
 SWITCH_INTERVAL = 0.0005  # s, while an emulator thread runs
-STALL = 0.02  # s: a serve loop later than its wait by more than this was held up by the machine
 _CLASS_LOCK = threading.Lock()
 BAUD_RATES = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
 
@@ -121,9 +121,7 @@ class BusEmulator:
         self._heard = 0.0  # when the last instruction packet reached the servos (the Bus Watchdog's clock)
         #: how long [s] each time the machine held the serve loop up (not counted by the watchdog)
         self.stalls: collections.deque[float] = collections.deque(maxlen=1000)
-        #: the spans (``time.perf_counter()`` [s]) in which the machine held the serve loop up past its due
-        self._held: collections.deque[tuple[float, float]] = collections.deque(maxlen=1000)
-        self._due = math.inf  # when the serve loop is due back at its next step, unless held up
+        self.holdups = HoldUps()  # the same, as spans of time.perf_counter(), for a driver's tries
         self.faults = faults
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -230,7 +228,7 @@ class BusEmulator:
                     sys.setswitchinterval(min(BusEmulator._saved_switch_interval, SWITCH_INTERVAL))
                 BusEmulator._threads_running += 1
             self._thread = threading.Thread(target=self.serve, name=f"bus-emulator {self.port}", daemon=True)
-            HELD_UP[self.port] = self.held_up
+            HELD_UP[self.port] = self.holdups.held_up
             self._thread.start()
         return self
 
@@ -241,7 +239,7 @@ class BusEmulator:
             try:
                 self._serve()
             finally:
-                self._due = math.inf  # a loop that ended is not held up
+                self.holdups.ended()
 
     def _serve(self) -> None:
         advance = getattr(self.motion, "advance", None)
@@ -252,9 +250,9 @@ class BusEmulator:
             wait = 0.005 if watching else 0.05
             if self._chip is not None:
                 wait = self._chip.wait(wait)
-            self._beat(wait)
+            self.holdups.beat(wait)
             ready, _, _ = select.select(line.readers() + [self._wake_r], [], [], wait)
-            self._beat(0.0)
+            self.holdups.beat(0.0)
             self._not_listening(self.now() - listened - wait)
             if self._chip is not None:
                 self._chip.poll()
@@ -288,32 +286,12 @@ class BusEmulator:
                 self._heard += late
                 self.stalls.append(late)
 
-    def _beat(self, allow: float) -> None:
-        """The serve loop reached a step: the span since it was due (when it is later than that) is
-        a hold-up; it is due back within ``allow`` [s] (a wait, a reply delayed on purpose) and
-        :data:`STALL`."""
-        now = time.perf_counter()
-        if now > self._due:
-            self._held.append((self._due, now))
-        self._due = now + allow + STALL
-
-    def held_up(self, since: float, until: float) -> bool:
-        """Whether the machine held the serve loop up between two ``time.perf_counter()`` times
-        [s]: it came back from a step later than due in that span, or is overdue now and was due
-        before ``until``. A reply the servos owe then may be late for want of the processor, not of
-        a servo: the driver does not count such an exchange as a failed try (``snakekit.host.HELD_UP``).
-        A reply delayed on purpose (``Faults(delay=...)``, the return delay) is not a hold-up."""
-        due = self._due
-        if time.perf_counter() > due and due < until:
-            return True
-        return any(start < until and end > since for start, end in list(self._held))
-
     def stop(self) -> None:
         """Stop serving, close the pty and free the motion source. Safe to call twice."""
         if self.closed:
             return
         self.closed = True
-        if HELD_UP.get(self.port) == self.held_up:
+        if HELD_UP.get(self.port) == self.holdups.held_up:
             del HELD_UP[self.port]
         self._stop.set()
         os.write(self._wake_w, b"x")
@@ -355,12 +333,6 @@ class BusEmulator:
 
     # --- the firmware -----------------------------------------------------------------------
 
-    def _pause(self, seconds: float, sleep) -> None:
-        """Wait on purpose (a delayed reply, the return delay): not a hold-up."""
-        self._beat(seconds)
-        sleep(seconds)
-        self._beat(0.0)
-
     def handle(self, packet: p.Packet) -> None:
         """Process one received packet and send the replies (public for unit tests)."""
         with self._lock:
@@ -387,10 +359,10 @@ class BusEmulator:
                     pkt = pkt[:i] + bytes((pkt[i] ^ 0x5A,)) + pkt[i + 1:]
                 out.append((servo, pkt))
         if fault == "delayed":
-            self._pause(self._faults.delay_time, time.sleep)
+            self.holdups.sleep(self._faults.delay_time)
         for servo, pkt in out:
             if self.timing:
-                self._pause(servo.return_delay + len(pkt) * 10 / self.baudrate, _sleep)
+                self.holdups.sleep(servo.return_delay + len(pkt) * 10 / self.baudrate, precise_sleep)
             self._send(pkt)
 
     def _watchdog(self, t: float) -> None:
@@ -525,13 +497,3 @@ def _signed(address: int) -> bool:
         return field_at(address).signed
     except KeyError:
         return False
-
-
-def _sleep(seconds: float) -> None:
-    """Sleep ``seconds`` [s], spinning the last 0.2 ms for sub-millisecond precision."""
-    end = time.perf_counter() + seconds
-    if seconds > 3e-4:
-        time.sleep(seconds - 2e-4)
-    while time.perf_counter() < end:
-        pass
-

@@ -4,7 +4,7 @@ When the USB adapter is unplugged (or the bridge, or the emulator behind the por
 nothing more can reach the servos: they keep the last goal that left the port, with the
 torque they had, until their Bus Watchdog stops them. The message of
 :class:`~snakekit.errors.PortLostError` says which goal that was, from the last SyncWrite
-that left the port (:attr:`snakekit.hardware.bus.Port.last_sync_write`), not from what the
+that left the port (:attr:`snakekit.hardware.port.Port.last_sync_write`), not from what the
 driver meant to send. Through a bridge, a goal that left the port may still have been lost
 on the way, and the message says so.
 """

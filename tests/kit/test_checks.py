@@ -164,3 +164,43 @@ def test_a_run_loaded_where_reading_a_bag_is_forbidden_says_which_call_and_what_
                                 "Read it with rosbags' AnyReader, as the lesson shows (the library's version is for after "
                                 "the exercise).")
     assert snakekit.Run.load(path).measured.positions.shape[1] == 5    # restored after the block
+
+
+# --- a known mistake's hint: the mistake, and only it -------------------------------------------------------------
+
+COARSE = "the lag lies between your grid's steps."
+MS = "a lag in milliseconds; return seconds."
+
+
+def _lag_hint(got) -> str:
+    """6.4's check at Task 2 (the lag 0.159 s, tolerance 6 ms): the hint ``got`` is told."""
+    said = message(lambda: checks.Exercise("6.4", "estimate_lag").close(
+        got, 0.159, what="lag", unit="s", tol=0.006, why="the method of the text",
+        mistakes={COARSE: 0.15, MS: checks.scaled(1000)}))
+    return CheckFailed.hint_of(said)
+
+
+def test_a_known_mistake_s_value_gets_its_hint_and_a_result_wrong_otherwise_does_not():
+    assert _lag_hint(0.15) == COARSE                   # what lags 50 ms apart give
+    assert _lag_hint(0.174) == ""                      # 15 ms late: wrong, and no grid gives it
+    assert _lag_hint(0.141) == ""                      # 18 ms early, 9 ms past the grid's value: not the grid either
+
+
+def test_a_unit_slip_is_recognised_within_the_tolerance_scaled_by_the_slip():
+    assert _lag_hint(159.0) == MS and _lag_hint(163.0) == MS       # 0.163 s would pass: in ms it is the slip alone
+    assert _lag_hint(170.0) == ""                                  # 0.170 s is wrong in seconds too
+    ex = checks.Exercise("9.9", "angle")
+    degrees = np.degrees(0.5 + 0.009)                              # 0.509 rad passes a 0.01 rad tolerance
+    hint = CheckFailed.hint_of(message(lambda: ex.close(degrees, 0.5, what="angle", unit="rad", tol=0.01)))
+    assert hint.startswith("this looks like degrees")
+    hint = CheckFailed.hint_of(message(lambda: ex.close(np.degrees(0.5) + 5, 0.5, what="angle", unit="rad", tol=0.01)))
+    assert hint == ""                                               # 5 degrees off beside the slip: not the slip alone
+
+
+def test_a_mistake_that_spreads_says_how_far():
+    near = {"near the target, not on it.": checks.within([0.22, 0.12], 1e-4)}
+    ex = checks.Exercise("3.3", "solve_ik")
+    said = message(lambda: ex.close([0.22005, 0.12], [0.22, 0.12], what="tool", unit="m", tol=1e-5, mistakes=near))
+    assert CheckFailed.hint_of(said) == "near the target, not on it."
+    said = message(lambda: ex.close([0.2205, 0.12], [0.22, 0.12], what="tool", unit="m", tol=1e-5, mistakes=near))
+    assert CheckFailed.hint_of(said) == ""

@@ -43,3 +43,73 @@ def test_the_summary_speaks_degrees(run):
     final = np.degrees(run.measured.positions[-1])
     assert "final joint angles: " + " ".join(f"{q:+.2f}" for q in final) + " deg" in text
     assert "rad" not in text
+
+
+# --- the clearance of a move (lesson 4, section 5) -----------------------------------------------------------------
+
+FOLD_A, FOLD_B = np.array([0.0, 0.5, 1.5, 1.5, -1.0]), np.array([0.0, 0.5, 1.5, 1.5, 1.5])   # lesson 4's move
+
+
+def _drawn(fig):
+    """The figure laid out as on the page: the renderer its texts were measured with."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()
+    return fig.canvas.get_renderer()
+
+
+def _overlap(p, q) -> bool:
+    """Whether two display boxes share more than a pixel's sliver."""
+    return min(p.x1, q.x1) - max(p.x0, q.x0) > 0.5 and min(p.y1, q.y1) - max(p.y0, q.y0) > 0.5
+
+
+@pytest.fixture(scope="module")
+def clearance_figure():
+    from snakekit.plots import plot_clearance
+
+    return plot_clearance(FOLD_A, FOLD_B)
+
+
+def test_the_clearance_plot_draws_the_distance_of_the_closest_links_in_mm(clearance_figure):
+    left, right = clearance_figure.axes
+    curve = next(ln for ln in left.get_lines() if ln.get_label() == "closest links")
+    s = curve.get_xdata()
+    assert s[0] == 0 and s[-1] == 1 and len(s) == 101
+    for k in (0, 40, 79, 100):
+        assert curve.get_ydata()[k] == pytest.approx(1000 * snakekit.clearance(FOLD_A + s[k] * (FOLD_B - FOLD_A)).distance)
+    margin = next(ln for ln in left.get_lines() if ln.get_label() == "margin")
+    assert margin.get_ydata()[0] == pytest.approx(1000 * snakekit.SPEC.collision_margin)
+    at_b = next(ln for ln in right.get_lines() if ln.get_label() == "b")
+    tool = snakekit.tool_pose_2d(FOLD_B)
+    assert (at_b.get_xdata()[-1], at_b.get_ydata()[-1]) == pytest.approx((1000 * tool[0], 1000 * tool[1]))
+    assert right.get_xlabel() == "x [mm]" and left.get_ylabel() == "closest links [mm]"
+
+
+def test_the_clearance_plots_legend_hides_neither_the_base_plate_nor_the_arm(clearance_figure):
+    renderer = _drawn(clearance_figure)
+    right = clearance_figure.axes[1]
+    legend = right.get_legend().get_window_extent(renderer)
+    plate = next(p for p in right.patches if p.get_label() == "base plate")
+    assert not _overlap(legend, plate.get_window_extent(renderer)), "the legend sits on the base plate"
+    for line in right.get_lines():
+        points = right.transData.transform(np.column_stack([line.get_xdata(), line.get_ydata()]))
+        inside = [(x, y) for x, y in points if legend.x0 <= x <= legend.x1 and legend.y0 <= y <= legend.y1]
+        assert not inside, f"the legend hides the joints of '{line.get_label()}' at {inside}"
+
+
+def test_the_clearance_plots_tick_labels_do_not_overlap(clearance_figure):
+    renderer = _drawn(clearance_figure)
+    for ax in clearance_figure.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            boxes = [t.get_window_extent(renderer) for t in axis.get_ticklabels() if t.get_visible() and t.get_text()]
+            assert len(boxes) >= 3, f"{ax.get_title()}: only {len(boxes)} tick labels"
+            crowded = [(i, i + 1) for i in range(len(boxes) - 1) if _overlap(boxes[i], boxes[i + 1])]
+            assert not crowded, f"{ax.get_title()}: tick labels {crowded} overlap"
+
+
+def test_the_clearance_plot_refuses_a_pose_without_one_angle_per_joint():
+    from snakekit.errors import ShapeError
+    from snakekit.plots import plot_clearance
+
+    with pytest.raises(ShapeError, match="b"):
+        plot_clearance(FOLD_A, [0.0, 0.5])

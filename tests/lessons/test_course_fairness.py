@@ -156,24 +156,33 @@ def test_6_1s_visible_check_holds_a_rate_where_arange_to_points_over_rate_gives_
     assert any(_arange_to_the_end(n, f).shape != (n,) for n, f in visible), visible
 
 
-def _lag(run, joint, step):
-    """6.4 as the lesson asks (lags 0 to 0.5 s, ``step`` apart; samples from 0.5 s after the first goal)."""
+def _lag(run, joint, step, measure="rms"):
+    """6.4 as the lesson asks (lags 0 to 0.5 s, ``step`` apart; samples from 0.5 s after the first goal), the
+    agreement measured by the rms, or by the mean absolute difference (``measure="mae"``)."""
     t, measured = run.measured.times, run.measured.positions[:, joint]
     ct, cq = run.commanded.times, run.commanded.positions[:, joint]
     inside = (t >= ct[0] + 0.5) & (t <= ct[-1])
     lags = np.arange(0, 0.5 + 1e-9, step)
-    rms = [np.sqrt(np.mean((measured[inside] - np.interp(t[inside] - lag, ct, cq)) ** 2)) for lag in lags]
-    return float(lags[int(np.argmin(rms))])
+    diffs = [measured[inside] - np.interp(t[inside] - lag, ct, cq) for lag in lags]
+    cost = [np.sqrt(np.mean(d ** 2)) if measure == "rms" else np.mean(np.abs(d)) for d in diffs]
+    return float(lags[int(np.argmin(cost))])
+
+
+def _sweep_run(points, rate, sweeps, amplitude):
+    import snakekit
+
+    with snakekit.make_robot("sim") as robot:
+        return robot.run(snakekit.side_sweep(points=points, rate=rate, sweeps=sweeps, amplitude=amplitude))
+
+
+def _lag_tolerance() -> float:
+    return runpy.run_path(str(COURSE / "cases" / "06_coded_sweep.py"))["TOLERANCES"]["ex06_4_phase_lag_test"]["atol"]
 
 
 def _coarse_misses(points, rate, sweeps, amplitude, joint, step=0.05) -> bool:
     """Whether lags tried ``step`` apart miss the lag of this sweep on the simulator by more than 6.4's tolerance."""
-    import snakekit
-
-    with snakekit.make_robot("sim") as robot:
-        run = robot.run(snakekit.side_sweep(points=points, rate=rate, sweeps=sweeps, amplitude=amplitude))
-    tol = runpy.run_path(str(COURSE / "cases" / "06_coded_sweep.py"))["TOLERANCES"]["ex06_4_phase_lag_test"]["atol"]
-    return abs(_lag(run, joint, step) - _lag(run, joint, 0.001)) > tol
+    run = _sweep_run(points, rate, sweeps, amplitude)
+    return abs(_lag(run, joint, step) - _lag(run, joint, 0.001)) > _lag_tolerance()
 
 
 # 40 draws, a simulator run each (the first case that tells the grids apart ends a draw): about 12 s
@@ -265,3 +274,65 @@ def test_6_4s_visible_check_holds_a_run_whose_lag_lies_between_the_steps_of_a_20
     runs = re.findall(r"side_sweep\(points=(\d+), sweeps=(\d+), amplitude=([\d.]+)\)", source)
     joints = [int(j) for j in re.findall(r"\(\w+_run, (\d), 0\.\d+,", source)]
     assert any(_coarse_misses(int(n), 10.0, int(k), float(a), j, step=0.02) for (n, k, a), j in zip(runs, joints[1:]))
+
+
+def _mean_absolute_miss(points, rate, sweeps, amplitude, joint) -> float:
+    """How far [s] the lag that minimises the mean absolute difference lies from the rms's, on the simulator."""
+    run = _sweep_run(points, rate, sweeps, amplitude)
+    return abs(_lag(run, joint, 0.001, "mae") - _lag(run, joint, 0.001))
+
+
+# 20 draws, three simulator runs each: about 25 s. Over 200 draws (the study of 6.4's cases) the two measures
+# were at most 4 ms apart at the slow sweep and 2 ms at the others; slower sweeps, left out, put them up to 7 ms apart.
+@pytest.mark.parametrize("seed", range(20))
+def test_every_draw_of_6_4_passes_the_lag_of_the_mean_absolute_difference_as_the_rms_s(seed):
+    """The text asks the rms; a student who measured the agreement by the mean absolute difference, as defensible,
+    passes every hidden case, at every draw: never right at some draws and wrong at others."""
+    cases = _cases("06_coded_sweep", "ex06_4_phase_lag_test", seed)
+    misses = [_mean_absolute_miss(*c) for c in cases]
+    assert max(misses) <= _lag_tolerance() - 0.002 + 1e-9, (cases, misses)
+
+
+def test_6_4s_visible_check_passes_the_lag_of_the_mean_absolute_difference():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex06_4_phase_lag_test"]
+    tol = float(re.search(r"tol=([\d.]+), why=\"the method of the text", source).group(1))
+    assert tol == _lag_tolerance(), "the notebook's check and the grader judge 6.4 with one tolerance"
+    runs = [(500, 50, 0.2)] + [(int(n), int(k), float(a)) for n, k, a in
+                               re.findall(r"side_sweep\(points=(\d+), sweeps=(\d+), amplitude=([\d.]+)\)", source)]
+    joints = [int(j) for j in re.findall(r"\(\w+_run, (\d), 0\.\d+,", source)]
+    misses = [_mean_absolute_miss(n, 10.0, k, a, j) for (n, k, a), j in zip(runs, joints)]
+    assert len(misses) == 3 and max(misses) < tol, misses
+
+
+def _cases_module():
+    return runpy.run_path(str(COURSE / "cases" / "06_coded_sweep.py"))
+
+
+@pytest.mark.parametrize("seed", range(0, 1000, 50))
+def test_6_4s_first_sweep_is_in_the_slow_band_and_the_others_peak_at_the_brisk_speed_or_faster(seed):
+    """Where the two measures of agreement could part (below the brisk speed, but for the slow band), no case is
+    drawn: every draw's sweeps, by their peak speed amplitude x 2 pi x sweeps / duration."""
+    module = _cases_module()
+    for k, (points, rate, sweeps, amplitude, joint) in enumerate(_cases("06_coded_sweep", "ex06_4_phase_lag_test", seed)):
+        speed = amplitude * 2 * np.pi * sweeps * rate / points
+        if k == 0:
+            assert module["SLOW"][0] - 1e-12 <= speed <= module["SLOW"][1] + 1e-12, (k, speed)
+        else:
+            assert speed >= module["BRISK"] and points / sweeps >= 12, (k, speed, points, sweeps)
+
+
+# 12 simulator runs (two joints at each edge): a few seconds
+@pytest.mark.parametrize("points, sweeps, speed, amplitude", [
+    (100, 3, "slow_low", None), (199, 5, "slow_high", None),         # the slow band's two ends
+    (100, None, "brisk", 0.05), (199, None, "brisk", 0.05),          # the slowest sweeps the other cases draw
+    (100, None, "brisk", 0.15), (199, None, "brisk", 0.15)])
+def test_the_mean_absolute_difference_finds_6_4s_lag_within_its_tolerance_at_the_edges_of_the_cases(
+        points, sweeps, speed, amplitude):
+    module = _cases_module()
+    if speed == "brisk":
+        sweeps = max(3, int(np.ceil(module["BRISK"] * points / (amplitude * 2 * np.pi * 10.0))))
+    else:
+        peak = module["SLOW"][0] if speed == "slow_low" else module["SLOW"][1]
+        amplitude = peak * (points / 10.0) / (2 * np.pi * sweeps)
+    misses = [_mean_absolute_miss(points, 10.0, sweeps, amplitude, joint) for joint in (0, 4)]
+    assert max(misses) <= _lag_tolerance() - 0.002 + 1e-9, misses
