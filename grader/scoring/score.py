@@ -159,6 +159,15 @@ def call(name: str | Wording, args) -> str:
     return w.call(args)
 
 
+def _a(word: str) -> str:
+    """The article before a type's name: "an int", "a float".
+
+    >>> _a("int"), _a("float"), _a("dict")
+    ('an', 'a', 'a')
+    """
+    return "an" if word[:1].lower() in "aeiou" else "a"
+
+
 def explain_error(text: str, name: str = "your function", returns: str = "") -> str:
     """What went wrong in the student's function ``name`` at a case, in plain words; a forgotten
     ``return`` in the words the notebook's own check uses (:func:`snakekit.watch.forgot_return`); a result the
@@ -180,7 +189,7 @@ def explain_error(text: str, name: str = "your function", returns: str = "") -> 
     if m:   # the test cell's code stumbled on what the function gave back: a result of the wrong kind
         what, fn = m.groups()
         return f"{fn} should return {returns}, got {what}." if returns else \
-            f"{fn} returned a {what}, which is not the kind of result the exercise asks for (see its check)."
+            f"{fn} returned {_a(what)} {what}, which is not the kind of result the exercise asks for (see its check)."
     m = re.match(r"returned (\w+)(?: for (\w+))?$", text)
     if m:
         what, part = m.groups()
@@ -191,7 +200,7 @@ def explain_error(text: str, name: str = "your function", returns: str = "") -> 
         if what in ("list", "tuple"):
             return (f"{where} returned a Python {what}, not a numpy array: return np.array(...) (the exercise asks "
                     "for an array, as its check says).")
-        return f"{where} returned a {what}, not numbers or an array."
+        return f"{where} returned {_a(what)} {what}, not numbers or an array."
     if text.startswith("ShortcutError:"):
         return text.split(":", 1)[1].strip()
     m = re.match(r"NameError: name '(\w+)' is not defined", text)
