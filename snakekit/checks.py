@@ -436,11 +436,21 @@ class waiting_for(contextlib.AbstractContextManager):
 
     def __exit__(self, kind, value, tb):
         if kind is NotImplementedError or (kind is NameError and getattr(value, "name", None)):
-            what = "" if kind is NotImplementedError else f" (`{value.name}` is not defined yet)"
             weak = failing_parts(self.exercise, self.builds_on)
-            print(f"This cell waits for exercise {self.exercise}{what}: write it, run it, then run this "
-                  "cell again." + (" " + composite_note(self.exercise, weak).split("; graded")[0] + "."
-                                   if weak and kind is NameError else ""))
+            if kind is NameError and weak:   # made by a cell above from a part that fails its check: the cause
+                roots = []   # a part that fails because of its own part (6.3 with a wrong 6.1): that one
+                for n in weak:
+                    roots += [m for m in (failing_parts(n) or [n]) if m not in roots]
+                via = [n for n in weak if n not in roots]
+                names = " and ".join(roots)
+                made = f"your {' and '.join(via)}, which uses your {names}" if via else f"your {names}"
+                fails = "fails its check" if len(roots) == 1 else "fail their checks"
+                said = "; ".join(f"{n}: {CAUSES.get(n, 'see its check cell').rstrip('.')}" for n in roots)
+                print(f"This cell needs `{value.name}`, which a cell above makes with {made}, and {names} {fails} "
+                      f"({said}). Fix {names} first, run its check cell and the cells above, then this cell again.")
+                return True
+            what = "" if kind is NotImplementedError else f" (`{value.name}` is not defined yet)"
+            print(f"This cell waits for exercise {self.exercise}{what}: write it, run it, then run this cell again.")
             return True
         if kind is not None and issubclass(kind, Exception) and not issubclass(kind, CheckFailed):
             weak = failing_parts(self.exercise, self.builds_on)

@@ -161,7 +161,7 @@ def test_a_demonstration_after_a_composite_names_the_part_that_fails_not_the_fix
     ids = [c.get("id") for c in nb.cells]
     answer = next(c for c in nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex06_1_sweep_times")
     answer.source = "def sweep_times(points, rate):\n    return np.arange(1, points + 1) / rate"
-    nb.cells = nb.cells[:ids.index("06-code-14b") + 1]
+    nb.cells = nb.cells[:ids.index("06-code-22") + 1]
     nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", allow_errors=True,
                             resources={"metadata": {"path": str(tmp_path)}}).execute()
 
@@ -175,5 +175,10 @@ def test_a_demonstration_after_a_composite_names_the_part_that_fails_not_the_fix
         "1/rate: the first goal goes out at t = 0. That is why this cell stopped (LimitError: the trajectory starts "
         "0.118 rad away from the arm's present position (joint 1: +0.000 -> +0.118 rad); nothing was sent). Fix 6.1 "
         "first, run its check cell, then this cell again.")
-    assert said("06-code-14b") == ("This cell waits for exercise 6.3 (`run` is not defined yet): write it, run it, then "
-                                   "run this cell again. 6.3 uses your 6.1, which fails its check: fix 6.1 first.")
+    assert said("06-code-14b") == ("This cell needs `run`, which a cell above makes with your 6.1, and 6.1 fails its "
+                                   "check (6.1: the times start at 1/rate: the first goal goes out at t = 0). Fix 6.1 "
+                                   "first, run its check cell and the cells above, then this cell again.")
+    # the lag table needs the same run, made with 6.3 (which uses the 6.1): not "write 6.4", which is right
+    assert said("06-code-22") == ("This cell needs `run`, which a cell above makes with your 6.3, which uses your 6.1, "
+                                  "and 6.1 fails its check (6.1: the times start at 1/rate: the first goal goes out at "
+                                  "t = 0). Fix 6.1 first, run its check cell and the cells above, then this cell again.")

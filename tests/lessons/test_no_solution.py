@@ -559,6 +559,8 @@ MISTAKES = {
          "the rate is an argument"),
         ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.arange(0, points / rate, 1 / rate)",
          "one time too many"),
+        ("ex06_1_sweep_times_test", "def sweep_times(points, rate):\n    return np.round(np.arange(points) / rate, 3)",
+         "these times are rounded"),
         ("ex06_2_sweep_positions_test", "def sweep_positions(times, sweeps, amplitude):\n"
          "    angle = amplitude * np.cos(2 * np.pi * sweeps * times / times[-1])\n"
          "    return np.repeat(angle[:, None], 5, axis=1)", "use sin"),
