@@ -41,14 +41,26 @@ def ex05_2_overshoot_test(rng, spec):
 
 
 def ex05_3_steady_state_error_test(rng, spec):
-    """steady_state_error(y, target, window): 6 step responses, windows from 1 to 40 samples."""
-    return [(y, g, int(w)) for (_, y, g), w in zip(_responses(rng), rng.integers(1, 40, 6))]
+    """steady_state_error(y, target, window): 6 step responses, windows from 1 to 40 samples, and one
+    response with the window left at the function's default (the last, cut off before it arrives, so
+    that its last samples differ)."""
+    responses = _responses(rng)
+    cases = [(y, g, int(w)) for (_, y, g), w in zip(responses, rng.integers(1, 40, 6))]
+    _, y, target = responses[-1]
+    return cases + [(y, target)]
 
 
 def ex05_4_profile_velocity_test(rng, spec):
     """profile_move_time(distance, profile_velocity, profile_acceleration): 8 moves of either sign,
-    and a short one that never reaches its profile velocity (a triangle)."""
+    a short one that never reaches its profile velocity (a triangle), and a long one with a Profile
+    Velocity above the arm's speed limit (the firmware plans it all the same), fast enough that a
+    speed clipped to the limit takes longer."""
     cases = [(float(d), int(pv), int(pa)) for d, pv, pa in
              zip(rng.uniform(-2.5, 2.5, 8), rng.integers(5, 200, 8), rng.integers(5, 300, 8))]
     cases.append((float(rng.uniform(0.005, 0.02)), int(rng.integers(40, 80)), int(rng.integers(50, 150))))
+    # the largest register within the limit: 62 for 1.5 rad/s (units of 0.229 rev/min)
+    top = int(spec.velocity_limit / (0.229 * 2 * np.pi / 60))
+    # at least 1 rad, at 18.7 rad/s^2 or more: past 1.5 rad/s within the first 0.12 rad
+    cases.append((float(rng.choice([-1, 1]) * rng.uniform(1.0, 2.5)), int(rng.integers(top + 1, 200)),
+                  int(rng.integers(50, 300))))
     return cases

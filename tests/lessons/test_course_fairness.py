@@ -336,3 +336,59 @@ def test_the_mean_absolute_difference_finds_6_4s_lag_within_its_tolerance_at_the
         amplitude = peak * (points / 10.0) / (2 * np.pi * sweeps)
     misses = [_mean_absolute_miss(points, 10.0, sweeps, amplitude, joint) for joint in (0, 4)]
     assert max(misses) <= _lag_tolerance() - 0.002 + 1e-9, misses
+
+
+def _how_graded(lesson: str) -> str:
+    """The paragraph of a lesson's text that says what kinds of hidden cases there are."""
+    nbformat = need("nbformat")
+    nb = nbformat.read(COURSE / "source" / lesson / f"{lesson}.ipynb", as_version=4)
+    text = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
+    return text.split("**How your work is graded.**")[1].split("\n\n")[0]
+
+
+def _steady_state_error(y, target, window):
+    """5.3 as the text asks: target minus the mean of the last ``window`` samples."""
+    return target - np.mean(np.asarray(y, dtype=float)[-window:])
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_every_draw_of_5_3_holds_a_case_at_the_default_window_where_a_default_of_1_is_wrong(seed):
+    """A case that leaves the window out judges the function's own default (10 samples, as the task says), so a
+    default of 1 loses points graded as it fails the visible check."""
+    at_default = [c for c in _cases("05_simulation", "ex05_3_steady_state_error_test", seed) if len(c) == 2]
+    assert at_default, "no hidden case of 5.3 leaves window at its default"
+    assert any(not np.isclose(_steady_state_error(y, g, 10), _steady_state_error(y, g, 1), rtol=1e-9, atol=1e-12)
+               for y, g in at_default), at_default
+
+
+def test_5_3s_visible_check_judges_the_default_window_and_the_text_says_the_hidden_cases_do():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex05_3_steady_state_error_test"]
+    calls = re.findall(r"ex\(steady_state_error, ([^)]*)\)", source)
+    assert any("window" not in c for c in calls), calls
+    assert "the default window (5.3)" in _how_graded("05_simulation")
+
+
+def _move_time(d, pv, pa, v_max=np.inf):
+    """5.4 as the text asks (the firmware's trapezoid or triangle), with the speed clipped to ``v_max`` for the
+    slip that holds a register above the arm's limit to the limit."""
+    v, a, d = min(pv * 0.229 * 2 * np.pi / 60, v_max), pa * 214.577 * 2 * np.pi / 3600, abs(d)
+    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)
+
+
+def _clip_is_wrong(d, pv, pa) -> bool:
+    return not np.isclose(_move_time(d, pv, pa, SPEC.velocity_limit), _move_time(d, pv, pa), rtol=1e-9, atol=1e-12)
+
+
+# and two draws (of the first 20000) whose eight random moves all stay within the limit, or end before a clip matters
+@pytest.mark.parametrize("seed", [*range(20), 2943, 13262])
+def test_every_draw_of_5_4_holds_a_register_above_the_arms_limit_where_a_clipped_speed_is_wrong(seed):
+    assert any(_clip_is_wrong(*c) for c in _cases("05_simulation", "ex05_4_profile_velocity_test", seed))
+
+
+def test_5_4s_visible_check_holds_a_register_above_the_arms_limit_where_a_clipped_speed_is_wrong():
+    """The hidden cases call 5.4 above the arm's 1.5 rad/s; so do the visible check and the text."""
+    source = dict((gid, src) for _, gid, src in CELLS)["ex05_4_profile_velocity_test"]
+    visible = [(float(d), int(pv), int(pa)) for d, pv, pa in
+               re.findall(r"ex\(profile_move_time, (-?[\d.]+), (\d+), (\d+)\)", source)]
+    assert any(_clip_is_wrong(*c) for c in visible), visible
+    assert "above the arm's limit too (5.4)" in _how_graded("05_simulation")

@@ -497,14 +497,26 @@ MISTAKES = {
         ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
          "    progress = (y - y[0]) / (target - y[0])\n    return float(t[np.argmax(progress >= 0.9)])",
          "the time to reach 90 %"),
+        ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
+         "    progress = (y - y[0]) / (target - y[0])\n"
+         "    return 1000 * float(t[np.argmax(progress >= 0.9)] - t[np.argmax(progress >= 0.1)])",
+         "this is in milliseconds"),
         ("ex05_2_overshoot_test", "def overshoot(y, target):\n    y = np.asarray(y, dtype=float)\n"
          "    return float(max(0.0, ((y - target) / (target - y[0])).max()))", "this is a fraction"),
         ("ex05_2_overshoot_test", "def overshoot(y, target):\n    y = np.asarray(y, dtype=float)\n"
          "    return float(100 * ((y - target) / (target - y[0])).max())", "no overshoot: 0, not a negative number"),
+        # a step down: the peak taken as max(y), or the step's size taken for the step
+        ("ex05_2_overshoot_test", "def overshoot(y, target):\n    y = np.asarray(y, dtype=float)\n"
+         "    return float(100 * max(0.0, (y.max() - target) / (target - y[0])))", "not at max(y)"),
+        ("ex05_2_overshoot_test", "def overshoot(y, target):\n    y = np.asarray(y, dtype=float)\n"
+         "    return float(100 * max(0.0, ((y - target) / abs(target - y[0])).max()))",
+         "divide by the (negative) step, target - y[0], not its size"),
         ("ex05_3_steady_state_error_test", "def steady_state_error(y, target, window=10):\n"
          "    return float(np.mean(np.asarray(y, dtype=float)[-window:]) - target)", "the sign"),
         ("ex05_3_steady_state_error_test", "def steady_state_error(y, target, window=10):\n"
          "    return float(target - y[-1])", "not one sample"),
+        ("ex05_3_steady_state_error_test", "def steady_state_error(y, target, window=1):\n"
+         "    return float(target - np.mean(np.asarray(y, dtype=float)[-window:]))", "the window's default is 10 samples"),
         ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
          "    return abs(distance) / (profile_velocity * 0.229 * 2 * np.pi / 60)",
          "the accelerating and braking time counts"),
@@ -515,6 +527,11 @@ MISTAKES = {
          "    v = profile_velocity * 0.229 * 2 * np.pi / 60\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
          "    if distance >= v * v / a:\n        return distance / v + v / a\n    return 2 * np.sqrt(distance / a)",
          "take abs(distance)"),
+        ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
+         "    v = min(profile_velocity * 0.229 * 2 * np.pi / 60, snakekit.SPEC.velocity_limit)\n"
+         "    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
+         "    d = abs(distance)\n    return d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)",
+         "timed at the arm's 1.5 rad/s"),
         # the unit slips, each in an otherwise right answer
         ("ex05_4_profile_velocity_test", "def profile_move_time(distance, profile_velocity, profile_acceleration):\n"
          "    v = profile_velocity * 0.229\n    a = profile_acceleration * 214.577 * 2 * np.pi / 3600\n"
