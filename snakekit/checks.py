@@ -162,9 +162,12 @@ class Exercise:
             return str(where)
         if not args:
             return "no arguments (its defaults)"
-        def shown(a):   # an object without a readable repr (a ControlPanel, a robot) by its type
+        def shown(a):   # an object without a short readable repr (a ControlPanel, a robot, a Run) by its type
             text = repr(a)
-            return f"a {type(a).__name__}" if text.startswith("<") and " at 0x" in text else text
+            if (text.startswith("<") and " at 0x" in text) or len(text) > 60 or "\n" in text:
+                kind = type(a).__name__
+                return f"{'an' if kind[:1].lower() in 'aeiou' else 'a'} {kind}"
+            return text
 
         return ", ".join(_fmt_array(a) if isinstance(a, (np.ndarray, list, tuple)) else
                          (getattr(a, "__name__", type(a).__name__) if callable(a) else shown(a)) for a in args)
@@ -187,7 +190,7 @@ class Exercise:
         except Exception as e:
             self.fail(f"`{self.name}` raised {type(e).__name__} when called with {call}: {e}; {why}: raise a "
                       f"{error.__name__} there.", student_frames=_student_frames(e.__traceback__))
-        self.fail(f"`{self.name}` returned when called with {call}; {why}: raise a {error.__name__} there "
+        self.fail(f"`{self.name}` returned a result when called with {call}, raising nothing; {why}: raise a {error.__name__} there "
                   f"(`raise {error.__name__}(\"...\")`, saying why).")
 
     def true(self, condition, message: str, hint: str = "") -> None:

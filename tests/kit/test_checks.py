@@ -85,7 +85,7 @@ def test_raises_passes_the_asked_error_and_names_what_came_instead():
     ex.raises(ValueError, refuses, 0.5, why="the target is out of reach")
     assert ex.checked == 1
     said = message(lambda: ex.raises(ValueError, lambda x: x, 0.5, why="the target is out of reach"))
-    assert said == ("exercise 9.3 ik: `ik` returned when called with 0.5; the target is out of reach: raise a "
+    assert said == ("exercise 9.3 ik: `ik` returned a result when called with 0.5, raising nothing; the target is out of reach: raise a "
                     'ValueError there (`raise ValueError("...")`, saying why).')
     said = message(lambda: ex.raises(ValueError, lambda x: 1 / 0, 0.5, why="the target is out of reach"))
     assert said.startswith("exercise 9.3 ik: `ik` raised ZeroDivisionError when called with 0.5: division by zero")
@@ -204,3 +204,16 @@ def test_a_mistake_that_spreads_says_how_far():
     assert CheckFailed.hint_of(said) == "near the target, not on it."
     said = message(lambda: ex.close([0.2205, 0.12], [0.22, 0.12], what="tool", unit="m", tol=1e-5, mistakes=near))
     assert CheckFailed.hint_of(said) == ""
+
+
+def test_a_forgotten_return_names_a_long_argument_by_its_kind():
+    """6.4's estimate_lag(run) without `return`: the message names the run "a Run", not its whole repr
+    (arrays of efforts and all), which the graded page copied too."""
+    import snakekit
+
+    with snakekit.make_robot("sim") as robot:
+        run = robot.run(snakekit.side_sweep(points=20, sweeps=2))
+    ex = checks.Exercise("9.4", "estimate_lag")
+    said = message(lambda: ex(lambda r, j=0: None, run, 0))
+    assert said.startswith("exercise 9.4 estimate_lag: estimate_lag returned None when called with a Run, 0: did you "
+                           "forget `return`?"), said

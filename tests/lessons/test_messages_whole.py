@@ -66,7 +66,7 @@ def longest_messages(name: str) -> tuple[str, str, str]:
                                     f"off by 1.234 {unit} (tolerance 0.1234 {unit}: "
                                     f"{kws.get('why') or 'exact math, 1e-9 relative'}).")
                 if node.func.attr == "raises":  # the message raises() builds when nothing is raised
-                    messages.append(f"`name` returned when called with {kws.get('where') or '0.1234'}; "
+                    messages.append(f"`name` returned a result when called with {kws.get('where') or '0.1234'}, raising nothing; "
                                     f"{kws.get('why') or ''}: raise a ValueError there (`raise ValueError(\"...\")`, "
                                     "saying why).")
                 for kw in node.keywords:
