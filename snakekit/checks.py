@@ -76,12 +76,16 @@ def _student_frames(tb) -> str:
 
 
 def _fmt_array(a) -> str:
+    kind = type(a).__name__ if isinstance(a, (list, tuple)) else ""
     a = np.asarray(a, dtype=float)
     if a.ndim == 0:
         return f"{float(a):.4g}"
     if a.size <= 8:
         return "[" + ", ".join(f"{float(x):.4g}" for x in a.ravel()) + "]"
-    return f"array of shape {a.shape}"
+    if not kind:
+        return f"array of shape {a.shape}"
+    return {1: f"a {kind} of {len(a)} numbers", 2: f"a {kind} of {len(a)} entries of {a.shape[-1]} numbers each"}.get(
+        a.ndim, f"a {kind} of shape {a.shape}")
 
 
 def _where(where) -> str:

@@ -217,3 +217,15 @@ def test_a_forgotten_return_names_a_long_argument_by_its_kind():
     said = message(lambda: ex(lambda r, j=0: None, run, 0))
     assert said.startswith("exercise 9.4 estimate_lag: estimate_lag returned None when called with a Run, 0: did you "
                            "forget `return`?"), said
+
+
+def test_a_list_argument_is_called_a_list_not_an_array():
+    """3.4's task1(panel, targets) without `return`: the targets, a list of (x, y, heading), are "a list of 3
+    entries of 3 numbers each", not "array of shape (3, 3)"."""
+    ex = checks.Exercise("9.5", "task1")
+    targets = [(0.25, 0.10, 0.3), (0.12, 0.22, 1.6), (0.28, -0.08, -0.4)]
+    said = message(lambda: ex(lambda t: None, targets))
+    assert said.startswith("exercise 9.5 task1: task1 returned None when called with a list of 3 entries of 3 numbers "
+                           "each: did you forget `return`?"), said
+    said = message(lambda: ex(lambda t: None, np.zeros((3, 3))))
+    assert "when called with array of shape (3, 3):" in said, said
