@@ -50,7 +50,7 @@ import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
-from .mistakes import either, known_mistake, mistake_hint, pose_mistakes, scaled, shape_hint, within
+from .mistakes import either, error_hint, known_mistake, mistake_hint, pose_mistakes, scaled, shape_hint, within
 from .closeness import ZERO, bound, entry_name, is_table, sentence, worst
 from .verdicts import BUILDS_ON, CAUSES, PASSED, composite_note, failing_parts, stopped_note
 from .watch import calls_to, forgot_return, raised_in, returns_none
@@ -154,7 +154,7 @@ class Exercise:
             if none:   # the student's function gave back None, and the check stumbled on it
                 self.fail(forgot_return(self.name, self._call(args, where)))
             self.fail(f"`{self.name}` raised {type(e).__name__} when called with {self._call(args, where)}: {e}",
-                      student_frames=_student_frames(e.__traceback__))
+                      error_hint(e), student_frames=_student_frames(e.__traceback__))
         if result is None or none:
             self.fail(forgot_return(self.name, self._call(args, where)))
         return result

@@ -140,3 +140,19 @@ def pose_mistakes(final_q, poses) -> dict:
     """
     return {JOINT_ANGLES_FOR_POSES: np.asarray(final_q, dtype=float),
             POINTS_FOR_POSES: np.asarray(poses, dtype=float)[..., :2]}
+
+
+def error_hint(error: BaseException) -> str:
+    """A hint for an error a beginner's answer raises where the error's own words do not say the fix.
+
+    >>> import numpy as np
+    >>> try:
+    ...     np.linalg.solve(np.zeros((2, 2)), np.ones(2))
+    ... except np.linalg.LinAlgError as e:
+    ...     print(error_hint(e)[:62])
+    the matrix solved has no inverse here: J J^T is singular where
+    """
+    if type(error).__name__ == "LinAlgError" and "singular" in str(error).lower():
+        return ("the matrix solved has no inverse here: J J^T is singular where the arm is stretched out or folded "
+                "(a row of J is all zeros), and the damping term + damping**2 * I is what keeps it invertible.")
+    return ""

@@ -424,6 +424,8 @@ MISTAKES = {
          "    return q + J.T @ np.linalg.solve(J @ J.T + damping * np.eye(2), e)", "lambda, squared"),
         ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
          "    return q - J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "e = target - tool"),
+        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
+         "    return q + J.T @ np.linalg.solve(J @ J.T, e)", "the damping term + damping**2 * I"),
         ("ex03_3_ik_loop_test", _SOLVE, "raise a ValueError there", True),
         ("ex03_3_ik_loop_test", _SOLVE.replace("np.clip(dls_step(q, target), spec.lower, spec.upper)",
                                                "dls_step(q, target)").replace("    return q", "    return q\n"
