@@ -51,12 +51,12 @@ import numpy as np
 from .errors import CheckFailed, ConfigurationError, ShortcutError
 from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
 from .mistakes import either, error_hint, known_mistake, mistake_hint, pose_mistakes, scaled, shape_hint, within
-from .closeness import ZERO, bound, entry_name, is_table, sentence, worst
+from .closeness import ZERO, bound, entry_name, is_table, not_finite, per_row, sentence, unit_of, worst
 from .verdicts import BUILDS_ON, CAUSES, PASSED, composite_note, failing_parts, stopped_note
 from .watch import calls_to, forgot_return, raised_in, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "live_off",
-           "pose_mistakes", "quick", "scaled", "waiting_for", "within"]
+           "per_row", "pose_mistakes", "quick", "scaled", "waiting_for", "within"]
 
 _HERE = os.path.abspath(__file__)
 
@@ -123,15 +123,20 @@ class Exercise:
         """Raise :class:`CheckFailed` with ``message`` (and a hint line, and, for a composite
         whose parts fail their own checks, which parts to fix first)."""
         PASSED[self.number] = False
+        weak = self._weak_parts()
+        if weak:   # the part's slip explains the failure: a hint of this exercise's own would name a mistake not made
+            hint = ""
         CAUSES[self.number] = hint or message
-        text = CheckFailed.compose(f"{self.prefix}: {message}", hint) + self._parts_note()
+        text = CheckFailed.compose(_ended(f"{self.prefix}: {message}") if hint or weak else f"{self.prefix}: {message}",
+                                   hint)
+        if weak:
+            text = _ended(text) + "\n" + composite_note(self.number, weak)
         raise _shorten(CheckFailed(text, student_frames)) from None
 
-    def _parts_note(self) -> str:
-        """For an exercise built on earlier ones: the line naming the parts whose own checks failed
-        (or have not passed yet), since a slip there shows up here too."""
-        weak = [n for n in self.builds_on if not PASSED.get(n, False)]
-        return "\n" + composite_note(self.number, weak) if weak else ""
+    def _weak_parts(self) -> list:
+        """For an exercise built on earlier ones: the parts whose own checks failed (or have not passed yet),
+        since a slip there shows up here too (:func:`snakekit.verdicts.composite_note` names them)."""
+        return [n for n in self.builds_on if not PASSED.get(n, False)]
 
     def __call__(self, fn, *args, where=None, **kwargs):
         """Run the student's ``fn(*args, **kwargs)``; turn a stub or a crash into a clear message."""
@@ -213,7 +218,8 @@ class Exercise:
             expected: the right answer (computed independently).
             what: what the value is, in the lesson's words ("tool pose").
             where: the inputs, as text or an array ("q=[...]").
-            unit: the unit of every entry, or one per entry of a 1-D value ("m", "rad", "s").
+            unit: the unit of every entry, one per entry of a 1-D value (or per column of a table: ("m", "rad",
+                "s")), or one per row of a matrix (``per_row("m", "m", "rad/rad")``: a Jacobian's rows).
             tol: absolute tolerance [unit]; rtol: relative tolerance.
             why: the reason for the tolerance; default "exact math" when ``tol`` is 0.
             labels: names of the entries of a 1-D value ("x", "y", "heading"), or of the columns of a 2-D one
@@ -244,8 +250,7 @@ class Exercise:
             self.fail(f"{what}{_where(where)} has shape {arr.shape}, expected shape {exp.shape}.",
                       known_mistake(arr, mistakes, tol=near, expected=exp) or shape_hint(arr, exp))
         if not np.isfinite(arr).all():
-            idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
-            self.fail(f"{what}{_where(where)} holds {arr[idx]} at index {idx}; every value must be finite.")
+            self.fail(not_finite(what, arr, _where(where)))
         # near zero is zero: what is within ZERO of an exact 0 passes, as graded (snakekit.closeness)
         tolerances = bound(exp, atol=tol, rtol=rtol)
         table = is_table(labels, arr.shape)
@@ -253,10 +258,8 @@ class Exercise:
         if i is None:
             self.checked += 1
             return
-        units = unit if isinstance(unit, (tuple, list)) else None
-        u = units[i[-1]] if units is not None and arr.ndim >= 1 else unit
-        hint = mistake_hint(arr, exp, units or unit, mistakes, tol=float(tolerances.max()))   # the mistake, and only it
-        self.fail(sentence(entry_name(what, i, arr.ndim, labels), arr[i], exp[i], tolerances[i], u, atol=tol,
+        hint = mistake_hint(arr, exp, unit, mistakes, tol=float(tolerances.max()))   # the mistake, and only it
+        self.fail(sentence(entry_name(what, i, arr.ndim, labels), arr[i], exp[i], tolerances[i], unit_of(unit, i), atol=tol,
                            rtol=rtol, why=why, where=_where(where)), hint)
 
     def hand_in(self, grade_id: str, fn, *, forbid: tuple = (), what: str = "", instead: str = "",
@@ -315,6 +318,12 @@ class Exercise:
         """Print that the checks passed (the last line of a test cell)."""
         PASSED[self.number] = True
         print(f"exercise {self.number} {self.name}: {self.checked} check(s) passed" + (f"; {note}" if note else ""))
+
+
+def _ended(text: str) -> str:
+    """``text`` ending a sentence, so that what follows it (a hint, a note) starts a new one."""
+    text = text.rstrip()
+    return text if text.endswith((".", "!", "?", ":")) else text + "."
 
 
 def _student_function(name: str):

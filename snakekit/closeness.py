@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["TIE", "ZERO", "bound", "entry_name", "is_table", "sentence", "tolerance", "worst"]
+__all__ = ["TIE", "ZERO", "bound", "entry_name", "is_table", "not_finite", "per_row", "sentence", "tolerance", "unit_of",
+           "worst"]
 
 #: The absolute floor of every closeness check [unit of the value]: a result within it of the
 #: expected one passes (a last row of 3.9e-16 where the text asks exactly 0), locally as graded.
@@ -73,22 +74,79 @@ def worst(got, expected, tol, *, table: bool = False) -> tuple | None:
     return tuple(int(k) for k in np.argwhere(wrong)[0])
 
 
+#: Words that make a value's name a phrase ("Jacobian of g", "tool after move 2"): an index written straight after it
+#: would read as indexing its last word ("g[2, 2]"), so the entry is named before it ("entry [2, 2] of Jacobian of g").
+_LINKING = {"of", "in", "at", "after", "for", "to", "from", "on", "by", "with"}
+
+
+def _plain(what: str) -> bool:
+    """Whether ``what`` is a plain name that an index or a label may follow ("send times", "tool")."""
+    words = what.split()
+    return bool(words) and all(w.isalpha() or w.replace("-", "").replace("_", "").isalpha() for w in words) \
+        and not _LINKING & {w.lower() for w in words}
+
+
 def entry_name(what: str, index: tuple, ndim: int, labels=None) -> str:
     """The entry at ``index`` as both messages name it: ``tool heading`` (a labelled 1-D value),
-    ``violations[2] joint`` (a table's row and column), ``send times[3]``, or ``what`` for a single number.
+    ``violations[2] joint`` (a table's row and column), ``send times[3]``, or ``what`` for a single number. A
+    name that is a phrase (a number in it, brackets, "of": what an index after it would seem to index) has
+    the entry named before it: ``entry [2, 2] of Jacobian of g``, ``x of tip of solution 1``.
 
     >>> entry_name("tool", (2,), 1, ("x", "y", "heading")), entry_name("violations", (2, 1), 2, ("time", "joint"))
     ('tool heading', 'violations[2] joint')
     >>> entry_name("Jacobian", (1, 3), 2), entry_name("reach", (), 0)
     ('Jacobian[1, 3]', 'reach')
+    >>> entry_name("Jacobian of g", (2, 2), 2), entry_name("Jacobian row 3 (the heading)", (0,), 1)
+    ('entry [2, 2] of Jacobian of g', 'entry [0] of Jacobian row 3 (the heading)')
+    >>> entry_name("tip of solution 1", (0,), 1, ("x", "y")), entry_name("lag of joint 3", (), 0)
+    ('x of tip of solution 1', 'lag of joint 3')
     """
     if not index or ndim == 0:
         return what
+    plain = _plain(what)
     if labels is not None and ndim == 1 and index[0] < len(labels):
-        return f"{what} {labels[index[0]]}"
+        return f"{what} {labels[index[0]]}" if plain else f"{labels[index[0]]} of {what}"
     if labels is not None and ndim == 2 and index[1] < len(labels):
-        return f"{what}[{int(index[0])}] {labels[index[1]]}"
-    return f"{what}[{', '.join(str(int(k)) for k in index)}]"
+        return f"{what}[{int(index[0])}] {labels[index[1]]}" if plain else \
+            f"{labels[index[1]]} of row {int(index[0])} of {what}"
+    at = ", ".join(str(int(k)) for k in index)
+    return f"{what}[{at}]" if plain else f"entry [{at}] of {what}"
+
+
+class per_row(tuple):
+    """The units of a matrix's rows, one per row (a check's ``unit=``): a Jacobian's position rows in m (per
+    rad), its heading row in rad/rad. A plain tuple of units names a value's entries, or a table's columns.
+
+    >>> unit_of(per_row("m", "m", "rad/rad"), (2, 0)), unit_of(("m", "m", "rad"), (0, 2)), unit_of("s", (4,))
+    ('rad/rad', 'rad', 's')
+    """
+
+    def __new__(cls, *units):
+        return super().__new__(cls, units)
+
+
+def unit_of(unit, index: tuple) -> str:
+    """The unit of the entry at ``index`` of a value whose check gives ``unit``: one unit for every entry, one
+    per entry of its last axis (a tuple), or one per row (:class:`per_row`)."""
+    if isinstance(unit, per_row):
+        return unit[index[0]] if index and index[0] < len(unit) else ""
+    if isinstance(unit, (tuple, list)):
+        return unit[index[-1]] if index and index[-1] < len(unit) else ""
+    return unit or ""
+
+
+def not_finite(what: str, value, where: str = "") -> str:
+    """The sentence of a value that holds nan or infinity, locally and graded: its first such entry, named as
+    :func:`entry_name` names it (a single number: the value itself).
+
+    >>> not_finite("manipulability", np.float64("nan"), " at q=[0, 0, 0, 0, 0]")
+    'manipulability at q=[0, 0, 0, 0, 0] is nan: every value must be a finite number.'
+    >>> not_finite("Jacobian", np.array([[0.0, np.inf]]))
+    'Jacobian[0, 1] is inf: every value must be a finite number.'
+    """
+    arr = np.asarray(value, dtype=float)
+    idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0]) if arr.ndim else ()
+    return f"{entry_name(what, idx, arr.ndim)}{where} is {arr[idx]}: every value must be a finite number."
 
 
 # --- numbers in messages -----------------------------------------------------------------

@@ -10,6 +10,8 @@ slip is 6.1's times starting at 1/rate).
 
 from __future__ import annotations
 
+import re
+
 #: exercise number -> whether its check cell passed, in this kernel (absent: not run yet).
 PASSED: dict[str, bool] = {}
 #: exercise number -> what its failed check said (its hint, else its message).
@@ -30,6 +32,11 @@ def composite_note(number: str, parts: list) -> str:
     names = " and ".join(parts)
     fails, fix = ("fails its check", f"fix {names}") if len(parts) == 1 else ("fail their checks", "fix them")
     return f"{number} uses your {names}, which {fails}: {fix} first; graded, {number} is run with the lesson's own {names}."
+
+
+#: What :func:`composite_note` writes, as a pattern: a message that holds it is explained by a part's slip, so
+#: neither side adds a hint of the composite's own (``Exercise.fail``, ``grader.scoring.verdict.with_local_check``).
+NOTE = re.compile(r"\b[\d.]+ uses your [\d. and]+, which fails? (?:its|their) checks?: fix ")
 
 
 def failing_parts(number: str, builds_on: tuple = ()) -> list:

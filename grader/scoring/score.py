@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from snakekit.closeness import bound, is_table, sentence, worst
+from snakekit.closeness import bound, is_table, not_finite, sentence, worst
 from snakekit.errors import SnakekitError
 from snakekit.handin import decode_results
 from snakekit.watch import forgot_return
@@ -255,8 +255,7 @@ def _compare_case(w: Wording, got: dict, want: dict, tol: dict, case=()) -> str:
             hint = compare.TRANSPOSE if g.ndim == 2 and g.shape == e.shape[::-1] else ""
             return f"{part.what} has shape {g.shape}, expected {e.shape}{hint}."
         if not np.isfinite(g).all():
-            idx = tuple(int(i) for i in np.argwhere(~np.isfinite(g))[0])
-            return f"{part.what} holds {g[idx]} at index {idx}: every value must be a finite number."
+            return not_finite(part.what, g)
         # the entry the notebook's check names, in its words (snakekit.closeness), at the grader's tolerances
         at = bound(e, atol=tol["atol"], rtol=tol["rtol"])
         idx = worst(g, e, at, table=is_table(part.labels, e.shape))

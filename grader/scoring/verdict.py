@@ -16,6 +16,7 @@ from pathlib import Path
 import nbformat
 
 from snakekit.errors import CheckFailed
+from snakekit.verdicts import NOTE
 
 from grader.feedback import scrub
 from grader.feedback import notebook as feedback
@@ -295,7 +296,7 @@ def with_local_check(sc: ExerciseScore, cell) -> ExerciseScore:
     said, hint = text.partition(CheckFailed.HINT)[0], CheckFailed.hint_of(text)
     said = " ".join(re.sub(r"^exercise [\w.]+ \w+: ", "", said.strip()).split())   # the page names the exercise
     hint, message, checks = " ".join(hint.split()), sc.message, sc.checks
-    if hint:
+    if hint or NOTE.search(said):   # the check's hint, or a part's slip it names, is the cause: no guess of ours
         message = GUESSES.sub("", message)
         checks = tuple(dataclasses.replace(c, message=GUESSES.sub("", c.message)) for c in checks)
     flat = " ".join(message.split())

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from snakekit.closeness import entry_name
+from snakekit.closeness import entry_name, per_row, unit_of
 
 __all__ = ["Part", "Wording", "wording", "title", "points", "shown", "signatures"]
 
@@ -131,10 +131,9 @@ class Part:
         return Part(what, self.unit, self.labels, why=self.why)
 
     def unit_at(self, index: tuple) -> str:
-        """The unit of the entry at ``index`` (the last axis picks a unit of a per-entry tuple)."""
-        if isinstance(self.unit, tuple):
-            return self.unit[index[-1]] if index and index[-1] < len(self.unit) else ""
-        return self.unit
+        """The unit of the entry at ``index``, as the check gives it (:func:`snakekit.closeness.unit_of`: one unit,
+        one per entry of the last axis, or one per row)."""
+        return unit_of(self.unit, index)
 
     def name_at(self, index: tuple, ndim: int) -> str:
         """The entry at ``index`` as the check names it: ``move duration``, ``send times[3]``
@@ -190,6 +189,11 @@ class Wording:
         if name == "value":   # the words every compared value of the check shares ("Jacobian"), and its unit
             if len(self.parts) <= 1:
                 return self.parts[0].at(self.values(case)) if self.parts else Part("the result")
+            # a case that names what it is taken of ("g", "tool": 2.2's test functions): the value the check names so
+            named = {a.lower() for a in case if isinstance(a, str)}
+            mine = list(dict.fromkeys(p for p in self.parts if named & set(re.findall(r"[\w*]+", p.what.lower()))))
+            if len(mine) == 1:
+                return mine[0].at(self.values(case))
             words = [p.what.split() for p in self.parts]
             common = [w[0] for w in zip(*words) if len(set(w)) == 1]
             while common and common[-1] in DANGLING:   # "Jacobian of q0*q1", "Jacobian of g": the Jacobian
@@ -198,8 +202,9 @@ class Wording:
             whole = [p for p in self.parts if p.what == common]
             if whole:   # one compared value is named by just those words (2.1's "Jacobian", beside its row 3)
                 return whole[0].at(self.values(case))
-            units = {p.unit for p in self.parts}
-            return Part(common or "the result", units.pop() if len(units) == 1 else "")
+            units, whys = {p.unit for p in self.parts}, {p.why for p in self.parts}
+            return Part(common or "the result", units.pop() if len(units) == 1 else "",
+                        why=whys.pop() if len(whys) == 1 else None)
         words = set(name.lower().split("_"))
         shared = [len(words & set(re.findall(r"[a-z]+", p.what.lower()))) for p in self.parts]
         if any(shared):   # the most words in common: recorded_angles is "recorded angles", not "recorded times"
@@ -246,7 +251,13 @@ def _text(node) -> str | None:
     return None
 
 
-def _unit(node):
+def _unit(node, names: dict | None = None):
+    """A check's ``unit=``: a string, a tuple of them, ``checks.per_row(...)``, or the name of one the cell assigns."""
+    if isinstance(node, ast.Name):
+        node = (names or {}).get(node.id, node)
+    if isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", "")) == "per_row":
+        units = tuple(_text(e) for e in node.args)   # checks.per_row("m", "m", "rad/rad"): one unit per row
+        return per_row(*units) if all(u is not None for u in units) else ""
     if isinstance(node, ast.Tuple):
         units = tuple(_text(e) for e in node.elts)
         return units if all(u is not None for u in units) else ""
@@ -287,7 +298,7 @@ def _parts(tree: ast.Module) -> tuple:
             what = _text(kw["what"]) if "what" in kw else None
             if not what:
                 continue
-            part = Part(what, _unit(kw["unit"]) if "unit" in kw else "", _labels(kw.get("labels"), names),
+            part = Part(what, _unit(kw["unit"], names) if "unit" in kw else "", _labels(kw.get("labels"), names),
                         _template(kw["what"]))
             # the reason of the first check of it in the cell's order (its visible case's, as the lesson reads)
             whys.setdefault(part, []).append((node.lineno, node.col_offset, _text(kw["why"]) if "why" in kw else None))

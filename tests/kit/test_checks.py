@@ -229,3 +229,45 @@ def test_a_list_argument_is_called_a_list_not_an_array():
                            "each: did you forget `return`?"), said
     said = message(lambda: ex(lambda t: None, np.zeros((3, 3))))
     assert "when called with array of shape (3, 3):" in said, said
+
+
+@pytest.mark.parametrize("what, got, want, said", [
+    ("Jacobian of q0*q1", [[3.0, 4.0]], [[3.0, 2.0]], "entry [0, 1] of Jacobian of q0*q1 at q=[2, 3] is 4, expected 2"),
+    ("Jacobian of g", np.eye(3) * 2, np.eye(3), "entry [0, 0] of Jacobian of g at q=[2, 3] is 2, expected 1"),
+    ("Jacobian row 3 (the heading)", np.zeros(5), np.ones(5),
+     "entry [0] of Jacobian row 3 (the heading) at q=[2, 3] is 0, expected 1"),
+    ("send times", [0.0, 0.5], [0.0, 0.1], "send times[1] at q=[2, 3] is 0.5, expected 0.1")])
+def test_an_entry_of_a_value_named_by_a_phrase_is_named_before_the_phrase_not_as_indexing_its_last_word(
+        what, got, want, said):
+    ex = checks.Exercise("2.2", "numerical_jacobian")
+    assert message(lambda: ex.close(np.array(got), want, what=what, where="q=[2, 3]")).startswith(
+        f"exercise 2.2 numerical_jacobian: {said}")
+
+
+def test_a_single_number_that_is_nan_is_said_to_be_nan_locally_and_graded():
+    from grader.scoring.score import Expected, score_exercise
+    from grader.scoring.wording import Part, Wording
+
+    ex = checks.Exercise("2.3", "manipulability")
+    assert message(lambda: ex.close(float("nan"), 0.0, what="manipulability", where="q=[0, 0, 0, 0, 0]")) == \
+        "exercise 2.3 manipulability: manipulability at q=[0, 0, 0, 0, 0] is nan: every value must be a finite number."
+    w = Wording("manipulability", parts=(Part("manipulability", "m^2/rad^2"),))
+    graded = score_exercise("ex02_3_manipulability_test", [{"value": np.array(np.nan)}],
+                            Expected("ex02_3_manipulability_test", "values", [(np.zeros(5),)],
+                                     [{"value": np.array(0.0)}], wording=w), 2.0).message
+    assert graded.endswith("manipulability(q=[0, 0, 0, 0, 0]): manipulability is nan: every value must be a finite "
+                           "number.") or graded.endswith("manipulability is nan: every value must be a finite number."), \
+        graded
+    assert "index" not in graded
+
+
+def test_a_composites_note_starts_a_sentence_of_its_own_after_an_error_that_has_no_full_stop():
+    from snakekit.verdicts import PASSED
+
+    ex = checks.Exercise("2.3", "manipulability", builds_on=("2.1",))
+    PASSED["2.1"] = False
+    try:
+        said = message(lambda: ex(lambda q: [[0.0]][:, 0], np.zeros(5)))
+    finally:
+        PASSED.pop("2.1", None)
+    assert "list indices must be integers or slices, not tuple.\n2.3 uses your 2.1, which fails its check" in said, said
