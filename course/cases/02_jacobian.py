@@ -15,9 +15,15 @@ DEPENDS = {"ex02_3_manipulability_test": ["ex02_1_planar_jacobian"]}
 
 
 def ex02_1_planar_jacobian_test(rng, spec):
-    """planar_jacobian(q): 9 cases, random poses inside the limits, the limits, the straight arm."""
+    """planar_jacobian(q): 10 cases, random poses inside the limits, the limits, the straight arm, and a pose
+    whose links 3 to 5 point within 2e-3 rad of x (the visible check's kind): entries of the x row near 1e-4 m,
+    where only the exact formula is within 1e-9 relative (a finite difference is off by about 1e-11 m)."""
     q = list(rng.uniform(spec.lower, spec.upper, (7, spec.n_joints)))
-    return [(x,) for x in q + [np.full(spec.n_joints, float(spec.upper)), np.zeros(spec.n_joints)]]
+    near = np.zeros(spec.n_joints)
+    near[:2] = rng.uniform(-0.6, 0.6, 2)
+    near[2] = -near[0] - near[1] + rng.uniform(-2e-3, 2e-3)
+    near[3:] = rng.uniform(-1e-3, 1e-3, spec.n_joints - 3)
+    return [(x,) for x in q + [np.full(spec.n_joints, float(spec.upper)), np.zeros(spec.n_joints), near]]
 
 
 def ex02_2_numerical_jacobian_test(rng, spec):

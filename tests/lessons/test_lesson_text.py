@@ -75,6 +75,16 @@ CLAIMS = {
          (1e-11, 1e-9), None),
         ("Gently bent wins", "manipulability(np.full(5, 0.3)) > max(manipulability(np.zeros(5)), "
                              "manipulability(np.full(5, 1.2)))", 1, 0),
+        # the plot draws each velocity ellipse (semi-axes: J_xy's singular values) scaled by 0.2, as the text says
+        ("a drawn ellipse's area is $0.2^2 \\pi w = 0.04 \\pi w$",
+         "[np.pi * np.prod(0.2 * np.linalg.svd(snakekit.planar_jacobian(np.full(5, b))[:2])[1]) / "
+         "(np.pi * manipulability(np.full(5, b))) for b in (0.3, 1.2)]", [0.04, 0.04], 1e-12),
+        ("ell = U @ np.diag(S) @ circle * 0.2", "0.2", 0.2, 0),
+        # the hidden kind of 2.1 the visible check has too: entries of J near 0, where a finite difference misses
+        ("a pose where some entries of $J$ are near 0",
+         "[np.abs(snakekit.planar_jacobian(np.array([0.3, -0.2, -0.099, 0.0, 0.0]))[0, 2:]).max(), "
+         "np.abs(numerical_jacobian(snakekit.tool_pose_2d, np.array([0.3, -0.2, -0.099, 0.0, 0.0])) - "
+         "planar_jacobian(np.array([0.3, -0.2, -0.099, 0.0, 0.0])))[0, 2:].max() > 1e-12]", [1.895e-4, 1], 5e-7),
     ],
     "03_inverse_kinematics": [
         ("`two_link_ik(0.1, 0.1, 0.1, 0.1)` is `[[0, 1.5708], [1.5708, -1.5708]]`", "two_link_ik(0.1, 0.1, 0.1, 0.1)",
@@ -259,3 +269,18 @@ def test_each_lesson_says_once_that_hidden_cases_exist_and_what_kind(name):
     assert text.count("**How your work is graded.**") == 1, name
     graded = text.split("**How your work is graded.**")[1].split("\n\n")[0]
     assert "*hidden cases*" in graded and "drawn anew for every grading" in graded, graded
+
+
+@pytest.mark.parametrize("name", sorted(CLAIMS))
+def test_the_text_before_a_demonstration_that_waits_says_it_waits(name):
+    """A demonstration that needs an exercise waits for it (``checks.waiting_for``) and never falls back on the
+    library's version: the text before it says so, not that something else draws it meanwhile (lesson 1's
+    "until 1.2 is done, the library draws it", above a cell that only printed that it waited)."""
+    import re
+
+    cells = read(ROOT / "notebooks" / f"{name}.ipynb").cells
+    for before, cell in zip(cells, cells[1:]):
+        if cell.cell_type == "code" and "waiting_for(" in cell.source and before.cell_type == "markdown":
+            until = re.search(r"[Uu]ntil (\d+\.\d+)[^.]*", before.source)
+            if until:
+                assert "waits" in until.group(0) and "library" not in until.group(0), (name, before.source)

@@ -334,7 +334,14 @@ MISTAKES = {
          "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])", "cos and sin are swapped"),
         ("ex01_2_joint_positions_test", "def joint_positions(q):\n" + _FK +
          "    steps = L[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])\n"
-         "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)]).T", "the transpose of the expected shape")],
+         "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)]).T", "the transpose of the expected shape"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n    phi = np.cumsum(q) - q\n    L = spec.lengths\n"
+         "    steps = L[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])\n"
+         "    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])", "off by one joint"),
+        ("ex01_2_joint_positions_test", "def joint_positions(q):\n    xy, heading = [[0.0, 0.0]], 0.0\n"
+         "    for i in range(5):\n        x, y = xy[-1]\n"
+         "        xy.append([x + spec.lengths[i] * np.cos(heading), y + spec.lengths[i] * np.sin(heading)])\n"
+         "        heading += q[i]\n    return np.array(xy)", "off by one joint")],
     "02_jacobian": [
         ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"
          "    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
@@ -352,6 +359,9 @@ MISTAKES = {
          "a joint angle is not accumulated"),
         ("ex02_1_planar_jacobian_test", "def planar_jacobian(q):\n    return snakekit.planar_jacobian(q)",
          "`snakekit.planar_jacobian` was called", True),
+        ("ex02_1_planar_jacobian_test", "def planar_jacobian(q, h=1e-6):\n    q = np.asarray(q, dtype=float)\n"
+         "    return np.column_stack([(snakekit.tool_pose_2d(q + h * e) - snakekit.tool_pose_2d(q - h * e)) / (2 * h)\n"
+         "                            for e in np.eye(len(q))])", "finite differences are exercise 2.2's method"),
         ("ex02_2_numerical_jacobian_test", "def numerical_jacobian(f, q, h=1e-6):\n"
          "    q = np.asarray(q, dtype=float)\n"
          "    return np.column_stack([(np.asarray(f(q + h * e)) - np.asarray(f(q))) / h for e in np.eye(len(q))])",

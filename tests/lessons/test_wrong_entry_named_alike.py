@@ -29,7 +29,7 @@ from grader.scoring.rules import RULES
 from grader.scoring.score import DEFAULT_TOLERANCES, Expected, call, handed_in_function, score_exercise
 from grader.scoring.wording import EXERCISE, signatures, wording
 from snakekit import checks
-from snakekit.closeness import ZERO, bound
+from snakekit.closeness import ZERO, bound, per_row
 from tests.conftest import need
 
 COURSE = Path(__file__).resolve().parents[2] / "course"
@@ -65,6 +65,8 @@ def _check_calls(source: str) -> dict:
 
     def value(node):
         node = names.get(node.id, node) if isinstance(node, ast.Name) else node
+        if isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "per_row":   # checks.per_row("m", ...)
+            return per_row(*(value(a) for a in node.args))
         if isinstance(node, ast.JoinedStr):
             return " ".join("".join(v.value if isinstance(v, ast.Constant) else " " for v in node.values).split())
         try:
@@ -157,7 +159,7 @@ def _judged(tol: float, rtol: float) -> tuple:
 
 #: What the grader compares in words of its own, not a value of the exercise's check (a flag its test cell
 #: makes of the result, the sum of several checks): there is no local message to match.
-OWN_WORDS = {("ex02_2_numerical_jacobian_test", "value"), ("ex06_2_sweep_positions_test", "last_row_home"),
+OWN_WORDS = {("ex06_2_sweep_positions_test", "last_row_home"),
              ("ex07_1_ticks_test", "whole_numbers"),
              ("ex07_2_safe_move_test", "arm_still"), ("ex07_2_safe_move_test", "moves"),
              ("ex07_2_safe_move_test", "refused"), ("ex07_3_fault_test", "errors_cleared"),
@@ -173,13 +175,14 @@ def test_a_wrong_value_is_named_alike_in_the_check_and_the_graded_feedback(lesso
     rng = np.random.default_rng(zlib.crc32(gid.encode()))
     compared = 0
     for name in ref["outputs"]:
-        check = calls.get(w.part(name).what)   # the part as the cell writes it, its placeholders unfilled
-        assert (check is None) == ((gid, name) in OWN_WORDS), f"{gid} {name}: {w.part(name)}"
-        if check is None:
-            continue
         for t in range(TRIES):
             args = cases[t % len(cases)]
             part = w.part(name, args)
+            # the part as the cell writes it (its placeholders unfilled), the one the case names (2.2's "g", "tool")
+            check = calls.get(part.what) or calls.get(w.part(name).what)
+            assert (check is None) == ((gid, name) in OWN_WORDS), f"{gid} {name}: {part}"
+            if check is None:
+                break
             what = part.what if check["templated"] else check["what"]
             want = _expected_value(rng, check.get("labels"))
             got = _wrong(rng, want, [(check.get("tol", 0.0), check.get("rtol", 1e-9)), (tol["atol"], tol["rtol"])])
@@ -195,3 +198,55 @@ def test_a_wrong_value_is_named_alike_in_the_check_and_the_graded_feedback(lesso
                     f"{gid} {name}:\n  local:  {local}\n  graded: {graded}"
             compared += 1
     assert compared == TRIES * sum((gid, n) not in OWN_WORDS for n in ref["outputs"])
+
+
+def _lesson_cell(lesson: str, gid: str) -> tuple[str, dict]:
+    nbformat = need("nbformat")
+    nb = nbformat.read(COURSE / "source" / lesson / f"{lesson}.ipynb", as_version=4)
+    source = next(c.source for c in nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == gid)
+    return source, signatures(c.source for c in nb.cells if c.cell_type == "code")
+
+
+def test_a_jacobian_row_is_named_in_its_own_unit_graded_as_in_the_check():
+    """2.1: the heading row is in rad/rad, locally and graded (graded, it was "m", off by "1000 mm")."""
+    gid = "ex02_1_planar_jacobian_test"
+    source, sigs = _lesson_cell("02_jacobian", gid)
+    ref = Reference.load(REFERENCES / "02_jacobian.npz").exercises[gid]
+    tol = {**DEFAULT_TOLERANCES["values"], **ref["tolerances"]}
+    w = wording(gid, source, handed_in_function(gid, source), sigs)
+    check = _check_calls(source)["Jacobian"]
+    q = np.zeros(5)
+    want = np.vstack([np.zeros(5), [0.3315, 0.2605, 0.1895, 0.1185, 0.0475], np.ones(5)])
+    got = want.copy()
+    got[2, 0] = 0.0
+    local = _local(source, "Jacobian", check, got, want)
+    graded = _graded(gid, w, "value", (q,), got, want, tol)
+    assert local.startswith("Jacobian[2, 0] is 0 rad/rad, expected 1 rad/rad: off by 1 rad/rad (tolerance "), local
+    assert _split(local)[0] == _split(graded)[0] and "mm" not in graded, graded
+    got = want.copy()
+    got[1, 3] += 1e-3   # a position row: in m, its difference in mm
+    assert "Jacobian[1, 3] is 0.1195 m, expected 0.1185 m: off by 1 mm" in _graded(gid, w, "value", (q,), got, want, tol)
+
+
+@pytest.mark.parametrize("function, what", [("g", "entry [2, 2] of Jacobian of g"),
+                                            ("tool", "entry [2, 2] of Jacobian of the tool pose")])
+def test_a_finite_difference_is_named_with_its_test_function_and_its_reason_graded_as_in_the_check(function, what):
+    """2.2: graded, the tolerance is the check's "finite differences" (it said "exact math, 1e-06"), the value is
+    named by the test function the case takes ("Jacobian of g"), and the tool pose's heading row is in rad/rad."""
+    gid = "ex02_2_numerical_jacobian_test"
+    source, sigs = _lesson_cell("02_jacobian", gid)
+    ref = Reference.load(REFERENCES / "02_jacobian.npz").exercises[gid]
+    tol = {**DEFAULT_TOLERANCES["values"], **ref["tolerances"]}
+    w = wording(gid, source, handed_in_function(gid, source), sigs)
+    n = 3 if function == "g" else 5
+    want = np.arange(3.0 * n).reshape(3, n) / 10
+    got = want.copy()
+    got[2, 2] += 0.5
+    args = (function, np.zeros(n), 1e-3)
+    graded = _graded(gid, w, "value", args, got, want, tol)
+    part = w.part("value", args)
+    local = _local(source, part.what, _check_calls(source)[part.what], got, want)
+    unit = "" if function == "g" else " rad/rad"
+    assert graded == local, f"local:  {local}\ngraded: {graded}"
+    assert graded.startswith(f"{what} is {want[2, 2] + 0.5:.4g}{unit}, expected {want[2, 2]:.4g}{unit}: off by "
+                             f"0.5{unit} (tolerance 1e-06{unit}: finite differences)."), graded
