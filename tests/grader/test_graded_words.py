@@ -141,11 +141,15 @@ def test_no_graded_message_names_what_only_the_test_cell_holds(lesson, gid):
 
 
 def _local_units(source: str, outputs: list) -> set[str]:
-    """The units the notebook's check names (``ex.close(..., unit=...)``): for a function's value, the one
-    every value it compares has (none if they differ); for named values, any."""
-    parts = wording("", markup.visible_part(source)).parts
+    """The units the notebook's check names (``ex.close(..., unit=...)``): for a function's value, those of the
+    check that compares it whole (2.1's "Jacobian": m, and rad/rad for its heading row), else the one every value
+    it compares has (none if they differ); for named values, any."""
+    w = wording("", markup.visible_part(source))
+    parts = w.parts
+    if outputs == ["value"] and w.part("value") in parts:   # one check compares the value whole (2.1's "Jacobian")
+        parts = (w.part("value"),)
     per = [set(p.unit) if isinstance(p.unit, tuple) else {p.unit} for p in parts]
-    units = (set.union(*per) if outputs != ["value"] else set.intersection(*per)) if per else set()
+    units = (set.union(*per) if outputs != ["value"] or len(parts) == 1 else set.intersection(*per)) if per else set()
     return {u for u in units if u}
 
 
