@@ -3,7 +3,8 @@
 A Jacobian by central differences of ``tool_pose_2d`` comes within about 1e-11 m of the exact one: inside
 2.1's tolerance (exact math, 1e-9 relative) where the entries are large, outside it where an entry is near 0.
 The hidden cases hold such a pose (the cases module draws one), and so does the visible check, so that answer
-fails both, with the same hint; a right answer in any style (loops, a vectorised sum, ``np.cumsum``) passes both.
+fails both, with the same hint; a right answer in any style (loops, a vectorised sum, ``np.cumsum``, the
+geometric one from the joints' positions) passes both.
 Both sides run here as they run for a student: the lesson's own check cell, and the grader's scoring of the
 hidden cases of several batches against the instructor's answer, at the lesson's tolerances.
 """
@@ -33,6 +34,10 @@ RIGHT = {
              "        J[0, i], J[1, i] = -sx, sy\n    return J",
     "vectorised": "def planar_jacobian(q):\n    phi = np.cumsum(q)\n    M = np.tril(np.ones((5, 5)))   # M[k, i] = 1 for k >= i\n"
                   "    return np.vstack([-(L * np.sin(phi)) @ M, (L * np.cos(phi)) @ M, np.ones(5)])",
+    "geometric": "def planar_jacobian(q):\n    phi = np.cumsum(q)\n"   # the tool's offset from joint i, turned 90 degrees
+                 "    x = np.concatenate([[0.0], np.cumsum(L * np.cos(phi))])\n"
+                 "    y = np.concatenate([[0.0], np.cumsum(L * np.sin(phi))])\n"
+                 "    return np.vstack([-(y[-1] - y[:-1]), x[-1] - x[:-1], np.ones(5)])",
     "cumsum": "def planar_jacobian(q):\n    phi = np.cumsum(q)\n    down = lambda v: np.cumsum(v[::-1])[::-1]\n"
               "    return np.vstack([down(-L * np.sin(phi)), down(L * np.cos(phi)), np.ones(len(q))])",
 }
