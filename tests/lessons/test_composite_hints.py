@@ -21,7 +21,7 @@ from grader.scoring.score import ExerciseScore
 from grader.scoring.verdict import LOCAL, with_local_check
 from snakekit import checks
 from snakekit.errors import CheckFailed
-from snakekit.verdicts import PASSED, composite_note
+from snakekit.verdicts import BUILDS_ON, CAUSES, PASSED, composite_note
 from tests.conftest import need
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -66,10 +66,12 @@ def _hints(source: str) -> list[str]:
 
 @pytest.fixture(autouse=True)
 def _fresh_verdicts():
-    saved = dict(PASSED)
+    """The kernel's verdicts as they were: what a check here passed, failed or built on is not left to other tests."""
+    saved = [(d, dict(d)) for d in (PASSED, CAUSES, BUILDS_ON)]
     yield
-    PASSED.clear()
-    PASSED.update(saved)
+    for d, before in saved:
+        d.clear()
+        d.update(before)
 
 
 def _said(ex, how: str, hint: str) -> str:
