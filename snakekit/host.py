@@ -240,16 +240,6 @@ def realtime() -> Iterator[bool]:
             pass
 
 
-#: Servos emulated in this process, by the port name a client opens (``/dev/pts/3``,
-#: ``socket://127.0.0.1:7800``): ``held_up(since, until)`` says whether this computer held the
-#: emulated servos up between two ``time.perf_counter()`` times, as it may on a busy machine. A real
-#: servo's processor answers whatever the computer does, so a packet exchange that failed while the
-#: emulator was held up is not the bus's failure: the driver tries it again without counting it
-#: (:meth:`snakekit.hardware.bus.Bus.retry`). The emulator adds its port when it starts serving and
-#: removes it when it stops.
-HELD_UP: dict[str, Callable[[float, float], bool]] = {}
-
-
 #: the longest path of a Unix socket (108 bytes with its terminating zero on Linux, 104 on macOS),
 #: less room for the kernel's "-<n>" suffixes
 _SOCKET_PATH_MAX = 96

@@ -23,19 +23,19 @@ import time
 import traceback
 
 from ..errors import ConfigurationError, InputTypeError
-from ..host import HELD_UP, realtime
+from ..host import realtime
 from ..model import SPEC, SnakeSpec
 from ..validate import as_configuration, check_count, check_flag, check_spec, length_of, number, quote
 from . import protocol as p
 from .control_table import FIRMWARE_VERSION_ADDRESS, MODEL_NUMBER_ADDRESS, field_at, to_signed
 from .faults import NO_FAULTS, Faults
-from .holdups import STALL, HoldUps, precise_sleep
 from .motion import MOTION_SOURCES, MotionSource
 from .record import Received, Write
 from .servo import OVERLOAD, EmulatedServo
 from .tcp import FtdiChip, PtyLine, TcpLine
 
 SWITCH_INTERVAL = 0.0005  # s, while an emulator thread runs
+STALL = 0.02  # s: a serve loop later than its wait by more than this was held up by the machine
 _CLASS_LOCK = threading.Lock()
 BAUD_RATES = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
 
@@ -121,7 +121,6 @@ class BusEmulator:
         self._heard = 0.0  # when the last instruction packet reached the servos (the Bus Watchdog's clock)
         #: how long [s] each time the machine held the serve loop up (not counted by the watchdog)
         self.stalls: collections.deque[float] = collections.deque(maxlen=1000)
-        self.holdups = HoldUps()  # the same, as spans of time.perf_counter(), for a driver's tries
         self.faults = faults
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -228,7 +227,6 @@ class BusEmulator:
                     sys.setswitchinterval(min(BusEmulator._saved_switch_interval, SWITCH_INTERVAL))
                 BusEmulator._threads_running += 1
             self._thread = threading.Thread(target=self.serve, name=f"bus-emulator {self.port}", daemon=True)
-            HELD_UP[self.port] = self.holdups.held_up
             self._thread.start()
         return self
 
@@ -236,10 +234,7 @@ class BusEmulator:
         """Answer packets until :meth:`stop` (or Ctrl-C in the foreground), under ``SCHED_FIFO``
         where allowed (``host.realtime``): the servos' processors answer whatever else runs."""
         with realtime():
-            try:
-                self._serve()
-            finally:
-                self.holdups.ended()
+            self._serve()
 
     def _serve(self) -> None:
         advance = getattr(self.motion, "advance", None)
@@ -250,9 +245,7 @@ class BusEmulator:
             wait = 0.005 if watching else 0.05
             if self._chip is not None:
                 wait = self._chip.wait(wait)
-            self.holdups.beat(wait)
             ready, _, _ = select.select(line.readers() + [self._wake_r], [], [], wait)
-            self.holdups.beat(0.0)
             self._not_listening(self.now() - listened - wait)
             if self._chip is not None:
                 self._chip.poll()
@@ -291,8 +284,6 @@ class BusEmulator:
         if self.closed:
             return
         self.closed = True
-        if HELD_UP.get(self.port) == self.holdups.held_up:
-            del HELD_UP[self.port]
         self._stop.set()
         os.write(self._wake_w, b"x")
         if self._thread is not None:
@@ -359,10 +350,10 @@ class BusEmulator:
                     pkt = pkt[:i] + bytes((pkt[i] ^ 0x5A,)) + pkt[i + 1:]
                 out.append((servo, pkt))
         if fault == "delayed":
-            self.holdups.sleep(self._faults.delay_time)
+            time.sleep(self._faults.delay_time)
         for servo, pkt in out:
             if self.timing:
-                self.holdups.sleep(servo.return_delay + len(pkt) * 10 / self.baudrate, precise_sleep)
+                _sleep(servo.return_delay + len(pkt) * 10 / self.baudrate)
             self._send(pkt)
 
     def _watchdog(self, t: float) -> None:
@@ -497,3 +488,13 @@ def _signed(address: int) -> bool:
         return field_at(address).signed
     except KeyError:
         return False
+
+
+def _sleep(seconds: float) -> None:
+    """Sleep ``seconds`` [s], spinning the last 0.2 ms for sub-millisecond precision."""
+    end = time.perf_counter() + seconds
+    if seconds > 3e-4:
+        time.sleep(seconds - 2e-4)
+    while time.perf_counter() < end:
+        pass
+

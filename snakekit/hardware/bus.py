@@ -14,7 +14,6 @@ from typing import Callable
 
 from ..bridge import check_latency_timer, is_url
 from ..errors import BackendError, MissingDependencyError
-from ..host import HELD_UP
 
 try:
     import dynamixel_sdk as sdk
@@ -35,10 +34,6 @@ COMM_RESULTS = {
 }
 #: the longest lag [s] of a late status packet the bus waits out after a failure
 MAX_LATENESS = 0.4
-#: how long [s] one exchange may be tried again uncounted while the computer holds up the emulated
-#: servos (a real servo's processor is never held up; a stall longer than this is the computer's fault
-#: to report)
-MAX_HELD_UP = 10.0
 SUPPORTED_BAUD_RATES = "57600, 1000000, 2000000, 3000000 or 4000000"
 
 
@@ -190,8 +185,6 @@ class Bus:
         self.retries = int(retries)
         #: packets sent again after a loss or corruption, since the bus was opened
         self.retried = 0
-        #: tries made again uncounted: they failed while this computer held the emulated servos up
-        self.held_up_tries = 0
         #: bytes thrown away because no request of ours was waiting for them (late or stray)
         self.stray_bytes = 0
         #: answers refused because more bytes followed them (a late status read as the answer)
@@ -326,9 +319,7 @@ class Bus:
     def retry(self, call: Callable[[], tuple[int, object]], *, answered: bool = True,
               tries: int | None = None) -> tuple[int, object]:
         """:meth:`attempt` ``call()`` (one packet exchange, returning ``(result, value)``), again
-        after each failure, at most ``retries + 1`` times (``tries + 1`` when given). A try that failed
-        while the computer held up servos emulated in this process (``snakekit.host.HELD_UP``) is
-        made again without counting, for at most :data:`MAX_HELD_UP` seconds. Returns the last ``(result, value)``:
+        after each failure, at most ``retries + 1`` times (``tries + 1`` when given). Returns the last ``(result, value)``:
         ``result`` is ``COMM_SUCCESS`` unless every try failed. When every try failed and one of them
         got a corrupt status packet, that is the result: a servo answered, on a noisy line or at
         another baud rate, even if a later try timed out (on a busy computer, the answer came late),
@@ -336,23 +327,15 @@ class Bus:
         """
         retries = self.retries if tries is None else tries
         corrupt = None
-        held_up = HELD_UP.get(self.name)  # servos emulated in this process, which the computer can hold up
-        attempt, deadline = 0, time.perf_counter() + MAX_HELD_UP
-        while True:
-            started = time.perf_counter()
+        for attempt in range(retries + 1):
             result, value = self.attempt(call, answered=answered)
             if result == sdk.COMM_SUCCESS:
                 return result, value
-            ended = time.perf_counter()
-            if held_up is not None and ended < deadline and held_up(started, ended):
-                self.held_up_tries += 1  # the emulated servos were held up by this computer: not a failed try
-                continue
             if result == sdk.COMM_RX_CORRUPT:
                 corrupt = result, value
-            if attempt == retries:
-                return corrupt or (result, value)
-            attempt += 1
-            self.retried += 1
+            if attempt < retries:
+                self.retried += 1
+        return corrupt or (result, value)
 
     def read(self, servo_id: int, address: int, size: int, *, tries: int | None = None) -> tuple[int, int, int]:
         """One READ with retries (``tries``: how many, default :attr:`retries`): ``(result, value,
