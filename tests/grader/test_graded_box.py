@@ -267,6 +267,7 @@ def test_a_wrong_entry_is_named_by_its_label_and_unit_locally_and_graded(lesson,
     from snakekit import checks
     from snakekit.errors import CheckFailed
     from grader.scoring.score import _compare_case
+    from snakekit.closeness import entry_name
 
     w = wording(gid, _lesson(lesson)[0][gid])
     shape = (rows, len(part.labels)) if rows else (len(part.labels),)
@@ -275,7 +276,9 @@ def test_a_wrong_entry_is_named_by_its_label_and_unit_locally_and_graded(lesson,
         got = want.copy()
         got[(0, column) if rows else column] = 2.0
         unit = part.unit_at((column,))
-        name = f"{part.what}[0] {label}" if rows else f"{part.what} {label}"
+        # "tool heading", "violations[0] time"; a name that is a phrase has the entry first ("x of tip of solution")
+        name = entry_name(part.what, (0, column) if rows else (column,), 2 if rows else 1, part.labels)
+        assert label in name and part.what in name, name
         shown = f"is 2{' ' + unit if unit else ''}, expected 1{' ' + unit if unit else ''}"
         key = "_".join(part.what.split())   # a result named in the part's words (3.4 compares two: pose and tool)
         graded = _compare_case(w, {key: got}, {key: want}, {"rtol": 1e-9, "atol": 1e-12})
