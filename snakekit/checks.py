@@ -459,6 +459,11 @@ class waiting_for(contextlib.AbstractContextManager):
                     roots += [m for m in (failing_parts(n) or [n]) if m not in roots]
                 via = [n for n in weak if n not in roots]
                 names = " and ".join(roots)
+                if all("not written yet" in CAUSES.get(n, "") for n in roots):   # stubs still: write them
+                    them = "it" if len(roots) == 1 else "them"
+                    print(f"This cell waits for exercise {names} (`{value.name}` is not defined yet): write {them}, "
+                          f"run {them}, then run this cell again.")
+                    return True
                 made = f"your {' and '.join(via)}, which uses your {names}" if via else f"your {names}"
                 fails = "fails its check" if len(roots) == 1 else "fail their checks"
                 said = "; ".join(f"{n}: {CAUSES.get(n, 'see its check cell').rstrip('.')}" for n in roots)
