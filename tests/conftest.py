@@ -102,6 +102,19 @@ def graded_classes(tmp_path_factory):
     return graded
 
 
+@pytest.fixture
+def fresh_verdicts():
+    """The kernel's verdicts as they were: what a check passed, failed or built on in a test is not left to
+    other tests (snakekit.verdicts' PASSED, CAUSES and BUILDS_ON)."""
+    from snakekit.verdicts import BUILDS_ON, CAUSES, PASSED
+
+    saved = [(d, dict(d)) for d in (PASSED, CAUSES, BUILDS_ON)]
+    yield
+    for d, before in saved:
+        d.clear()
+        d.update(before)
+
+
 @pytest.fixture(scope="session")
 def graded_slips(tmp_path_factory):
     """``lesson -> graded course folder``: a lesson's known mistakes (tests/grader/test_hints_graded.py's

@@ -65,13 +65,8 @@ def _hints(source: str) -> list[str]:
 
 
 @pytest.fixture(autouse=True)
-def _fresh_verdicts():
-    """The kernel's verdicts as they were: what a check here passed, failed or built on is not left to other tests."""
-    saved = [(d, dict(d)) for d in (PASSED, CAUSES, BUILDS_ON)]
-    yield
-    for d, before in saved:
-        d.clear()
-        d.update(before)
+def _fresh_verdicts(fresh_verdicts):
+    """The kernel's verdicts as they were after each test here (tests/conftest.py)."""
 
 
 def _said(ex, how: str, hint: str) -> str:

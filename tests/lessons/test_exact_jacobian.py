@@ -47,15 +47,8 @@ FINITE = ("def planar_jacobian(q, h=1e-6):\n    q = np.asarray(q, dtype=float)\n
 
 
 @pytest.fixture(autouse=True)
-def _fresh_verdicts():
-    """The kernel's verdicts as they were: what the lesson's checks passed or failed here is not left to other tests."""
-    from snakekit.verdicts import BUILDS_ON, CAUSES, PASSED
-
-    saved = [(d, dict(d)) for d in (PASSED, CAUSES, BUILDS_ON)]
-    yield
-    for d, before in saved:
-        d.clear()
-        d.update(before)
+def _fresh_verdicts(fresh_verdicts):
+    """The kernel's verdicts as they were after each test here (tests/conftest.py)."""
 
 
 def _lesson():
