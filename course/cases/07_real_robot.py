@@ -21,7 +21,7 @@ def ex07_1_ticks_test(rng, spec):
 
 def ex07_2_safe_move_test(rng, spec):
     """graded_safe_move(start, target, margin): two moves from a bent pose, a short one (0.2 s at least),
-    and two targets too close to the limits (one only because of a wide margin)."""
+    and two targets too close to the limits, one on each side (one only because of a wide margin)."""
     start = rng.uniform(-0.4, 0.4, 5)
     cases = [(start, rng.uniform(-0.6, 0.6, 5), 0.05), (rng.uniform(-0.4, 0.4, 5), rng.uniform(-0.6, 0.6, 5), 0.1)]
     cases.append((start, start + rng.uniform(-0.05, 0.05, 5), 0.05))
@@ -29,8 +29,8 @@ def ex07_2_safe_move_test(rng, spec):
     j = int(rng.integers(5))
     near[j] = float(rng.choice([-1.0, 1.0]) * rng.uniform(spec.upper - 0.04, spec.upper))
     cases.append((np.zeros(5), near, 0.05))
-    wide = np.zeros(5)
-    wide[int(rng.integers(5))] = float(rng.uniform(1.1, 1.3))
+    wide = np.zeros(5)   # on the other side from the near one: a refusal of one side only fails one of the two
+    wide[int(rng.integers(5))] = -np.sign(near[j]) * float(rng.uniform(1.1, 1.3))
     cases.append((np.zeros(5), wide, 0.5))
     return cases
 

@@ -156,6 +156,26 @@ def test_6_1s_visible_check_holds_a_rate_where_arange_to_points_over_rate_gives_
     assert any(_arange_to_the_end(n, f).shape != (n,) for n, f in visible), visible
 
 
+def _refused_sides(targets, margin_of):
+    """The signs of the targets of 7.2 that a right answer refuses (an angle beyond spec.upper - margin)."""
+    return {float(np.sign(t[np.abs(t) > SPEC.upper - m]).min()) for t, m in zip(targets, margin_of)
+            if (np.abs(t) > SPEC.upper - m).any()}
+
+
+@pytest.mark.parametrize("seed", range(100))
+def test_every_draw_of_7_2_refuses_a_target_on_each_side_so_a_one_sided_limit_check_fails(seed):
+    cases = _cases("07_real_robot", "ex07_2_safe_move_test", seed)
+    assert _refused_sides([np.asarray(t) for _, t, _ in cases], [m for *_, m in cases]) == {-1.0, 1.0}, cases
+
+
+def test_7_2s_visible_check_refuses_a_target_on_each_side():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex07_2_safe_move_test"]
+    refused = [(np.array(eval(t)), float(m or 0.05))
+               for t, m in re.findall(r"^check_refused\(np\.array\((\[[^]]*\])\)(?:, margin=([\d.]+))?\)", source, re.M)]
+    assert len(refused) >= 2, source
+    assert _refused_sides([t for t, _ in refused], [m for _, m in refused]) == {-1.0, 1.0}, refused
+
+
 def _lag(run, joint, step, measure="rms"):
     """6.4 as the lesson asks (lags 0 to 0.5 s, ``step`` apart; samples from 0.5 s after the first goal), the
     agreement measured by the rms, or by the mean absolute difference (``measure="mae"``)."""

@@ -644,6 +644,10 @@ MISTAKES = {
          "    if np.any(np.abs(q) > spec.upper - margin):\n        raise ValueError('too close')\n"
          "    d = np.abs(q - robot.read().positions).max()\n"
          "    return robot.move_to(q, max(1.875 * d / 1.5, 0.2))", "raise snakekit.LimitError"),
+        ("ex07_2_safe_move_test", "def safe_move(robot, q, margin=0.05):\n    q = np.asarray(q, dtype=float)\n"
+         "    if np.any(q > spec.upper - margin):\n        raise snakekit.LimitError('too close')\n"
+         "    d = np.abs(q - robot.read().positions).max()\n"
+         "    return robot.move_to(q, max(1.875 * d / 1.5, 0.2))", "the limits hold on both sides"),
         ("ex07_3_fault_test", "def recover(robot):\n    for i in robot.ids:\n        robot.reboot(i)\n"
          "    robot.torque_on()\n    return list(robot.ids)", "reboot only the servos")],
     "08_ros": [
