@@ -128,5 +128,5 @@ def progress_report(folder=None, *, out=None) -> int:
     todo = {"failed": f"fix it: its check says \"{s.message}\"",
             "not written": "write it in its answer cell, then run its check cell",
             "not checked": "run its check cell (and the cells above it)"}[s.state]
-    print(f"Next: exercise {s.number} in {lesson} ({s.points:g} points): {todo}", file=out)
+    print(f"Next: exercise {s.number} in {lesson} ({s.points:g} point{'' if s.points == 1 else 's'}): {todo}", file=out)
     return 0

@@ -82,7 +82,8 @@ def ik_loop(args, result, tol):
         return False, why
     off = float(np.abs(_tool_xy(q)[0] - target).max())
     if ((q < SPEC.lower - 1e-12) | (q > SPEC.upper + 1e-12)).any():
-        return False, f"q={np.round(q, 4).tolist()} is outside the joint limits {SPEC.lower}..{SPEC.upper} rad."
+        return False, (f"q={np.round(q, 4).tolist()} is outside the joint limits {SPEC.lower}..{SPEC.upper} rad. "
+                       + (CLAMP_AT_LIMITS if (np.abs(q) <= np.pi / 2 + 1e-9).all() else CLAMP_EVERY_STEP))
     if len(args) > 1 and args[1] is not None:
         q0 = np.asarray(args[1], dtype=float)
         far = np.abs(q - q0)
@@ -103,6 +104,10 @@ NEAR = 100.0
 #: 3.3: from a start q0 near a solution the lesson's loop ends within 0.25 rad of q0 (the cases are drawn so);
 #: ignoring q0 it ends 1 rad away or more. 0.5 rad [each joint] lies between the two.
 START_NEAR = 0.5
+#: 3.3: what to do when q leaves the limits, in the words of the notebook's check: a clamp at +-pi/2 (1.5708 rad)
+#: lets a joint 0.8 mrad past them; none lets it anywhere.
+CLAMP_AT_LIMITS = "Clamp at the arm's limits, spec.lower and spec.upper (+-1.57 rad), not at +-pi/2."
+CLAMP_EVERY_STEP = "Clamp q after every step: np.clip(q, spec.lower, spec.upper)."
 #: 3.3: what to do, in the words of the notebook's check.
 START_HINT = "Start from q0 when it is given: q = np.zeros(5) if q0 is None else np.asarray(q0, dtype=float)."
 
@@ -129,6 +134,15 @@ def task1(args, result, tol):
         return False, (f"move {k + 1} to ({targets[k, 0]:.4f}, {targets[k, 1]:.4f}) m ended with the tool at "
                        f"({tool[k, 0]:.4f}, {tool[k, 1]:.4f}) m, {off[k] * 1000:.3g} mm off (tolerance "
                        f"{tol['atol'] * 1000:.3g} mm).")
+    turned = np.array([tool_pose_2d(row)[2] for row in q])
+    off = np.angle(np.exp(1j * (turned - targets[:, 2])))
+    bad = np.nonzero(np.abs(off) > HEADING_TOL)[0]
+    if len(bad):
+        k = int(bad[0])
+        target = tuple(round(float(v), 4) for v in targets[k])
+        return False, (f"move {k + 1} to target {target} ended with the tool's heading at {turned[k]:.4f} rad, "
+                       f"{off[k]:+.3g} rad from the target's (tolerance {HEADING_TOL:g} rad: the servos settle within "
+                       f"a few mrad). {HEADING_HINT[0].upper()}{HEADING_HINT[1:]}")
     if "poses" in result:
         poses, why = _value(result, (len(targets), 3), "task1", "poses")
         if poses is None:   # what it looks like, in the words of the notebook's check
@@ -151,6 +165,11 @@ def task1(args, result, tol):
 
 #: 3.4: a returned pose is the measured one within 1e-6 (m, rad): the same numbers, computed as the exercise says.
 POSE_TOL = 1e-6
+#: 3.4: each move ends turned to its target's heading: the five joints' settling adds up to a few mrad (at most
+#: 5.2 mrad in 15 moves), and a heading left out or given in degrees is off by tenths of a radian or more.
+HEADING_TOL = 0.05
+#: 3.4: what to do, in the words of the notebook's check.
+HEADING_HINT = "each target is (x, y, heading), the heading in radians: pass all three, panel.set_target(x, y, heading)."
 
 
 #: grade id -> rule. The tolerances come from the reference (the cases module's TOLERANCES, else references.OVERRIDES).

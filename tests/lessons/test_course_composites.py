@@ -27,7 +27,7 @@ LESSONS = sorted(p.name for p in (COURSE / "source").iterdir() if (p / f"{p.name
 
 #: Composites whose check cell runs them with the kit's own part in place of the student's, locally
 #: and graded alike, so a slip in the part never reaches them (the hand-in procedure swaps it in).
-INDEPENDENT = {"ex03_3_ik_loop_test": 'globals()["dls_step"] = snakekit.kinematics.dls_step'}
+INDEPENDENT = {"ex03_3_ik_loop_test": 'globals()["dls_step"] = lesson_step'}
 
 
 def _cells(lesson: str):

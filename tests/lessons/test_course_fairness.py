@@ -156,6 +156,32 @@ def test_6_1s_visible_check_holds_a_rate_where_arange_to_points_over_rate_gives_
     assert any(_arange_to_the_end(n, f).shape != (n,) for n, f in visible), visible
 
 
+def _loop_clamped_at(target, limit):
+    """3.3's loop from home with the kit's DLS step, clamped at +-``limit``: where it ends, or None."""
+    from snakekit.kinematics import dls_step, tool_pose_2d
+
+    q = np.zeros(5)
+    for _ in range(200):
+        if np.linalg.norm(np.asarray(target) - tool_pose_2d(q)[:2]) < 1e-6:
+            return q
+        q = np.clip(dls_step(q, target), -limit, limit)
+    return None
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_every_draw_of_3_3_holds_a_target_where_a_clamp_at_pi_over_2_leaves_a_joint_past_the_limits(seed):
+    ends = [_loop_clamped_at(c[0], np.pi / 2) for c in _cases("03_inverse_kinematics", "ex03_3_ik_loop_test", seed)
+            if len(c) == 1 and np.linalg.norm(c[0]) < SPEC.reach]
+    assert any(q is not None and (np.abs(q) > SPEC.upper + 1e-12).any() for q in ends), seed
+
+
+def test_3_3s_visible_check_holds_a_target_where_a_clamp_at_pi_over_2_leaves_a_joint_past_the_limits():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex03_3_ik_loop_test"]
+    targets = [np.array(eval(t)) for t in re.findall(r"^check_ik\(np\.array\((\[[^]]*\])\)\)", source, re.M)]
+    ends = [_loop_clamped_at(t, np.pi / 2) for t in targets]
+    assert any(q is not None and (np.abs(q) > SPEC.upper + 1e-12).any() for q in ends), targets
+
+
 def _refused_sides(targets, margin_of):
     """The signs of the targets of 7.2 that a right answer refuses (an angle beyond spec.upper - margin)."""
     return {float(np.sign(t[np.abs(t) > SPEC.upper - m]).min()) for t, m in zip(targets, margin_of)

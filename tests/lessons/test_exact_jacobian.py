@@ -123,3 +123,52 @@ def test_the_hidden_cases_hold_a_pose_where_finite_differences_miss():
         exact = planar_jacobian(q)
         assert np.abs(exact[0, 2:]).min() < 5e-4
         assert worst(finite(q), exact, bound(exact, atol=1e-12, rtol=1e-9)) is not None
+
+
+# 2.2: a nudge made in place and undone (q[i] += h, then -= 2h, then += h) leaves q as it was to rounding: the
+# check passes it, as the grader does; one not undone changes q, and both refuse it (the check names the copy).
+IN_PLACE = ("def numerical_jacobian(f, q, h=1e-6):\n    qp = q\n    columns = []\n    for i in range(len(q)):\n"
+            "        qp[i] += h\n        fp = np.asarray(f(qp))\n        qp[i] -= 2 * h\n        fm = np.asarray(f(qp))\n"
+            "{undo}        columns.append((fp - fm) / (2 * h))\n    return np.column_stack(columns)")
+FD_GID = "ex02_2_numerical_jacobian_test"
+
+
+def _local_fd(cells, answer: str) -> str:
+    namespace = _function(cells, answer)
+    exec(cells[GID].split("\n\nex = ")[0], namespace)   # the shortcuts 2.1's cell names, 2.2's cell forbids too
+    try:
+        exec(cells[FD_GID], namespace)
+    except CheckFailed as e:
+        return str(e)
+    return ""
+
+
+def _graded_fd(cells, answer: str, seed: int):
+    cases = draw(COURSE, "02_jacobian", seed=seed).cases[FD_GID]
+    mine = _function(cells, answer)
+    theirs = _function(cells, cells["ex02_2_numerical_jacobian"].replace("### BEGIN SOLUTION", "")
+                       .replace("### END SOLUTION", ""))
+    for ns in (mine, theirs):
+        exec(cells[FD_GID].split("\nex = ")[0], ns)   # the test functions the hidden cases name, and graded_fd
+    tol = {**DEFAULT_TOLERANCES["values"], **Reference.load(REFERENCES / "02_jacobian.npz").exercises[FD_GID]["tolerances"]}
+    expected = Expected(FD_GID, "values", cases, [{"value": theirs["graded_fd"](*c)} for c in cases], tol, "numerical_jacobian")
+    return score_exercise(FD_GID, [{"value": mine["graded_fd"](*c)} for c in cases], expected, 3.0)
+
+
+def test_a_nudge_made_in_place_and_undone_passes_2_2_both_ways():
+    cells = _lesson()
+    answer = IN_PLACE.format(undo="        qp[i] += h\n")
+    assert _local_fd(cells, answer) == ""
+    for seed in (1, 2):
+        verdict = _graded_fd(cells, answer, seed)
+        assert verdict.score == verdict.max_score, verdict.message
+
+
+def test_a_nudge_made_in_place_and_not_undone_fails_2_2_both_ways():
+    cells = _lesson()
+    answer = IN_PLACE.format(undo="")
+    said = _local_fd(cells, answer)
+    assert "changed the q it was given" in said and "does not copy an array" in said, said
+    for seed in (1, 2):
+        verdict = _graded_fd(cells, answer, seed)
+        assert verdict.score < verdict.max_score, verdict.message

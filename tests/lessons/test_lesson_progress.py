@@ -77,7 +77,9 @@ def test_progress_shows_each_lesson_the_total_and_what_is_next(folder):
     assert f"{L0:<{len(L1)}}  0 of {len(points0)} exercises passed, 0 of {sum(points0.values()):g} points  (not started)" in shown
     assert (f"{L1}  1 of 3 exercises passed, {p1:g} of {total1:g} points  (1.2 failed, 1.3 not written)") in shown
     assert f"total{' ' * (len(L1) - 5)}  1 of {3 + len(points0)} exercises passed, {p1:g} of {total:g} points" in shown
-    assert f"Next: exercise 0.1 in {L0} ({points0['ex00_1_tool_distance_test']:g} points): write it" in shown
+    worth = points0["ex00_1_tool_distance_test"]   # 1 point: "(1 point)", never "(1 points)"
+    assert f"Next: exercise 0.1 in {L0} ({worth:g} point{'' if worth == 1 else 's'}): write it" in shown
+    assert " 1 points)" not in shown
 
 
 def test_in_a_graded_copy_the_cell_says_where_progress_shows_instead_of_not_started(folder, monkeypatch):

@@ -465,7 +465,11 @@ MISTAKES = {
         ("ex03_3_ik_loop_test", "def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n    q = np.zeros(5)\n"
          "    for _ in range(max_iter):\n        if np.linalg.norm(np.asarray(target) - snakekit.tool_pose_2d(q)[:2]) < tol:\n"
          "            return q\n        q = np.clip(dls_step(q, target), spec.lower, spec.upper)\n"
-         "    raise ValueError('no solution')", "Start from q0 when it is given")],
+         "    raise ValueError('no solution')", "Start from q0 when it is given"),
+        ("ex03_3_ik_loop_test", _SOLVE.replace("spec.lower, spec.upper", "-np.pi / 2, np.pi / 2").replace(
+            "    return q", "    return q\n    raise ValueError('no solution')"), "not at +-pi/2"),
+        ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])").replace(
+            "set_target(x, y, heading)", "set_target(x, y)"), "the heading in radians: pass all three")],
     "04_trajectories": [
         ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.asarray(t, dtype=float) / T, 0, 1)\n"
          "    return 3 * r ** 2 - 2 * r ** 3", "this is the cubic"),
