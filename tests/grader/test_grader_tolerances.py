@@ -97,3 +97,21 @@ def test_a_tolerance_given_twice_is_refused_naming_both_homes(tmp_path, monkeypa
                             "and in the cases module's TOLERANCES; keep it in the cases module (course/cases/) alone")
     monkeypatch.setitem(references.OVERRIDES, A, {GID: {"rtol": 1e-6}})
     assert references.tolerances(A, GID, "values", batch, [])["atol"] == 1e-7
+
+
+def test_3_1_is_judged_with_one_tolerance_in_the_notebook_and_graded():
+    """3.1's tip tolerance is one number: the check cell's TIP_TOL is the grader's atol (they once were 1 nm locally
+    and 0.1 um graded, so a tip 5e-8 m off passed graded and failed in the notebook)."""
+    import re
+
+    import nbformat
+
+    nb = nbformat.read(COURSE / "source" / "03_inverse_kinematics" / "03_inverse_kinematics.ipynb", as_version=4)
+    source = next(c.source for c in nb.cells
+                  if c.metadata.get("nbgrader", {}).get("grade_id") == "ex03_1_two_link_ik_test")
+    local = float(re.search(r"^TIP_TOL = ([\d.e+-]+)", source, re.M).group(1))
+    assert re.findall(r"tol=([^,)]+)", source) == ["TIP_TOL"] * len(re.findall(r"tol=", source)), \
+        "every tolerance of 3.1's check is TIP_TOL"
+    graded = draw(COURSE, "03_inverse_kinematics", seed=1).settings["ex03_1_two_link_ik_test"]["tolerances"]
+    assert graded["atol"] == local == 1e-7
+    assert graded["rtol"] == 1e-9   # the check's close() default rtol
