@@ -246,9 +246,11 @@ def _compare_case(w: Wording, got: dict, want: dict, tol: dict, case=()) -> str:
     for name, e in want.items():
         part = w.part(name, case)
         if name not in got:
-            return f"your result has no {part.what}."
+            return f"your result does not say {part.what}." if part.said else f"your result has no {part.what}."
         g, e = np.asarray(got[name]), np.asarray(e)
         if e.dtype.kind == "b" and g.shape == e.shape and not np.array_equal(g.astype(bool), e):
+            if part.said:   # a yes or no, said as what it means (wording.WORDS), never "refused is True"
+                return f"{part.said[0 if bool(np.all(g)) else 1]}."
             return f"{part.what} is {bool(np.all(g))}, expected {bool(np.all(e))}."
         g, e = g.astype(float), e.astype(float)
         if g.shape != e.shape:
@@ -305,7 +307,7 @@ def _cases_check(ok, why, name: str = "hidden cases", weight: float = 1.0) -> co
 
 def _trajectory(d: dict, times: str, positions: str, what: str) -> Trajectory:
     if times not in d or positions not in d:
-        raise ValueError(f"no {what} in your result ('{times}' and '{positions}')")
+        raise ValueError(f"your result holds no {what}")
     try:
         return Trajectory(d[times], d[positions])
     except (SnakekitError, ValueError) as e:
