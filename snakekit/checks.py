@@ -49,11 +49,11 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CheckFailed, ConfigurationError, ShortcutError
-from .handin import Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
+from .handin import NotAnArray, Returned, ReturnedNone, encode_results, fetch_cases, live_off, quick
 from .mistakes import either, error_hint, known_mistake, mistake_hint, pose_mistakes, scaled, shape_hint, within
 from .closeness import ZERO, bound, entry_name, is_table, not_finite, per_row, sentence, unit_of, worst
 from .verdicts import BUILDS_ON, CAUSES, PASSED, composite_note, failing_parts, stopped_note
-from .watch import calls_to, forgot_return, raised_in, returns_none
+from .watch import calls_to, forgot_return, listed, not_an_array, raised_in, returns_none
 
 __all__ = ["CheckFailed", "ShortcutError", "Exercise", "calls_to", "either", "forbid", "known_mistake", "live_off",
            "per_row", "pose_mistakes", "quick", "scaled", "waiting_for", "within"]
@@ -105,10 +105,15 @@ class Exercise:
     Args:
         number: the exercise number as the lesson shows it, e.g. ``"1.1"``.
         name: the name of what the student writes, e.g. ``"planar_fk"``.
+        array: the exercise's text asks for a numpy array (True), or for a tuple of them, named
+            (``("times", "positions")``): a Python list or tuple the student's function returns there fails
+            the check, and is graded wrong, in the same words (:func:`snakekit.watch.not_an_array`): the one
+            rule of the course, declared here once for both.
     """
 
-    def __init__(self, number: str, name: str, *, builds_on: tuple = ()):
+    def __init__(self, number: str, name: str, *, builds_on: tuple = (), array: bool | tuple = False):
         self.number, self.name = number, name
+        self.array = array
         self.builds_on = tuple(builds_on)
         self.checked = 0
         PASSED.pop(number, None)      # run again: its verdict is this run's
@@ -158,10 +163,15 @@ class Exercise:
         except Exception as e:
             if none:   # the student's function gave back None, and the check stumbled on it
                 self.fail(forgot_return(self.name, self._call(args, where)))
+            if none.returned and listed(none.value, self.array):   # ...or a list, where an array is asked
+                self.fail(not_an_array(self.name, *listed(none.value, self.array), self._call(args, where)))
             self.fail(f"`{self.name}` raised {type(e).__name__} when called with {self._call(args, where)}: {e}",
                       error_hint(e), student_frames=_student_frames(e.__traceback__))
         if result is None or none:
             self.fail(forgot_return(self.name, self._call(args, where)))
+        bad = listed(none.value, self.array) if none.returned else None
+        if bad:   # a list where the exercise asks for an array: the course's one rule, graded alike (hand_in)
+            self.fail(not_an_array(self.name, *bad, self._call(args, where)))
         return result
 
     @staticmethod
@@ -232,14 +242,14 @@ class Exercise:
                 near a value, a loop stopped too early); when ``got`` is one, within the check's own tolerance
                 (the tolerance times the factor for ``scaled``, the spread for ``within``), its hint is shown.
             array: the exercise asks for a numpy array: a list or tuple fails (with what to do),
-                since the lesson's later cells index the result as an array.
+                since the lesson's later cells index the result as an array. (An exercise declares it once,
+                ``Exercise(..., array=True)``, which judges what the student's function returns.)
         """
         exp = np.asarray(expected, dtype=float)
         if got is None:
             self.fail(forgot_return(self.name, str(where) if where is not None else ""))
-        if array and isinstance(got, (list, tuple)):
-            self.fail(f"{what}{_where(where)} is a Python {type(got).__name__}, not a numpy array: return "
-                      f"np.array(...) (the cells below use array operations on it, such as [:, 0]).")
+        if array and isinstance(got, (list, tuple)):   # the words of the course's one rule (Exercise's array)
+            self.fail(not_an_array(self.name, type(got).__name__, where="" if where is None else str(where)))
         try:
             arr = np.asarray(got, dtype=float)
         except (TypeError, ValueError):
@@ -309,6 +319,8 @@ class Exercise:
                         results[-1] = Returned(self.name, none.returned)
                 if none:   # named as the forgotten `return` it is, whatever the wrapper made of the None
                     results[-1] = ReturnedNone(self.name)
+                elif none.returned and listed(none.value, self.array):   # as the visible check says it (__call__)
+                    results[-1] = NotAnArray(self.name, *listed(none.value, self.array))
         path = Path(folder) / f"{grade_id}.npz"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(encode_results(results, array=array))

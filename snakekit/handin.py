@@ -103,6 +103,24 @@ class Returned:
     def __init__(self, name: str, what: str):
         self.name, self.what = name, what
 
+    def said(self) -> str:
+        """As the hand-in file holds it: ``"returned tuple from task2_sweep"``."""
+        return f"returned {self.what} from {self.name}"
+
+
+class NotAnArray(Returned):
+    """A case at which the student's function ``name`` returned a Python list or tuple (``what``) where the
+    exercise asks for a numpy array (``part``: which of a pair of results): handed in as ``"not an array: list
+    from two_link_ik"`` (``"not an array: list times from read_joint_states"``), and graded wrong in the words of
+    the notebook's check (:func:`snakekit.watch.not_an_array`)."""
+
+    def __init__(self, name: str, what: str, part: str = ""):
+        super().__init__(name, what)
+        self.part = part
+
+    def said(self) -> str:
+        return f"not an array: {self.what}{' ' + self.part if self.part else ''} from {self.name}"
+
 
 class ReturnedNone(Returned):
     """A case at which the student's function ``name`` returned None (a forgotten ``return``),
@@ -122,7 +140,7 @@ def encode_results(results, *, array: bool = False) -> bytes:
     arrays = {"__cases__": np.array(len(results))}
     for k, r in enumerate(results):
         if isinstance(r, Returned):
-            arrays[f"{k}/__error__"] = np.array(f"returned {r.what} from {r.name}")
+            arrays[f"{k}/__error__"] = np.array(r.said())
             continue
         if isinstance(r, BaseException):
             arrays[f"{k}/__error__"] = np.array(f"{type(r).__name__}: {whole_sentences(str(r))}")

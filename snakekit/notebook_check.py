@@ -19,6 +19,7 @@ import warnings
 from pathlib import Path
 
 from . import host
+from .cells import cell_name
 from .errors import FileFormatError
 
 #: What to do with a lesson file that can't be used as it is.
@@ -74,11 +75,11 @@ def read_lesson(path):
             continue
         gid, points = meta.get("grade_id"), meta.get("points", 0)
         if not isinstance(gid, str) or not gid:
-            raise FileFormatError(f"{path}: cell {index + 1} is a graded cell without a grade id (its nbgrader "
+            raise FileFormatError(f"{path}: {cell_name(nb.cells, index)} is a graded cell without a grade id (its nbgrader "
                                   f"metadata was changed); {FRESH_COPY}")
         if isinstance(points, bool) or not isinstance(points, (int, float)) or not math.isfinite(points) \
                 or points < 0:
-            raise FileFormatError(f"{path}: graded cell {gid} (cell {index + 1}) has points {points!r}, not a "
+            raise FileFormatError(f"{path}: {cell_name(nb.cells, index)} (graded cell {gid}) has points {points!r}, not a "
                                   f"number >= 0 (its nbgrader metadata was changed); {FRESH_COPY}")
     return nb
 
@@ -128,13 +129,13 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
         try:
             client.execute(stderr=log)
         except CellTimeoutError:
-            stopped = (f"cell {running[-1] + 1} ran longer than {timeout:g} s and did not stop when interrupted "
+            stopped = (f"{cell_name(nb.cells, running[-1])} ran longer than {timeout:g} s and did not stop when interrupted "
                        "(a loop inside a compiled library, or a long run: run it in JupyterLab to see, or give "
                        "more time with --timeout)")
         except DeadKernelError:
             log.seek(0)
             said = [line.strip() for line in log if line.strip() and "WARNING" not in line]
-            where = f"while running cell {running[-1] + 1}" if running else "before the first cell"
+            where = f"while running {cell_name(nb.cells, running[-1])}" if running else "before the first cell"
             stopped = (f"the Python kernel died {where} (the process ended: os._exit, a crash in a compiled "
                        "library, or out of memory)" + (f"; its last words: {said[-1][:200]}" if said else "")
                        + "; restart the kernel in JupyterLab and run that cell to see")
@@ -152,7 +153,7 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
             if index >= last:
                 failed += 1
                 rows.append((meta["grade_id"], points, "FAILED", "stopped here (see below)" if index == last
-                             else f"not run (cell {last + 1} stopped the run)"))
+                             else f"not run ({cell_name(nb.cells, last)} stopped the run)"))
             elif index in interrupted:
                 failed += 1
                 rows.append((meta["grade_id"], points, "FAILED", _runaway(timeout)))
@@ -166,7 +167,7 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
                 got += points
                 rows.append((meta["grade_id"], points, "passed", ""))
         elif errors or index in interrupted:
-            where = f"answer cell {meta.get('grade_id')}" if meta.get("solution") else f"cell {index + 1}"
+            where = cell_name(nb.cells, index)
             others.append(f"{where}: " + (_runaway(timeout) if index in interrupted
                                           else f"{errors[0].ename}: {str(errors[0].evalue).strip()}"))
     width = max(len(r[0]) for r in rows)

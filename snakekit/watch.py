@@ -5,7 +5,9 @@ own (a loop that calls the student's step, a check that runs the student's task 
 arm). Two things are seen from outside through :func:`sys.settrace` (on that function's frames
 only), leaving every name in place: the arguments of each call (:func:`calls_to`, to draw the steps a loop took) and a call
 that returned None (:func:`returns_none`: a forgotten ``return``, named as such wherever the
-wrapper then stumbles). :func:`forgot_return` is the one message for it, locally and graded.
+wrapper then stumbles). :func:`forgot_return` is the one message for it, locally and graded; so is
+:func:`not_an_array` for a Python list or tuple returned where the exercise asks for a numpy array
+(:func:`listed` tells one, from the value the student's function returned).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import sys
 
 import numpy as np
 
-__all__ = ["calls_to", "forgot_return", "raised_in", "returns_none"]
+__all__ = ["calls_to", "forgot_return", "listed", "not_an_array", "raised_in", "returns_none"]
 
 _RETURNS = {dis.opmap[name] for name in ("RETURN_VALUE", "RETURN_CONST") if name in dis.opmap}
 
@@ -93,9 +95,44 @@ def raised_in(error: BaseException, fn) -> bool:
 
 class _Returns(list):
     """The calls that returned None (:func:`returns_none`); ``returned``: the type of the last value returned
-    that was not None ("" if none was)."""
+    that was not None ("" if none was), and ``value`` that value."""
 
     returned = ""
+    value = None
+
+
+def not_an_array(name: str, kind: str, part: str = "", where: str = "") -> str:
+    """What a student reads when their function returned a Python list or tuple (``kind``) where the exercise
+    asks for a numpy array (``part``: which of a pair of results), locally and graded alike: the same rule in
+    every exercise whose text asks for an array (:class:`snakekit.checks.Exercise`'s ``array``).
+
+    >>> not_an_array("two_link_ik", "list")
+    'two_link_ik returned a Python list, not a numpy array: the exercise asks for an array, and the cells after it use it as one; return np.array(...) of it.'
+    >>> not_an_array("read_joint_states", "list", "times", "the bag a.mcap")[:74]
+    'read_joint_states returned times as a Python list when called with the bag'
+    """
+    at = f" when called with {where}" if where else ""
+    return (f"{name} returned {part + ' as ' if part else ''}a Python {kind}{at}, not a numpy array: the exercise asks "
+            f"for an array, and the cells after it use it as one; return np.array(...) of it.")
+
+
+def listed(value, array) -> tuple[str, str] | None:
+    """Whether ``value``, what a student's function returned, is a list or tuple where ``array`` asks for numpy
+    arrays (True: the value itself; a tuple of names: a tuple of that many arrays, ``("times", "positions")``):
+    ``(kind, part)`` of the first one that is not, else None. A number stays a number (a scalar input's result).
+
+    >>> listed([1.0, 2.0], True), listed(np.zeros(2), True), listed(0.5, True)
+    (('list', ''), None, None)
+    >>> listed((np.zeros(2), [[0.0] * 5]), ("times", "positions")), listed((1.0, 2.0), True)
+    (('list', 'positions'), ('tuple', ''))
+    """
+    if not array:
+        return None
+    if array is True:
+        return (type(value).__name__, "") if isinstance(value, (list, tuple)) else None
+    if isinstance(value, (list, tuple)) and len(value) == len(array):
+        return next(((type(v).__name__, name) for name, v in zip(array, value) if isinstance(v, (list, tuple))), None)
+    return None
 
 
 @contextlib.contextmanager
@@ -121,7 +158,7 @@ def returns_none(fn):
         if value is None:
             seen.append(frame.f_code.co_name)
         else:
-            seen.returned = type(value).__name__
+            seen.returned, seen.value = type(value).__name__, value
 
     if code is None:
         yield seen

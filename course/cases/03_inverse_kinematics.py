@@ -8,13 +8,16 @@ ValueError there, so the student's must raise one.
 
 import numpy as np
 
-#: The grader's tolerances per grade id: 3.1 the tip on the target (0.1 um: the textbook triangle
-#: method, q2 = acos(c), loses precision near c = 1, and at the fully stretched arm puts the tip up
-#: to ~1e-8 m off with every step right; 1e-7 m is still far below any real mistake),
-#: 3.2 exact math (1e-9 rad), 3.3 the tool on the target (the solver stops within 1e-6 m; 1e-5
-#: m leaves room), 3.4 the tool after each move (the servo settles within a few mrad: 3 mm).
+#: The grader's tolerances per grade id: 3.1 the tip on the target (0.1 um, the number the notebook's
+#: check gives as TIP_TOL: tests/grader/test_grader_tolerances.py keeps them one. A fair grader accepts
+#: every right method and no mistake: the textbook triangle method, q2 = acos(c), loses precision near
+#: c = 1, and at the fully stretched arm puts the tip up to ~1e-8 m off with every step right, while
+#: the smallest real mistake (degrees, a sign, atan instead of atan2) moves it by millimetres),
+#: 3.2 the new q (0.1 urad, the check's STEP_TOL: a Jacobian by lesson 2's central differences, h = 1e-6,
+#: is within 6e-8 rad of the exact step over 200 draws, every mistake 1e-4 rad or more away), 3.3 the tool
+#: on the target (the solver stops within 1e-6 m; 1e-5 m leaves room), 3.4 the tool after each move (the servo settles within a few mrad: 3 mm).
 TOLERANCES = {"ex03_1_two_link_ik_test": {"rtol": 1e-9, "atol": 1e-7},
-              "ex03_2_dls_step_test": {"rtol": 1e-9, "atol": 1e-9},
+              "ex03_2_dls_step_test": {"rtol": 1e-9, "atol": 1e-7},
               "ex03_3_ik_loop_test": {"rtol": 0.0, "atol": 1e-5},
               "ex03_4_task1_test": {"rtol": 0.0, "atol": 0.003}}
 

@@ -25,10 +25,13 @@ from snakekit.model import SPEC
 __all__ = ["RULES"]
 
 
-def _value(result: dict, shape: tuple, what: str, name: str = "value"):
-    """The result's array ``name`` of ``shape``, or (None, why not)."""
+def _value(result: dict, shape: tuple, what: str, name: str = "value", called: str = ""):
+    """The result's array ``name`` of ``shape``, or (None, why not); ``called``: what the missing value is, in the
+    student's words (``what`` where it is not said)."""
     if name not in result:
-        return None, f"{what} handed in {', '.join(sorted(result))}, expected {name if name != 'value' else 'one array'}."
+        if name == "value":   # the student's function returned a dict of its own: its keys are the student's
+            return None, f"{what} handed in {', '.join(sorted(result))}, expected one array."
+        return None, f"your result does not hold {called or what}."   # a key the test cell made: never shown
     a = np.asarray(result[name], dtype=float)
     if a.shape != shape:
         return None, f"{what} returned shape {a.shape}, expected {shape}."
@@ -122,8 +125,9 @@ def task1(args, result, tol):
     from snakekit.kinematics import tool_pose_2d
 
     targets = np.atleast_2d(np.asarray(args[0], dtype=float))
-    name = "final_q" if "final_q" in result else "value"
-    q, why = _value(result, (len(targets), SPEC.n_joints), "the moves (their final angles)", name)
+    name = "final_q" if {"final_q", "poses"} & set(result) else "value"
+    q, why = _value(result, (len(targets), SPEC.n_joints), "the moves (their final angles)", name,
+                    "the joint angles the arm measured at the end of each move")
     if q is None:
         return False, why
     tool = _tool_xy(q)
@@ -144,7 +148,7 @@ def task1(args, result, tol):
                        f"{off[k]:+.3g} rad from the target's (tolerance {HEADING_TOL:g} rad: the servos settle within "
                        f"a few mrad). {HEADING_HINT[0].upper()}{HEADING_HINT[1:]}")
     if "poses" in result:
-        poses, why = _value(result, (len(targets), 3), "task1", "poses")
+        poses, why = _value(result, (len(targets), 3), "task1", "poses", "the tool poses task1 returned")
         if poses is None:   # what it looks like, in the words of the notebook's check
             kind = known_mistake(np.asarray(result["poses"], dtype=float),
                                  pose_mistakes(q, [tool_pose_2d(row) for row in q]), tol=1e-9)

@@ -26,7 +26,7 @@ import numpy as np
 from snakekit.closeness import bound, is_table, not_finite, sentence, worst
 from snakekit.errors import SnakekitError
 from snakekit.handin import decode_results
-from snakekit.watch import forgot_return
+from snakekit.watch import forgot_return, not_an_array
 from snakekit.model import SPEC
 from snakekit.trajectory import Trajectory
 
@@ -183,6 +183,9 @@ def explain_error(text: str, name: str = "your function", returns: str = "") -> 
     >>> explain_error("NameError: name 'helper' is not defined", "sweep_times")
     "your function raised NameError: name 'helper' is not defined"
     """
+    m = re.match(r"not an array: (\w+)(?: (\w+))? from (\w+)$", text)
+    if m:   # a list where the exercise asks for an array: the notebook's check's words (snakekit.watch.not_an_array)
+        return not_an_array(m.group(3), m.group(1), m.group(2) or "")
     m = re.match(r"returned (\w+) from (\w+)$", text)
     if m and m.group(1) == "None":
         return forgot_return(m.group(2))
@@ -197,9 +200,8 @@ def explain_error(text: str, name: str = "your function", returns: str = "") -> 
             return forgot_return(name) if not part else \
                 f"the '{part}' of the result of {name} is None: " + forgot_return(name).split(": ", 1)[1]
         where = f"the '{part}' of your result" if part else "your function"
-        if what in ("list", "tuple"):
-            return (f"{where} returned a Python {what}, not a numpy array: return np.array(...) (the exercise asks "
-                    "for an array, as its check says).")
+        if what in ("list", "tuple"):   # (a hand-in's own array=True: the same words as the check's)
+            return not_an_array(name, what)
         return f"{where} returned {_a(what)} {what}, not numbers or an array."
     if text.startswith("ShortcutError:"):
         return text.split(":", 1)[1].strip()
@@ -246,9 +248,11 @@ def _compare_case(w: Wording, got: dict, want: dict, tol: dict, case=()) -> str:
     for name, e in want.items():
         part = w.part(name, case)
         if name not in got:
-            return f"your result has no {part.what}."
+            return f"your result does not say {part.what}." if part.said else f"your result has no {part.what}."
         g, e = np.asarray(got[name]), np.asarray(e)
         if e.dtype.kind == "b" and g.shape == e.shape and not np.array_equal(g.astype(bool), e):
+            if part.said:   # a yes or no, said as what it means (wording.WORDS), never "refused is True"
+                return f"{part.said[0 if bool(np.all(g)) else 1]}."
             return f"{part.what} is {bool(np.all(g))}, expected {bool(np.all(e))}."
         g, e = g.astype(float), e.astype(float)
         if g.shape != e.shape:
@@ -305,7 +309,7 @@ def _cases_check(ok, why, name: str = "hidden cases", weight: float = 1.0) -> co
 
 def _trajectory(d: dict, times: str, positions: str, what: str) -> Trajectory:
     if times not in d or positions not in d:
-        raise ValueError(f"no {what} in your result ('{times}' and '{positions}')")
+        raise ValueError(f"your result holds no {what}")
     try:
         return Trajectory(d[times], d[positions])
     except (SnakekitError, ValueError) as e:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import nbformat
 
+from snakekit.cells import cell_name
 from snakekit.errors import CheckFailed
 from snakekit.verdicts import NOTE
 
@@ -143,7 +144,8 @@ class Verdicts:
                 scores.append(kernel_score(gid, cell, executed.get(cell.notebook)))
         stopped = stopped_cells(worker.get("stopped"), executed)
         if outcome.timed_out or stopped:
-            where = "".join(f" in cell {i + 1}" + (f" of {n}.ipynb" if len(a.notebooks) > 1 else "")
+            where = "".join(f" in {cell_name(executed[n].cells, i)}"    # as a student finds it, not counted from the top
+                            + (f" of {n}.ipynb" if len(a.notebooks) > 1 else "")
                             for n, i in sorted(stopped.items())[:1])
             status, detail = "timeout", f"the notebook ran longer than {self.timeout:g} s and was stopped{where}"
         elif "CellTimeoutError" in errors:

@@ -5,7 +5,8 @@ student's function and returns named arrays (``goal_times``). A student never wr
 graded message names the student's function (``checks.Exercise("4.3", "sample_move")``), the arguments
 it was called with, and each value as the check's ``ex.close(..., what=, unit=, labels=, why=)`` says it
 ("send times", in s, its tolerance for the check's reason). All of it is read from the test cell's source,
-so it needs nothing of a lesson but its check.
+so it needs nothing of a lesson but its check; a value that only the helper makes (7.2's ``refused``) is named
+by :data:`WORDS`, a yes or no as what it means ("safe_move moved the arm although ..."), never by its key.
 """
 
 from __future__ import annotations
@@ -19,10 +20,47 @@ import numpy as np
 
 from snakekit.closeness import entry_name, per_row, unit_of
 
-__all__ = ["Part", "Wording", "wording", "title", "points", "shown", "signatures"]
+__all__ = ["WORDS", "Part", "Wording", "wording", "title", "points", "shown", "signatures"]
 
 #: Words that cannot end a value's name: what the compared values of a check share stops before them.
 DANGLING = {"of", "at", "in", "for", "to", "the", "a", "an", "and"}
+
+#: How a graded message names a value that a test cell's hand-in helper makes and its check names nowhere, by
+#: grade id and key (a key such as ``refused`` is the helper's: the student never wrote it, and "the refused is
+#: True" says nothing). A value is named by a phrase; a yes or no by three: whether it holds, what is said when
+#: the student's is yes and the solution's no, and what is said the other way round, each in the words of the
+#: lesson and its check. tests/grader/test_graded_keys.py walks every key of every lesson's hand-ins.
+WORDS = {
+    "ex03_4_task1_test": {
+        "poses": "tool poses task1 returned",
+        "final_q": "joint angles the arm measured at the end of each move"},
+    "ex06_2_sweep_positions_test": {
+        "last_row_home": ("whether the last goal is home", "the last goal is home where the solution's is not",
+                          "the last goal is not home: the text asks 0 there (within 1e-12 rad: near zero is zero)")},
+    "ex07_1_ticks_test": {
+        "whole_numbers": ("whether to_ticks returned whole numbers",
+                          "to_ticks returned whole numbers where the solution's are not",
+                          "to_ticks returned values that are not whole numbers: ticks are whole numbers, "
+                          "np.rint(...).astype(int)")},
+    "ex07_2_safe_move_test": {
+        "refused": ("whether safe_move refused the target",
+                    "safe_move refused the move (it raised snakekit.LimitError), but no angle of the target is "
+                    "within the margin of the limits: move there",
+                    "safe_move moved the arm although the target is within the margin of the limits: raise "
+                    "snakekit.LimitError before moving"),
+        "arm_still": ("whether the arm stayed where it was when safe_move refused the target",
+                      "the arm stayed where it was where the solution's moved",
+                      "the arm moved although safe_move refused the target: check before you move"),
+        "moves": "number of moves safe_move sent to the arm"},
+    "ex07_3_fault_test": {
+        "rebooted": "list of rebooted ids recover returned",
+        "torque_on": ("whether torque is on after recover", "torque is on after recover where the solution's is off",
+                      "torque is still off after recover: call robot.torque_on() after the reboots"),
+        "errors_cleared": ("whether every servo's error is cleared after recover",
+                           "every servo's error is cleared after recover where the solution's is not",
+                           "a servo still reports an error after recover: reboot every servo whose "
+                           "robot.hardware_error_status(id) is not empty")},
+}
 
 #: A test cell's ``checks.Exercise("6.3", "task2_sweep")``: the exercise's number and the student's function.
 EXERCISE = re.compile(r"checks\.Exercise\(\s*[\"']([\w.]+)[\"']\s*,\s*[\"'](\w+)[\"']")
@@ -118,6 +156,9 @@ class Part:
     labels: tuple | None = None
     template: str = field(default="", repr=False)
     why: str | None = field(default=None, repr=False, compare=False)
+    #: a yes or no, as :data:`WORDS` says it: (said when the hand-in's is yes and the solution's no, said the
+    #: other way round); ``what`` is then "whether ..."
+    said: tuple | None = field(default=None, repr=False, compare=False)
 
     def at(self, values: dict) -> "Part":
         """The part at a hidden case whose named values are ``values``: a name the check makes of a value of
@@ -158,6 +199,9 @@ class Wording:
     args: tuple | None = None
     given: tuple = ()
     returns: str = ""
+    #: :data:`WORDS` of this exercise, as (key, words) pairs: how a value that the hand-in helper makes and the
+    #: check names nowhere is called (``refused``: "whether safe_move refused the target")
+    says: tuple = ()
 
     def values(self, case) -> dict:
         """A hidden case's values by the names the test cell gives them (its hand-in helper's arguments)."""
@@ -205,6 +249,11 @@ class Wording:
             units, whys = {p.unit for p in self.parts}, {p.why for p in self.parts}
             return Part(common or "the result", units.pop() if len(units) == 1 else "",
                         why=whys.pop() if len(whys) == 1 else None)
+        said = dict(self.says).get(name)
+        if isinstance(said, str):       # the course's name of a value only the hand-in helper makes
+            return Part(said)
+        if isinstance(said, tuple):     # a yes or no, said as a whole clause either way
+            return Part(said[0], said=tuple(said[1:]))
         words = set(name.lower().split("_"))
         shared = [len(words & set(re.findall(r"[a-z]+", p.what.lower()))) for p in self.parts]
         if any(shared):   # the most words in common: recorded_angles is "recorded angles", not "recorded times"
@@ -328,7 +377,8 @@ def _params(tree: ast.Module, handed: str, student: str) -> tuple:
 
 def wording(grade_id: str, source: str, handed: str = "", signatures: dict | None = None) -> Wording:
     """How the messages of the exercise whose test cell is ``source`` name things (``handed``: the function
-    its ``hand_in`` names; ``signatures``: the parameters of the notebook's functions, :func:`signatures`).
+    its ``hand_in`` names; ``signatures``: the parameters of the notebook's functions, :func:`signatures`;
+    the values its hand-in helper makes are named by :data:`WORDS`).
     A cell that cannot be read keeps the names it hands in.
 
     >>> w = wording("ex9_1_f_test", 'def graded_f(a, b):\\n    return {"goal_times": f(run(a), b)}\\n'
@@ -339,11 +389,12 @@ def wording(grade_id: str, source: str, handed: str = "", signatures: dict | Non
     """
     m = EXERCISE.search(source)
     student = m.group(2) if m else handed
+    says = tuple(WORDS.get(grade_id, {}).items())
     try:
         tree = ast.parse(source)
     except SyntaxError:
-        return Wording(student or handed)
+        return Wording(student or handed, says=says)
     params, given = _params(tree, handed, student)
     m = re.search(r"isinstance\(\s*\w+\s*,\s*([\w.]+)\s*\)", source)
     return Wording(student or handed, params, _parts(tree), (signatures or {}).get(student), given,
-                   m.group(1) if m else "")
+                   m.group(1) if m else "", says)

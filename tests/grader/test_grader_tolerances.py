@@ -97,3 +97,23 @@ def test_a_tolerance_given_twice_is_refused_naming_both_homes(tmp_path, monkeypa
                             "and in the cases module's TOLERANCES; keep it in the cases module (course/cases/) alone")
     monkeypatch.setitem(references.OVERRIDES, A, {GID: {"rtol": 1e-6}})
     assert references.tolerances(A, GID, "values", batch, [])["atol"] == 1e-7
+
+
+@pytest.mark.parametrize("grade_id, name", [("ex03_1_two_link_ik_test", "TIP_TOL"), ("ex03_2_dls_step_test", "STEP_TOL")])
+def test_3_1_and_3_2_are_judged_with_one_tolerance_in_the_notebook_and_graded(grade_id, name):
+    """3.1's tip tolerance and 3.2's step tolerance are one number each: the check cell's TIP_TOL / STEP_TOL is the
+    grader's atol (3.1 was 1 nm locally and 0.1 um graded, so a tip 5e-8 m off passed graded and failed in the
+    notebook; 3.2 was 1e-9 rad both ways, which a Jacobian by lesson 2's finite differences missed at some draws
+    only: 3 of 4 batches took points while the notebook's check passed)."""
+    import re
+
+    import nbformat
+
+    nb = nbformat.read(COURSE / "source" / "03_inverse_kinematics" / "03_inverse_kinematics.ipynb", as_version=4)
+    source = next(c.source for c in nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == grade_id)
+    local = float(re.search(rf"^{name} = ([\d.e+-]+)", source, re.M).group(1))
+    tols = re.findall(r"\btol=([^,)]+)", source)
+    assert tols and set(tols) == {name}, f"every tolerance of {grade_id}'s check is {name}: {tols}"
+    graded = draw(COURSE, "03_inverse_kinematics", seed=1).settings[grade_id]["tolerances"]
+    assert graded["atol"] == local == 1e-7
+    assert graded["rtol"] == 1e-9   # the check's close() default rtol

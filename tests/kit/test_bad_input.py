@@ -590,23 +590,29 @@ def test_check_interrupts_an_endless_loop_and_checks_the_cells_after_it(tmp_path
     assert ["after_test", "3", "pt", "passed"] in rows, r.stdout
     stuck = next(line for line in r.stdout.splitlines() if line.split()[:1] == ["stuck_test"])
     assert "FAILED  stopped after 3 s, the limit for one cell: most likely an endless loop" in stuck, r.stdout
-    assert "  also failed: answer cell loop_answer: stopped after 3 s, the limit for one cell" in r.stdout
+    assert "  also failed: the answer cell loop_answer: stopped after 3 s, the limit for one cell" in r.stdout
     assert "2 of 3 exercises passed, 4 of 6 points" in r.stdout
     assert "stopped:" not in r.stdout and "KeyboardInterrupt" not in r.stdout and "Traceback" not in r.stdout + r.stderr
 
 
 @pytest.mark.parametrize("body, stopped", [
     ("import signal, time\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\nwhile True:\n    time.sleep(0.1)",
-     "stopped: cell 2 ran longer than 3 s and did not stop when interrupted"),
-    ("import os\nos._exit(1)", "stopped: the Python kernel died while running cell 2 (the process ended"),
+     "stopped: the check cell of exercise 9.2 ran longer than 3 s and did not stop when interrupted"),
+    ("import os\nos._exit(1)", "stopped: the Python kernel died while running the check cell of exercise 9.2 (the process ended"),
 ])
 def test_check_reports_a_cell_that_never_ends_or_kills_the_kernel(tmp_path, body, stopped):
-    cells = [_graded("assert 1 + 1 == 2", grade_id="first_test", points=1),
-             _graded(body, grade_id="stuck_test", points=2), _graded("assert True", grade_id="after_test", points=3)]
+    """The cell is named as a student finds it in JupyterLab (by its exercise), not by its index among all cells:
+    the markdown cell before it would make that index one a student cannot count."""
+    from nbformat.v4 import new_markdown_cell
+
+    cells = [_graded("assert 1 + 1 == 2", grade_id="ex09_1_first_test", points=1), new_markdown_cell("### Exercise 9.2"),
+             _graded(body, grade_id="ex09_2_stuck_test", points=2), _graded("assert True", grade_id="ex09_3_after_test", points=3)]
     r, rows = _check_with_a_3_s_limit(tmp_path, cells)
-    assert ["first_test", "1", "pt", "passed"] in rows
-    assert ["stuck_test", "2", "pt", "FAILED", "stopped", "here", "(see", "below)"] in rows
-    assert ["after_test", "3", "pt", "FAILED", "not", "run", "(cell", "2", "stopped", "the", "run)"] in rows
+    assert ["ex09_1_first_test", "1", "pt", "passed"] in rows
+    assert ["ex09_2_stuck_test", "2", "pt", "FAILED", "stopped", "here", "(see", "below)"] in rows
+    assert ["ex09_3_after_test", "3", "pt", "FAILED", "not", "run", "(the", "check", "cell", "of", "exercise", "9.2",
+            "stopped", "the", "run)"] in rows
+    assert "cell 3" not in r.stdout
     assert "1 of 3 exercises passed, 1 of 6 points" in r.stdout
     assert stopped in r.stdout and "Traceback" not in r.stdout + r.stderr
 

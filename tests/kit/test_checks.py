@@ -71,7 +71,9 @@ def test_a_list_where_an_array_is_asked_says_to_return_an_array():
     ex = checks.Exercise("9.2", "rows")
     said = message(lambda: ex.close([[0.0, 0.0], [1.0, 0.0]], [[0.0, 0.0], [1.0, 0.0]], what="rows", unit="m",
                                     array=True))
-    assert "is a Python list, not a numpy array: return np.array(...)" in said
+    assert "rows returned a Python list when called with" not in said
+    assert "rows returned a Python list, not a numpy array: the exercise asks for an array" in said
+    assert said.rstrip().endswith("return np.array(...) of it.")
     ex.close(np.array([[0.0, 0.0], [1.0, 0.0]]), [[0.0, 0.0], [1.0, 0.0]], what="rows", unit="m", array=True)
     ex.close([1.0, 2.0], [1.0, 2.0], what="a list is fine where no array is asked")
 
@@ -271,3 +273,20 @@ def test_a_composites_note_starts_a_sentence_of_its_own_after_an_error_that_has_
     finally:
         PASSED.pop("2.1", None)
     assert "list indices must be integers or slices, not tuple.\n2.3 uses your 2.1, which fails its check" in said, said
+
+
+def test_an_exercise_that_asks_for_an_array_refuses_a_list_its_function_returns_whoever_calls_it(monkeypatch):
+    """``Exercise(..., array=True)``: what the student's function returns is judged, even where the check calls it through
+    a helper of its own that makes an array of it (6.2's np.asarray(sweep_positions(...)))."""
+    import __main__
+
+    def rows(n):
+        return [[0.0, 0.0]] * n
+
+    monkeypatch.setattr(__main__, "rows", rows, raising=False)
+    ex = checks.Exercise("9.4", "rows", array=True)
+    said = message(lambda: ex(lambda n: np.asarray(rows(n)), 2, where="n=2"))
+    assert said.startswith("exercise 9.4 rows: rows returned a Python list when called with n=2, not a numpy array"), said
+    monkeypatch.setattr(__main__, "rows", lambda n: np.zeros((n, 2)), raising=False)
+    assert ex(__main__.rows, 2).shape == (2, 2)                      # an array passes
+    assert checks.Exercise("9.4", "rows")(rows, 2) == [[0.0, 0.0]] * 2   # and a list, where no array is asked
