@@ -609,10 +609,16 @@ def test_task1_judged_by_where_each_move_ends():
     from snakekit import tool_pose_2d
 
     finals = np.array([[0.3, -0.2, 0.5, 0.1, -0.4], [0.0, 0.2, 0.2, 0.2, 0.2]])
-    targets = np.array([[*tool_pose_2d(q)[:2], 0.0] for q in finals]) + [0.001, 0.0, 0.0]   # 1 mm short: settled
+    targets = np.array([tool_pose_2d(q) for q in finals]) + [0.001, 0.0, 0.004]   # 1 mm, 4 mrad short: settled
     e = Expected("ex03_4_task1_test", "values", [(targets,)], [{"value": finals}], {"rtol": 0.0, "atol": 0.003},
                  "graded_task1")
     assert score_exercise(e.grade_id, [{"value": finals}], e, 2).score == 2
+    # a move that ends on the point but turned another way (the heading left out, or given in degrees)
+    turned = targets + [0.0, 0.0, 0.3]
+    t = Expected(e.grade_id, "values", [(turned,)], [{"value": finals}], e.tolerances, "graded_task1")
+    s = score_exercise(e.grade_id, [{"value": finals}], t, 2)
+    assert s.score == 0 and "ended with the tool's heading at" in s.message and \
+        "Each target is (x, y, heading), the heading in radians: pass all three" in s.message, s.message
     s = score_exercise(e.grade_id, [{"value": finals[:1]}], e, 2)
     assert s.score == 0 and "returned shape (1, 5), expected (2, 5)" in s.message
     # the lesson's form: the poses task1 returned, and where the recorded moves ended
