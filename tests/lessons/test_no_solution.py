@@ -500,7 +500,13 @@ MISTAKES = {
          "breaks the position limit too: compare np.abs(q)"),
         ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(np.diff(p, axis=0))", "np.diff(p, axis=0)"),
          "breaks the speed limit too"),
-        ("ex04_4_limit_check_test", _LIMITS.replace("sorted(rows)", "rows"), "sort them by time, then joint")],
+        ("ex04_4_limit_check_test", _LIMITS.replace("sorted(rows)", "rows"), "sort them by time, then joint"),
+        ("ex04_4_limit_check_test", "def limit_violations(trajectory):\n    t, p = trajectory.times, trajectory.positions\n"
+         "    dt = t[1] - t[0]\n    rows = []\n    for k in range(len(t)):\n        for j in range(5):\n"
+         "            if abs(p[k, j]) > spec.upper:\n                rows.append([t[k], j + 1, 0])\n"
+         "            if k > 0 and abs(p[k, j] - p[k - 1, j]) / dt > spec.velocity_limit:\n"
+         "                rows.append([t[k], j + 1, 1])\n    return np.array(rows, dtype=float).reshape(-1, 3)",
+         "the times are not evenly spaced: divide each step by its own dt, np.diff(t)")],
     "05_simulation": [
         ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
          "    progress = y / target\n"

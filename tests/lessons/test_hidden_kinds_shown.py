@@ -1,0 +1,64 @@
+"""The visible check holds a case of each kind the hidden cases hold (more of tests/lessons/test_course_fairness.py):
+for each slip below, every draw of the hidden cases holds a case where it gives a wrong answer, and so does the
+visible check, so the slip fails locally as it loses points graded.
+
+* 4.2: ``T = 2 d / v_peak`` in the triangle, nan for a move of no length;
+* 4.4: every step divided by the first step's ``dt``, wrong on a trajectory at uneven times;
+* 8.3: ``when`` taken among all the recorded times, wrong for a recording that starts before the reference; the
+  largest error sought on the joint of the largest rms, wrong where the largest error is on another joint.
+
+The visible cases are the arguments the test cell calls the student's function with, the cell run with a right
+answer in the student's place.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+import snakekit
+from snakekit import SPEC, checks
+from tests.lessons.test_course_fairness import CELLS, _cases
+
+
+def _visible_calls(grade_id: str, name: str, fn, **names) -> list[tuple]:
+    """The arguments the visible check of ``grade_id`` calls the student's ``name`` with (``fn`` answering)."""
+    calls = []
+
+    def kept(*args):
+        calls.append(args)
+        return fn(*args)
+
+    kept.__name__ = name
+    exec(dict((gid, src) for _, gid, src in CELLS)[grade_id], {"np": np, "checks": checks, name: kept, **names})
+    return calls
+
+
+def _violations(times, positions, even=False):
+    """4.4 as the lesson asks, or (``even``) with every step divided by the first one's dt: rows [time, joint, kind]."""
+    t, p = np.asarray(times, dtype=float), np.asarray(positions, dtype=float)
+    dt = np.full(len(t) - 1, t[1] - t[0]) if even else np.diff(t)
+    rows = [[t[k], j + 1, 0] for k, j in zip(*np.nonzero(np.abs(p) > SPEC.upper))]
+    speed = np.abs(np.diff(p, axis=0)) / dt[:, None]
+    rows += [[t[k + 1], j + 1, 1] for k, j in zip(*np.nonzero(speed > SPEC.velocity_limit))]
+    return np.array(sorted(rows), dtype=float).reshape(-1, 3)
+
+
+def _even_spacing_is_wrong(times, positions) -> bool:
+    right, even = _violations(times, positions), _violations(times, positions, even=True)
+    return right.shape != even.shape or not np.allclose(right, even)
+
+
+@pytest.mark.parametrize("seed", range(50))
+def test_every_draw_of_4_4_holds_a_trajectory_at_uneven_times_where_one_dt_for_all_steps_is_wrong(seed):
+    cases = _cases("04_trajectories", "ex04_4_limit_check_test", seed)
+    assert any(_even_spacing_is_wrong(*c) for c in cases), cases
+
+
+def test_4_4s_visible_check_holds_a_trajectory_at_uneven_times_where_one_dt_for_all_steps_is_wrong():
+    calls = _visible_calls("ex04_4_limit_check_test", "limit_violations",
+                           lambda tr: _violations(tr.times, tr.positions), snakekit=snakekit, spec=SPEC)
+    assert len(calls) >= 5, calls
+    assert any(_even_spacing_is_wrong(tr.times, tr.positions) for (tr,) in calls), calls
