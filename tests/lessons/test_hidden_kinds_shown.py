@@ -36,6 +36,23 @@ def _visible_calls(grade_id: str, name: str, fn, **names) -> list[tuple]:
     return calls
 
 
+def _trapezoid_nan_at(d, v, a) -> bool:
+    """4.2's slip T = 2 d / v_peak in the triangle: nan where the move has no length."""
+    with np.errstate(all="ignore"):
+        return abs(d) < v * v / a and not np.isfinite(2 * abs(d) / np.sqrt(a * abs(d)))
+
+
+@pytest.mark.parametrize("seed", range(50))
+def test_every_draw_of_4_2_holds_a_move_of_no_length_where_2_d_over_v_peak_is_nan(seed):
+    assert any(_trapezoid_nan_at(*c) for c in _cases("04_trajectories", "ex04_2_trapezoid_test", seed))
+
+
+def test_4_2s_visible_check_holds_a_move_of_no_length_where_2_d_over_v_peak_is_nan():
+    source = dict((gid, src) for _, gid, src in CELLS)["ex04_2_trapezoid_test"]
+    visible = [tuple(map(float, m)) for m in re.findall(r"ex\(trapezoid, (-?[\d.]+), ([\d.]+), ([\d.]+)\)", source)]
+    assert any(_trapezoid_nan_at(*c) for c in visible), visible
+
+
 def _violations(times, positions, even=False):
     """4.4 as the lesson asks, or (``even``) with every step divided by the first one's dt: rows [time, joint, kind]."""
     t, p = np.asarray(times, dtype=float), np.asarray(positions, dtype=float)

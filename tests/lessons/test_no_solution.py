@@ -501,6 +501,9 @@ MISTAKES = {
         ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(np.diff(p, axis=0))", "np.diff(p, axis=0)"),
          "breaks the speed limit too"),
         ("ex04_4_limit_check_test", _LIMITS.replace("sorted(rows)", "rows"), "sort them by time, then joint"),
+        ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = abs(distance)\n"
+         "    if d >= v_max ** 2 / a_max:\n        return np.array([d / v_max + v_max / a_max, v_max])\n"
+         "    v_peak = np.sqrt(a_max * d)\n    return np.array([2 * d / v_peak, v_peak])", "dividing by the peak speed"),
         ("ex04_4_limit_check_test", "def limit_violations(trajectory):\n    t, p = trajectory.times, trajectory.positions\n"
          "    dt = t[1] - t[0]\n    rows = []\n    for k in range(len(t)):\n        for j in range(5):\n"
          "            if abs(p[k, j]) > spec.upper:\n                rows.append([t[k], j + 1, 0])\n"
