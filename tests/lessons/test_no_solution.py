@@ -504,6 +504,14 @@ MISTAKES = {
         ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = abs(distance)\n"
          "    if d >= v_max ** 2 / a_max:\n        return np.array([d / v_max + v_max / a_max, v_max])\n"
          "    v_peak = np.sqrt(a_max * d)\n    return np.array([2 * d / v_peak, v_peak])", "dividing by the peak speed"),
+    ] + [("ex04_3_sample_10hz_test", "def sample_move(q_start, q_end, duration, rate=10.0):\n"
+          f"    times = {times}\n"
+          "    return snakekit.Trajectory(times, q_start + np.outer(quintic(duration, times), np.asarray(q_end) - q_start))",
+          hint) for times, hint in (
+        ("np.arange(int(np.ceil(duration * rate)) + 1) / rate", "not rounded up as np.ceil does"),
+        ("np.arange(0, duration + 1 / rate, 1 / rate)", "steps once past it, since its stop is not exact"),
+        ("np.arange(0, duration, 1 / rate)", "np.arange(0, duration, 1 / rate) stops before duration"))
+    ] + [
         ("ex04_4_limit_check_test", "def limit_violations(trajectory):\n    t, p = trajectory.times, trajectory.positions\n"
          "    dt = t[1] - t[0]\n    rows = []\n    for k in range(len(t)):\n        for j in range(5):\n"
          "            if abs(p[k, j]) > spec.upper:\n                rows.append([t[k], j + 1, 0])\n"
