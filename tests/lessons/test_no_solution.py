@@ -501,6 +501,8 @@ MISTAKES = {
         ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(np.diff(p, axis=0))", "np.diff(p, axis=0)"),
          "breaks the speed limit too"),
         ("ex04_4_limit_check_test", _LIMITS.replace("sorted(rows)", "rows"), "sort them by time, then joint"),
+        ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.atleast_1d(np.asarray(t, dtype=float)) / T, 0, 1)\n"
+         "    return 10 * r ** 3 - 15 * r ** 4 + 6 * r ** 5", "s has the shape of t"),
         ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = abs(distance)\n"
          "    if d >= v_max ** 2 / a_max:\n        return np.array([d / v_max + v_max / a_max, v_max])\n"
          "    v_peak = np.sqrt(a_max * d)\n    return np.array([2 * d / v_peak, v_peak])", "dividing by the peak speed"),
