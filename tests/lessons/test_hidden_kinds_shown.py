@@ -79,3 +79,54 @@ def test_4_4s_visible_check_holds_a_trajectory_at_uneven_times_where_one_dt_for_
                            lambda tr: _violations(tr.times, tr.positions), snakekit=snakekit, spec=SPEC)
     assert len(calls) >= 5, calls
     assert any(_even_spacing_is_wrong(tr.times, tr.positions) for (tr,) in calls), calls
+
+
+def _errors(times, positions, ref_times, ref_positions):
+    """8.3's compared times and errors e[k, j] (None, None where nothing overlaps)."""
+    times, positions = np.asarray(times, dtype=float), np.asarray(positions, dtype=float)
+    ref_times, ref_positions = np.asarray(ref_times, dtype=float), np.asarray(ref_positions, dtype=float)
+    inside = (times >= ref_times[0]) & (times <= ref_times[-1])
+    if not inside.any():
+        return None, None
+    t = times[inside]
+    return t, positions[inside] - np.column_stack([np.interp(t, ref_times, ref_positions[:, j]) for j in range(5)])
+
+
+def _compare(times, positions, ref_times, ref_positions, slip=""):
+    """8.3 as the lesson asks, or with a slip: the time taken among all the recorded times ("when"), or the largest
+    error sought on the joint of the largest rms ("rms")."""
+    t, error = _errors(times, positions, ref_times, ref_positions)
+    if t is None:
+        raise ValueError("no recorded time falls within the reference's")
+    rms = np.sqrt(np.mean(error ** 2, axis=0))
+    k, j = np.unravel_index(np.argmax(np.abs(error)), error.shape)
+    if slip == "rms":
+        j = int(np.argmax(rms))
+        k = int(np.argmax(np.abs(error[:, j])))
+    when = float((np.asarray(times, dtype=float) if slip == "when" else t)[k])
+    return {"rms": rms, "largest": float(abs(error[k, j])), "joint": int(j) + 1, "when": when}
+
+
+def _slip_is_wrong(case, slip) -> bool:
+    if _errors(*case)[0] is None:
+        return False
+    right, wrong = _compare(*case), _compare(*case, slip=slip)
+    return any(not np.isclose(right[key], wrong[key], rtol=0, atol=1e-9) for key in ("largest", "joint", "when"))
+
+
+def _starts_before(case) -> bool:
+    return np.asarray(case[0])[0] < np.asarray(case[2])[0]
+
+
+@pytest.mark.parametrize("seed", range(50))
+def test_every_draw_of_8_3_holds_a_recording_that_starts_before_the_reference_and_largest_rms_on_another_joint(seed):
+    cases = _cases("08_ros", "ex08_3_compare_runs_test", seed)
+    assert any(_starts_before(c) and _slip_is_wrong(c, "when") for c in cases)
+    assert any(_slip_is_wrong(c, "rms") for c in cases)
+
+
+def test_8_3s_visible_check_holds_a_recording_that_starts_before_the_reference_and_largest_rms_on_another_joint():
+    calls = _visible_calls("ex08_3_compare_runs_test", "compare_runs", _compare)
+    assert len(calls) >= 4, calls
+    assert any(_starts_before(c) and _slip_is_wrong(c, "when") for c in calls)
+    assert any(_slip_is_wrong(c, "rms") for c in calls)

@@ -732,7 +732,12 @@ MISTAKES = {
         ({"inside": "np.ones(len(times), dtype=bool)"}, "after the reference ends there is nothing to compare with"),
         ({"largest": "float(error[k, j])"}, "the largest |e| (its size)"),
         ({"largest": "float(np.max(error))"}, "the largest e itself misses errors below the reference"),
-        ({"joint": "int(j)"}, "the joints count from 1"))],
+        ({"joint": "int(j)"}, "the joints count from 1"))
+    ] + [("ex08_3_compare_runs_test", COMPARE.format(**COMPARE_RIGHT).replace(right, slip), hint) for right, slip, hint in (
+        ("float(t[k])", "float(times[k])", "counts only the compared ones"),
+        ("k, j = np.unravel_index(np.argmax(np.abs(error)), error.shape)",
+         "j = int(np.argmax(np.sqrt(np.mean(error ** 2, axis=0)))); k = int(np.argmax(np.abs(error[:, j])))",
+         "the largest error of the joint with the largest rms"))],
 }
 
 
