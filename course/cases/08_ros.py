@@ -76,21 +76,28 @@ def ex08_3_compare_runs_test(rng, spec):
     """compare_runs(times, positions, ref_times, ref_positions): a reference sweep at 100 Hz and recordings of it
     at 50 Hz that lag it by 0.05 to 0.2 s with noise: one inside it (with one reading 0.1 to 0.3 rad further below the
     reference than any other is off, so its largest error is a negative difference), one that starts before it, one that ends after it,
-    one on the reference's own times, and one that never overlaps it (it must raise ValueError)."""
+    one on the reference's own times, one without lag with a joint 0.05 to 0.1 rad off all along (the largest rms) and
+    another 0.15 to 0.3 rad below once (the largest error: on another joint than the largest rms, since 70 readings or
+    more share that one), and one that never overlaps it (it must raise ValueError)."""
     cases = []
-    for kind in ("inside", "before", "after", "same", "apart"):
+    for kind in ("inside", "before", "after", "same", "spike", "apart"):
         duration = float(rng.uniform(2.0, 6.0))
         ref_t = np.arange(0.0, duration, 0.01)
         sweeps, amplitude = int(rng.integers(1, 5)), rng.uniform(0.05, 0.4, 5)
         def sweep(t):
             return amplitude * np.sin(2 * np.pi * sweeps * np.clip(t, 0, duration) / duration)[:, None]
         start, end = {"inside": (0.3, duration - 0.3), "before": (-0.7, duration - 0.5), "after": (0.4, duration + 0.8),
-                      "same": (0.0, duration), "apart": (duration + 1.0, duration + 3.0)}[kind]
+                      "same": (0.0, duration), "spike": (0.3, duration - 0.3),
+                      "apart": (duration + 1.0, duration + 3.0)}[kind]
         t = ref_t if kind == "same" else np.arange(start, end, 0.02) + float(rng.uniform(0, 0.02))
-        lag = float(rng.uniform(0.05, 0.2))
+        lag = 0.0 if kind == "spike" else float(rng.uniform(0.05, 0.2))
         recorded = sweep(t - lag) + rng.normal(0, 0.002, (len(t), 5))
         if kind == "inside":   # one reading far below the reference: the largest error is negative
             k, j = int(rng.choice(np.flatnonzero((t > 0.1) & (t < duration - 0.1)))), int(rng.integers(5))
             recorded[k, j] = sweep(t[k:k + 1])[0, j] - np.abs(recorded - sweep(t)).max() - float(rng.uniform(0.1, 0.3))
+        if kind == "spike":    # the largest rms on one joint, the largest error on another
+            steady, once = (int(j) for j in rng.choice(5, 2, replace=False))
+            recorded[:, steady] += float(rng.uniform(0.05, 0.1))
+            recorded[int(rng.integers(len(t))), once] -= float(rng.uniform(0.15, 0.3))
         cases.append((t, recorded, ref_t, sweep(ref_t)))
     return cases

@@ -504,7 +504,26 @@ MISTAKES = {
          "breaks the position limit too: compare np.abs(q)"),
         ("ex04_4_limit_check_test", _LIMITS.replace("np.abs(np.diff(p, axis=0))", "np.diff(p, axis=0)"),
          "breaks the speed limit too"),
-        ("ex04_4_limit_check_test", _LIMITS.replace("sorted(rows)", "rows"), "sort them by time, then joint")],
+        ("ex04_4_limit_check_test", _LIMITS.replace("sorted(rows)", "rows"), "sort them by time, then joint"),
+        ("ex04_1_quintic_test", "def quintic(T, t):\n    r = np.clip(np.atleast_1d(np.asarray(t, dtype=float)) / T, 0, 1)\n"
+         "    return 10 * r ** 3 - 15 * r ** 4 + 6 * r ** 5", "s has the shape of t"),
+        ("ex04_2_trapezoid_test", "def trapezoid(distance, v_max, a_max):\n    d = abs(distance)\n"
+         "    if d >= v_max ** 2 / a_max:\n        return np.array([d / v_max + v_max / a_max, v_max])\n"
+         "    v_peak = np.sqrt(a_max * d)\n    return np.array([2 * d / v_peak, v_peak])", "dividing by the peak speed"),
+    ] + [("ex04_3_sample_10hz_test", "def sample_move(q_start, q_end, duration, rate=10.0):\n"
+          f"    times = {times}\n"
+          "    return snakekit.Trajectory(times, q_start + np.outer(quintic(duration, times), np.asarray(q_end) - q_start))",
+          hint) for times, hint in (
+        ("np.arange(int(np.ceil(duration * rate)) + 1) / rate", "not rounded up as np.ceil does"),
+        ("np.arange(0, duration + 1 / rate, 1 / rate)", "steps once past it, since its stop is not exact"),
+        ("np.arange(0, duration, 1 / rate)", "np.arange(0, duration, 1 / rate) stops before duration"))
+    ] + [
+        ("ex04_4_limit_check_test", "def limit_violations(trajectory):\n    t, p = trajectory.times, trajectory.positions\n"
+         "    dt = t[1] - t[0]\n    rows = []\n    for k in range(len(t)):\n        for j in range(5):\n"
+         "            if abs(p[k, j]) > spec.upper:\n                rows.append([t[k], j + 1, 0])\n"
+         "            if k > 0 and abs(p[k, j] - p[k - 1, j]) / dt > spec.velocity_limit:\n"
+         "                rows.append([t[k], j + 1, 1])\n    return np.array(rows, dtype=float).reshape(-1, 3)",
+         "the times are not evenly spaced: divide each step by its own dt, np.diff(t)")],
     "05_simulation": [
         ("ex05_1_rise_time_test", "def rise_time(t, y, target):\n    t, y = np.asarray(t), np.asarray(y)\n"
          "    progress = y / target\n"
@@ -717,7 +736,12 @@ MISTAKES = {
         ({"inside": "np.ones(len(times), dtype=bool)"}, "after the reference ends there is nothing to compare with"),
         ({"largest": "float(error[k, j])"}, "the largest |e| (its size)"),
         ({"largest": "float(np.max(error))"}, "the largest e itself misses errors below the reference"),
-        ({"joint": "int(j)"}, "the joints count from 1"))],
+        ({"joint": "int(j)"}, "the joints count from 1"))
+    ] + [("ex08_3_compare_runs_test", COMPARE.format(**COMPARE_RIGHT).replace(right, slip), hint) for right, slip, hint in (
+        ("float(t[k])", "float(times[k])", "counts only the compared ones"),
+        ("k, j = np.unravel_index(np.argmax(np.abs(error)), error.shape)",
+         "j = int(np.argmax(np.sqrt(np.mean(error ** 2, axis=0)))); k = int(np.argmax(np.abs(error[:, j])))",
+         "the largest error of the joint with the largest rms"))],
 }
 
 
