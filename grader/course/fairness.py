@@ -61,23 +61,17 @@ JOBS = {"07_real_robot": 4}
 
 #: Variants that give the same results as the instructor's answer at every input the exercise's
 #: task allows, so neither the visible check nor the graded cases can (or should) refuse them:
-#: (answer grade id, operator) -> why.
+#: (answer grade id, operator) -> why. (A list where the task asks an array is not one: it fails both ways alike,
+#: tests/lessons/test_list_where_array.py.)
 EQUIVALENT = {
     ("ex04_1_quintic", "transpose"): "s has the shape of t (a number or a 1-D array): .T leaves it as it is",
-    ("ex04_1_quintic", "list"): "the task asks the values of s, and a list of the same numbers is one (4.3 takes it "
-                                "through np.outer alike); the checks refuse a list only where the task asks an array",
     ("ex04_1_quintic", "swap_args"): "np.clip(0, r, 1) is min(max(0, r), 1), which is np.clip(r, 0, 1)",
     ("ex04_2_trapezoid", "transpose"): "a 1-D pair [duration, peak speed]: .T leaves it as it is",
-    ("ex04_2_trapezoid", "list"): "the task writes the answer as a list [duration, peak speed]: the same two numbers",
     ("ex04_3_sample_10hz", "list"): "np.asarray of a Trajectory is a 0-d object array, whose tolist() is the "
                                     "Trajectory itself",
     ("ex06_3_task2", "list"): "np.asarray of a Trajectory is a 0-d object array, whose tolist() is the Trajectory itself",
     ("ex01_1_planar_fk", "transpose"): "a 1-D pose (x, y, heading): .T leaves it as it is",
     ("ex06_1_sweep_times", "transpose"): "1-D send times: .T leaves them as they are",
-    ("ex06_1_sweep_times", "list"): "the task asks the send times, and a list of the same numbers is one (6.3 takes "
-                                    "it alike); the checks refuse a list only where the task asks an array",
-    ("ex06_2_sweep_positions", "list"): "the task asks the goals' values, and a list of rows of the same numbers is "
-                                        "one (a Trajectory takes it alike)",
     ("ex07_1_ticks", "transpose"): "the task's q is a vector of joint angles, so its ticks are 1-D: .T leaves them "
                                    "as they are",
     ("ex03_1_two_link_ik", "swap_args"): "np.clip(-1.0, c2, 1.0) is min(max(-1, c2), 1), which is np.clip(c2, -1, 1)",

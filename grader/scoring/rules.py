@@ -94,6 +94,9 @@ def ik_loop(args, result, tol):
             j = int(far.argmax())
             return False, (f"q={np.round(q, 4).tolist()} is {far[j]:.3g} rad from the start q0 at joint {j + 1}; a loop "
                            f"that starts at q0 ends within {START_NEAR:g} rad of it here. " + START_HINT)
+    if off > NEAR * tol["atol"] and (np.abs(q) >= SPEC.upper - 1e-12).any():   # not a loop stopped early
+        return False, (f"q={np.round(q, 4).tolist()} has a joint at its limit, with the tool {off * 1000:.3g} mm from "
+                       f"the target (tolerance {tol['atol']:.2g} m). " + CLAMP_INSIDE)
     if off > tol["atol"]:
         # near but not within the tolerance asked (a loop that stops too early): half the case
         near = off <= NEAR * tol["atol"]
@@ -111,6 +114,8 @@ START_NEAR = 0.5
 #: lets a joint 0.8 mrad past them; none lets it anywhere.
 CLAMP_AT_LIMITS = "Clamp at the arm's limits, spec.lower and spec.upper (+-1.57 rad), not at +-pi/2."
 CLAMP_EVERY_STEP = "Clamp q after every step: np.clip(q, spec.lower, spec.upper)."
+CLAMP_INSIDE = ("Clamp inside the loop, after every step: a clamp once at the end moves a joint the loop needed past "
+                "its limit back, and the tool off the target.")
 #: 3.3: what to do, in the words of the notebook's check.
 START_HINT = "Start from q0 when it is given: q = np.zeros(5) if q0 is None else np.asarray(q0, dtype=float)."
 

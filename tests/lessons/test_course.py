@@ -77,6 +77,15 @@ def test_exercises_follow_the_contract(name):
     assert "<!-- BEGIN ANSWER -->" in text, f"{name}: the instructor version holds the predicted answers"
 
 
+@pytest.mark.parametrize("name", SOURCES)
+def test_no_cell_a_student_reads_holds_a_numpy_scalars_repr(name):
+    """A number pasted from a numpy repr ("np.float64(0.894...)") reads as noise in a check cell: numbers are written
+    as numbers."""
+    nb = read(COURSE / "source" / name / f"{name}.ipynb")
+    found = [m.group(0) for c in nb.cells for m in re.finditer(r"np\.(?:float|int)\d+\([-\d.e]+\)", c.source)]
+    assert not found, f"{name}: {found}"
+
+
 def test_every_lesson_has_its_hidden_cases():
     assert DRAWN == SOURCES, f"no course/cases/<lesson>.py for {sorted(set(SOURCES) - set(DRAWN))}"
 

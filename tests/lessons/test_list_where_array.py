@@ -174,3 +174,12 @@ def test_a_list_of_the_right_numbers_is_refused_in_the_same_words_locally_and_gr
         assert not [o for o in ok.outputs if o.output_type == "error"], (gid, ok.outputs)
         assert score_exercise(gid, right_handins[gid], want[gid], 1.0).score == 1.0
     assert np.all([gid in handins for gid in tried])
+
+
+def test_no_list_variant_of_an_exercise_that_asks_an_array_is_called_equivalent():
+    """The fairness matrix's EQUIVALENT (variants neither side can refuse) lists no list variant of an exercise whose
+    task asks an array: those fail both ways alike."""
+    from grader.course.fairness import EQUIVALENT
+
+    answers = {gid.removesuffix("_test") for gid in ASKS_AN_ARRAY}
+    assert not [key for key in EQUIVALENT if key[1] == "list" and key[0] in answers]

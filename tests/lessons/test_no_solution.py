@@ -436,6 +436,11 @@ MISTAKES = {
          "    return q - J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "e = target - tool"),
         ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n" + _DLS +
          "    return q + J.T @ np.linalg.solve(J @ J.T, e)", "the damping term + damping**2 * I"),
+        ("ex03_2_dls_step_test", "def dls_step(q, target, damping=1e-3):\n    q = np.asarray(q, dtype=float)\n"
+         "    h, here = 1e-8, snakekit.tool_pose_2d(q)[:2]\n"
+         "    J = np.column_stack([(snakekit.tool_pose_2d(q + h * d)[:2] - here) / h for d in np.eye(5)])\n"
+         "    e = np.asarray(target, dtype=float) - here\n"
+         "    return q + J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(2), e)", "is your Jacobian one-sided"),
         ("ex03_3_ik_loop_test", _SOLVE, "raise a ValueError there", True),
         ("ex03_3_ik_loop_test", _SOLVE.replace("np.clip(dls_step(q, target), spec.lower, spec.upper)",
                                                "dls_step(q, target)").replace("    return q", "    return q\n"
@@ -466,6 +471,11 @@ MISTAKES = {
          "    for _ in range(max_iter):\n        if np.linalg.norm(np.asarray(target) - snakekit.tool_pose_2d(q)[:2]) < tol:\n"
          "            return q\n        q = np.clip(dls_step(q, target), spec.lower, spec.upper)\n"
          "    raise ValueError('no solution')", "Start from q0 when it is given"),
+        ("ex03_3_ik_loop_test", "def solve_ik(target, q0=None, tol=1e-6, max_iter=200):\n"
+         "    q = np.zeros(5) if q0 is None else np.asarray(q0, dtype=float)\n    for _ in range(max_iter):\n"
+         "        if np.linalg.norm(np.asarray(target) - snakekit.tool_pose_2d(q)[:2]) < tol:\n"
+         "            return np.clip(q, spec.lower, spec.upper)\n        q = dls_step(q, target)\n"
+         "    raise ValueError('no solution')", "clamp inside the loop, after every step"),
         ("ex03_3_ik_loop_test", _SOLVE.replace("spec.lower, spec.upper", "-np.pi / 2, np.pi / 2").replace(
             "    return q", "    return q\n    raise ValueError('no solution')"), "not at +-pi/2"),
         ("ex03_4_task1_test", _TASK1.format("snakekit.tool_pose_2d(run.measured.positions[-1])").replace(
