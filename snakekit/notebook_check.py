@@ -79,8 +79,8 @@ def read_lesson(path):
                                   f"metadata was changed); {FRESH_COPY}")
         if isinstance(points, bool) or not isinstance(points, (int, float)) or not math.isfinite(points) \
                 or points < 0:
-            raise FileFormatError(f"{path}: {cell_name(nb.cells, index)} (graded cell {gid}) has points {points!r}, not a "
-                                  f"number >= 0 (its nbgrader metadata was changed); {FRESH_COPY}")
+            raise FileFormatError(f"{path}: {cell_name(nb.cells, index)} has points {points!r}, not a number >= 0 (its "
+                                  f"nbgrader metadata was changed); {FRESH_COPY}")
     return nb
 
 

@@ -545,9 +545,10 @@ def _broken_lessons():
          "utf16.ipynb is not UTF-8 text (it looks like UTF-16): byte 0 is 0xff. Jupyter saves notebooks as UTF-8; "
          "open it in JupyterLab and save it again there"),
         ("no_grade_id", nb(_graded("assert True", points=1)),
-         f"no_grade_id.ipynb: cell 1 is a graded cell without a grade id (its nbgrader metadata was changed); {fresh}"),
+         f"no_grade_id.ipynb: code cell 1 (the one that starts `assert True`) is a graded cell without a grade id (its "
+         f"nbgrader metadata was changed); {fresh}"),
         ("string_points", nb(_graded("assert True", grade_id="ex_test", points="2")),
-         "string_points.ipynb: graded cell ex_test (cell 1) has points '2', not a number >= 0"),
+         "string_points.ipynb: the check cell ex_test has points '2', not a number >= 0"),
     ]
 
 

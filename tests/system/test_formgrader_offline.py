@@ -55,7 +55,7 @@ def test_formgraders_pages_load_nothing_from_the_network_and_show_names_and_math
                          "--roster", str(course / "roster.csv")]) == 0
     # alice graded; bob collected only (formgrader lists him by name all the same)
     (alice,) = Grader(course, ASSIGNMENT, jobs=2, timeout=TIMEOUT, references=REFERENCES).run(["alice"])
-    assert (alice.status, alice.score) == ("graded", alice.max_score), alice
+    assert (alice.status, alice.score) == ("graded", alice.max_score), f"{alice.status}: {alice.detail}"   # whole
 
     home = tmp_path / "home"
     home.mkdir()
