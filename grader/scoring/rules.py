@@ -143,7 +143,8 @@ def task1(args, result, tol):
         return False, (f"move {k + 1} to ({targets[k, 0]:.4f}, {targets[k, 1]:.4f}) m ended with the tool at "
                        f"({tool[k, 0]:.4f}, {tool[k, 1]:.4f}) m, {off[k] * 1000:.3g} mm off (tolerance "
                        f"{tol['atol'] * 1000:.3g} mm).")
-    turned = np.array([tool_pose_2d(row)[2] for row in q])
+    measured = np.array([tool_pose_2d(row) for row in q])   # the poses the arm measured at each move's end
+    turned = measured[:, 2]
     off = np.angle(np.exp(1j * (turned - targets[:, 2])))
     bad = np.nonzero(np.abs(off) > HEADING_TOL)[0]
     if len(bad):
@@ -155,10 +156,8 @@ def task1(args, result, tol):
     if "poses" in result:
         poses, why = _value(result, (len(targets), 3), "task1", "poses", "the tool poses task1 returned")
         if poses is None:   # what it looks like, in the words of the notebook's check
-            kind = known_mistake(np.asarray(result["poses"], dtype=float),
-                                 pose_mistakes(q, [tool_pose_2d(row) for row in q]), tol=1e-9)
+            kind = known_mistake(np.asarray(result["poses"], dtype=float), pose_mistakes(q, list(measured)), tol=1e-9)
             return False, why + " " + (kind[0].upper() + kind[1:] if kind else "One tool pose (x, y, heading) per move.")
-        measured = np.array([tool_pose_2d(row) for row in q])
         off = np.abs(poses - measured).max(axis=1)
         if (off > POSE_TOL).any():
             k = int(np.argmax(off > POSE_TOL))
