@@ -285,6 +285,9 @@ class Grader:
             except InstructorReferenceError as e:
                 detail = "" if outcome.returncode == 0 else f" (its sandbox ended with {outcome.returncode}" + \
                     (", timed out" if outcome.timed_out else "") + ")"
+                if outcome.returncode == sandbox.NOT_MADE:
+                    detail = (f" (its sandbox could not be made, three times: {self.runner.not_made(work) or 'it said nothing'}"
+                              "; nothing of the notebook ran: grade the batch again)")
                 busy = busy_machine() if real_time(a) else ""
                 detail += f"; {busy}" if busy else ""
                 raise GradingError(f"{e}{detail}; nothing was graded") from e
@@ -295,14 +298,26 @@ class Grader:
         """Stage and run one notebook set in a sandbox: (its folder, how it ended, runs). A busy or
         stuck machine must not cost points: a run stopped by a clock is run once more from scratch,
         and only a second stop counts (an endless loop costs the batch twice its timeout)."""
-        work = self.runner.stage(student, src, nbs, tampered)
-        outcome = self.runner.run(work, student)
+        work, outcome = self._sandboxed(student, src, nbs, tampered)
         late_replies(work, student)
         if not (self.retry_timeouts and stopped_by_clock(work, outcome, student, self.a)):
             return work, outcome, 1
         shutil.rmtree(work, ignore_errors=True)
-        work = self.runner.stage(student, src, nbs, tampered)
-        return work, self.runner.run(work, student), 2
+        return (*self._sandboxed(student, src, nbs, tampered), 2)
+
+    def _sandboxed(self, student: str, src: Path, nbs: dict, tampered: dict, tries: int = 3):
+        """Stage and run one notebook set: (its folder, how it ended). A sandbox that could not be made (its
+        namespaces or mounts refused, on a machine short of something for a moment) ran nothing of the
+        notebook: it is made again from scratch, at most ``tries`` times in all, and never costs a point."""
+        for attempt in range(tries):
+            work = self.runner.stage(student, src, nbs, tampered)
+            outcome = self.runner.run(work, student)
+            if outcome.returncode != sandbox.NOT_MADE or attempt == tries - 1:
+                return work, outcome
+            said = self.runner.not_made(work)
+            print(f"{student}: the sandbox could not be made ({said or 'it said nothing'}); making it again",
+                  file=sys.stderr, flush=True)
+            shutil.rmtree(work, ignore_errors=True)
 
     def _grade_one(self, student: str):
         """Run one submission's sandbox; returns its result, or (it ran) the call that scores it."""
@@ -348,7 +363,8 @@ class Grader:
                     keep = True
                     return Again(lambda: self._run_again(student, src, nbs, tampered, again, finish))
                 return self.verdicts.collect(work, student, nbs, tampered, problems, outcome, t0, second, runs,
-                                             restored=restored)
+                                             restored=restored, not_made=self.runner.not_made(work)
+                                             if outcome.returncode == sandbox.NOT_MADE else None)
             finally:
                 if not keep:
                     shutil.rmtree(work, ignore_errors=True)

@@ -68,6 +68,11 @@ class Limits:
     tmp_size: int = 64 << 20
 
 
+#: the exit status of a sandbox that could not be made (its namespaces, mounts or user): nothing of the
+#: notebook ran (grader.sandbox.inside.enter, grader.sandbox.forkserver)
+NOT_MADE = 125
+
+
 @dataclass(frozen=True)
 class Outcome:
     """How a sandboxed command ended: ``returncode`` (negative: killed by that signal)."""

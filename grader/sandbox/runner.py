@@ -77,6 +77,23 @@ class Runner:
             if self.cases is not None:
                 self.cases.stop(work / "cases.sock")
 
+    def log(self, work: Path) -> Path:
+        """Where the sandbox that runs ``work`` writes what it prints (beside the folder, out of its view)."""
+        return work.parent / f".{work.name}.log"
+
+    def not_made(self, work: Path) -> str:
+        """Why the sandbox for ``work`` could not be made, in its own words (its ``sandbox: ...`` lines, else
+        the last line it printed); "" when it said nothing."""
+        try:
+            with open(self.log(work), "rb") as f:
+                f.seek(max(0, f.seek(0, os.SEEK_END) - 8192))
+                lines = f.read().decode("utf-8", "replace").splitlines()
+        except OSError:
+            return ""
+        said = [line.strip() for line in lines if line.startswith("sandbox:")]
+        last = [line.strip() for line in lines if line.strip()][-1:]
+        return "; ".join(said or last)[:500]
+
     def env(self, work: Path) -> dict:
         venv_bin = str(Path(os.path.abspath(sys.executable)).parent)
         return {"PATH": f"{venv_bin}:/usr/local/bin:/usr/bin:/bin", "HOME": str(work / "home"),
@@ -93,8 +110,8 @@ class Runner:
                 f"{self.timeout:g}", f"{self.cell_timeout:g}", str(len(self.a.notebooks))]
         if self.use_sandbox and self.server is not None:
             return sandbox.run_forked(self.server, argv, workdir=work, env=self.env(work), limits=self.limits,
-                                      hide=[str(self.course)], log=work.parent / f".{work.name}.log", gate=gate)
-        with open(work.parent / f".{work.name}.log", "wb") as log:
+                                      hide=[str(self.course)], log=self.log(work), gate=gate)
+        with open(self.log(work), "wb") as log:
             if self.use_sandbox:
                 return sandbox.run(argv, workdir=work, env=self.env(work), limits=self.limits,
                                    hide=[str(self.course)], stdout=log, stderr=log, gate=gate)

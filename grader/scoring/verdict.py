@@ -101,12 +101,13 @@ class Verdicts:
         return out
 
     def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None, runs=1,
-                restored=None) -> SubmissionResult:
+                restored=None, not_made: str | None = None) -> SubmissionResult:
         """``second``: grade id -> (its hand-in, the answer cells replaced) from a second run with the
         instructor's answers in those cells (:mod:`grader.scoring.rerun`); the better score counts. ``runs``: 2
         when the first run was stopped by a clock and this is the run from scratch after it.
         ``restored``: test cells put back as released before the run (:mod:`grader.course.restore`): no
-        points lost, the status says so for the TA."""
+        points lost, the status says so for the TA. ``not_made``: the sandbox could not be made (its words), so
+        nothing of the notebook ran: a grader error, never the student's score."""
         a = self.a
         worker, executed = self.ran(work, student)
         errors = set()
@@ -161,6 +162,11 @@ class Verdicts:
             status = "tests restored"
             detail = "; ".join(f"{g}: {why}" for g, why in sorted(restored.items())) + \
                 " (the released tests gave the points)"
+        elif not_made is not None and not executed:
+            status = "grader error"
+            said = not_made or "it said nothing"
+            detail = (f"the grader could not make the sandbox to run the notebook in, three times ({said}): nothing of "
+                      "it ran, so this is no score of the student's; grade the student again")
         elif not executed:
             last = (str(worker.get("error", "")).strip().splitlines() or ["no result"])[-1][:300]
             status = "kernel died" if outcome.returncode not in (0, 3) else "autograde failed"
