@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import Counter
 from contextlib import contextmanager
 from typing import Callable
 
@@ -149,9 +150,9 @@ class SyncRead(sdk.GroupSyncRead):
         self.last_result = True
         return result
 
-    def exchange(self) -> tuple[int, None]:
-        """One SyncRead, for :meth:`Bus.retry`: corrupt unless every servo's whole block arrived
-        and passed the check."""
+    def exchange(self) -> tuple[int, int | None]:
+        """One SyncRead, for :meth:`Bus.retry` (with ``servo_of=SyncRead.servo_of``): ``(result, the servo
+        whose block failed, or None)``; corrupt unless every servo's whole block arrived and passed the check."""
         self.implausible = None
         result = self.txRxPacket()
         if result == sdk.COMM_SUCCESS and not all(self.isAvailable(i, self.start_address, self.data_length)
@@ -163,8 +164,24 @@ class SyncRead(sdk.GroupSyncRead):
                 if why:
                     self.failed_id, self.implausible = i, why
                     self.refused = self.refused or (i, why)
-                    return sdk.COMM_RX_CORRUPT, None
-        return result, None
+                    return sdk.COMM_RX_CORRUPT, i
+        return result, (None if result == sdk.COMM_SUCCESS else self.failed_id)
+
+    @staticmethod
+    def servo_of(value: int | None) -> int | None:
+        """The servo a failed :meth:`exchange` concerns (its value)."""
+        return value
+
+
+def reported(failed: list[tuple[int, object]], servo_of: Callable[[object], object] | None = None) -> tuple[int, object]:
+    """Which of the failed tries of one request is reported (:meth:`Bus.retry`): with ``servo_of``, only the
+    tries of the servo that failed the most (the first such to fail); of those, a corrupt one, else the last."""
+    if servo_of is not None:
+        counts = Counter(servo_of(v) for _, v in failed)
+        most = max(counts.values())
+        worst = next(servo_of(v) for _, v in failed if counts[servo_of(v)] == most)
+        failed = [(r, v) for r, v in failed if servo_of(v) == worst]
+    return next(((r, v) for r, v in failed if r == sdk.COMM_RX_CORRUPT), failed[-1])
 
 
 class Bus:
@@ -317,25 +334,29 @@ class Bus:
         return result, value
 
     def retry(self, call: Callable[[], tuple[int, object]], *, answered: bool = True,
-              tries: int | None = None) -> tuple[int, object]:
+              tries: int | None = None, servo_of: Callable[[object], object] | None = None) -> tuple[int, object]:
         """:meth:`attempt` ``call()`` (one packet exchange, returning ``(result, value)``), again
         after each failure, at most ``retries + 1`` times (``tries + 1`` when given). Returns the last ``(result, value)``:
         ``result`` is ``COMM_SUCCESS`` unless every try failed. When every try failed and one of them
         got a corrupt status packet, that is the result: a servo answered, on a noisy line or at
         another baud rate, even if a later try timed out (on a busy computer, the answer came late),
         and the message then points at the line, not at the servo's power or id.
+
+        ``servo_of``: for an exchange with several servos (a SyncRead), the servo a failed try's value
+        names. The servo that failed the most tries is the one reported (a servo that stays silent at
+        every try is not hidden by one try that a late byte garbled at another servo), with a corrupt
+        try of its own over its timeouts.
         """
         retries = self.retries if tries is None else tries
-        corrupt = None
+        failed = []
         for attempt in range(retries + 1):
             result, value = self.attempt(call, answered=answered)
             if result == sdk.COMM_SUCCESS:
                 return result, value
-            if result == sdk.COMM_RX_CORRUPT:
-                corrupt = result, value
+            failed.append((result, value))
             if attempt < retries:
                 self.retried += 1
-        return corrupt or (result, value)
+        return reported(failed, servo_of)
 
     def read(self, servo_id: int, address: int, size: int, *, tries: int | None = None) -> tuple[int, int, int]:
         """One READ with retries (``tries``: how many, default :attr:`retries`): ``(result, value,

@@ -297,13 +297,13 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
         reader = self._reader
         t_sent = self._now()
         reader.forget()
-        result, _ = self.bus.retry(reader.exchange)
+        result, failed = self.bus.retry(reader.exchange, servo_of=reader.servo_of)
         if result != sdk.COMM_SUCCESS and reader.refused:
             servo, why = reader.refused  # a servo's reading no servo can give, at any try: name it
             self._fail(f"servo {servo} on {self.port_name} reported {why}, which no "
                        f"true reading holds: a corrupt or misread reply ({self._tries()})", result)
         if result != sdk.COMM_SUCCESS:
-            self._fail(f"servo {reader.failed_id} on {self.port_name} did not answer the SyncRead of the "
+            self._fail(f"servo {failed} on {self.port_name} did not answer the SyncRead of the "
                        f"joint state ({describe(result)}, {self._tries()})", result)
         t = 0.5 * (t_sent + self._now())  # the servos sampled about half-way through
         values = []

@@ -89,9 +89,9 @@ class WatchdogMixin:
         """
         self._check_open()
         status = self._status
-        result, _ = self.bus.retry(status.exchange)
+        result, failed = self.bus.retry(status.exchange, servo_of=status.servo_of)
         if result != sdk.COMM_SUCCESS:
-            self._fail(f"servo {status.failed_id} on {self.port_name} did not answer the SyncRead of its "
+            self._fail(f"servo {failed} on {self.port_name} did not answer the SyncRead of its "
                        f"status ({describe(result)}, {self._tries()})", result)
         out = {}
         for i in self.ids:

@@ -307,6 +307,28 @@ def test_the_retries_report_a_corrupt_answer_over_a_later_timeout(robot):
     assert bus.retry(tries(C, C, C, C), tries=3) == C and bus.retried == before + 3  # 3 sent again
 
 
+def test_a_syncreads_retries_name_the_servo_that_failed_the_most_tries(robot):
+    """Servo 3 unplugged: every try of a SyncRead times out at servo 3, except one whose reply a late byte
+    garbled at servo 1. The message must name servo 3, not servo 1. Over every sequence of four failed
+    tries at two servos: the servo named is one that failed the most tries, the first such to fail, and
+    its result is corrupt when one of its own tries was, else a timeout."""
+    import itertools
+
+    import dynamixel_sdk as sdk
+
+    from snakekit.hardware.bus import SyncRead, reported
+
+    T, C = sdk.COMM_RX_TIMEOUT, sdk.COMM_RX_CORRUPT
+    bus = robot.bus
+    assert bus.retry(iter([(T, 3), (C, 1), (T, 3), (T, 3)]).__next__, tries=3, servo_of=SyncRead.servo_of) == (T, 3)
+    for seq in itertools.product([(T, 1), (C, 1), (T, 3), (C, 3)], repeat=4):
+        got = reported(list(seq), SyncRead.servo_of)   # the rule Bus.retry applies, as above
+        fails = {servo: [r for r, s in seq if s == servo] for servo in (1, 3)}
+        most = max(len(f) for f in fails.values())
+        first = next(s for _, s in seq if len(fails[s]) == most)
+        assert got == (C if C in fails[first] else T, first), (seq, got)
+
+
 def test_noisy_bus_never_carries_a_goal_outside_the_limits(robot):
     bus = robot.emulator
     bus.faults = Faults(drop=0.02, corrupt=0.01, delay=0.01, delay_time=0.04, seed=7)
