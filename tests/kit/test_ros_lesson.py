@@ -196,7 +196,9 @@ if os.fork() == 0:
         os.rename(path + ".active", path)
         os._exit(0)
     signal.signal(signal.SIGINT, close)
-    open(path + ".active", "w").write("218 messages")
+    with open(path + ".part", "w") as f:   # whole before it is seen: the test stops it once .active exists
+        f.write("218 messages")
+    os.rename(path + ".part", path + ".active")
     while True:
         time.sleep(1)
 signal.signal(signal.SIGINT, lambda *_: os._exit(0))
