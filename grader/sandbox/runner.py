@@ -90,7 +90,7 @@ class Runner:
                 lines = f.read().decode("utf-8", "replace").splitlines()
         except OSError:
             return ""
-        said = [line.strip() for line in lines if line.startswith("sandbox:")]
+        said = list(dict.fromkeys(line.strip() for line in lines if line.startswith("sandbox:")))  # once each
         last = [line.strip() for line in lines if line.strip()][-1:]
         return "; ".join(said or last)[:500]
 

@@ -92,6 +92,7 @@ def test_a_student_whose_sandbox_is_never_made_gets_a_grader_error_with_its_word
     bob = got["bob"]
     assert bob.status == "grader error", (bob.status, bob.detail)
     assert bob.detail.startswith("the grader could not make the sandbox to run the notebook in, three times (sandbox: ")
+    assert bob.detail.count("sandbox: ") == 1, bob.detail   # each of the sandbox's words once, not once a try
     assert f"mount {MISSING}" in bob.detail and bob.detail.endswith("so this is no score of the student's; grade the "
                                                                      "student again")
 
