@@ -283,11 +283,12 @@ class Grader:
                                 signatures=signatures(c.source for nb in nbs.values() for c in nb.cells
                                                       if c.cell_type == "code"))
             except InstructorReferenceError as e:
-                detail = "" if outcome.returncode == 0 else f" (its sandbox ended with {outcome.returncode}" + \
-                    (", timed out" if outcome.timed_out else "") + ")"
                 if outcome.returncode == sandbox.NOT_MADE:
                     detail = (f" (its sandbox could not be made, three times: {self.runner.not_made(work) or 'it said nothing'}"
                               "; nothing of the notebook ran: grade the batch again)")
+                else:
+                    detail = "" if outcome.returncode == 0 else f" (its sandbox ended with {outcome.returncode}" + \
+                        (", timed out" if outcome.timed_out else "") + ")"
                 busy = busy_machine() if real_time(a) else ""
                 detail += f"; {busy}" if busy else ""
                 raise GradingError(f"{e}{detail}; nothing was graded") from e

@@ -151,8 +151,8 @@ class SyncRead(sdk.GroupSyncRead):
         return result
 
     def exchange(self) -> tuple[int, int | None]:
-        """One SyncRead, for :meth:`Bus.retry` (with ``servo_of=SyncRead.servo_of``): ``(result, the servo
-        whose block failed, or None)``; corrupt unless every servo's whole block arrived and passed the check."""
+        """One SyncRead, for :meth:`Bus.retry` (with ``by_servo=True``): ``(result, the servo whose block
+        failed, or None)``; corrupt unless every servo's whole block arrived and passed the check."""
         self.implausible = None
         result = self.txRxPacket()
         if result == sdk.COMM_SUCCESS and not all(self.isAvailable(i, self.start_address, self.data_length)
@@ -167,20 +167,15 @@ class SyncRead(sdk.GroupSyncRead):
                     return sdk.COMM_RX_CORRUPT, i
         return result, (None if result == sdk.COMM_SUCCESS else self.failed_id)
 
-    @staticmethod
-    def servo_of(value: int | None) -> int | None:
-        """The servo a failed :meth:`exchange` concerns (its value)."""
-        return value
 
-
-def reported(failed: list[tuple[int, object]], servo_of: Callable[[object], object] | None = None) -> tuple[int, object]:
-    """Which of the failed tries of one request is reported (:meth:`Bus.retry`): with ``servo_of``, only the
-    tries of the servo that failed the most (the first such to fail); of those, a corrupt one, else the last."""
-    if servo_of is not None:
-        counts = Counter(servo_of(v) for _, v in failed)
-        most = max(counts.values())
-        worst = next(servo_of(v) for _, v in failed if counts[servo_of(v)] == most)
-        failed = [(r, v) for r, v in failed if servo_of(v) == worst]
+def reported(failed: list[tuple[int, object]], by_servo: bool = False) -> tuple[int, object]:
+    """Which of the failed tries of one request is reported (:meth:`Bus.retry`): ``by_servo`` (each try's value
+    is the servo it failed at), only the tries of the servo that failed the most (the first such to fail); of
+    those, a corrupt one, else the last."""
+    if by_servo:
+        counts = Counter(v for _, v in failed)
+        worst = next(v for _, v in failed if counts[v] == max(counts.values()))
+        failed = [(r, v) for r, v in failed if v == worst]
     return next(((r, v) for r, v in failed if r == sdk.COMM_RX_CORRUPT), failed[-1])
 
 
@@ -334,7 +329,7 @@ class Bus:
         return result, value
 
     def retry(self, call: Callable[[], tuple[int, object]], *, answered: bool = True,
-              tries: int | None = None, servo_of: Callable[[object], object] | None = None) -> tuple[int, object]:
+              tries: int | None = None, by_servo: bool = False) -> tuple[int, object]:
         """:meth:`attempt` ``call()`` (one packet exchange, returning ``(result, value)``), again
         after each failure, at most ``retries + 1`` times (``tries + 1`` when given). Returns the last ``(result, value)``:
         ``result`` is ``COMM_SUCCESS`` unless every try failed. When every try failed and one of them
@@ -342,8 +337,8 @@ class Bus:
         another baud rate, even if a later try timed out (on a busy computer, the answer came late),
         and the message then points at the line, not at the servo's power or id.
 
-        ``servo_of``: for an exchange with several servos (a SyncRead), the servo a failed try's value
-        names. The servo that failed the most tries is the one reported (a servo that stays silent at
+        ``by_servo``: for an exchange with several servos (a SyncRead), whose failed tries' values are
+        the servos they failed at. The servo that failed the most tries is the one reported (a servo that stays silent at
         every try is not hidden by one try that a late byte garbled at another servo), with a corrupt
         try of its own over its timeouts.
         """
@@ -356,7 +351,7 @@ class Bus:
             failed.append((result, value))
             if attempt < retries:
                 self.retried += 1
-        return reported(failed, servo_of)
+        return reported(failed, by_servo)
 
     def read(self, servo_id: int, address: int, size: int, *, tries: int | None = None) -> tuple[int, int, int]:
         """One READ with retries (``tries``: how many, default :attr:`retries`): ``(result, value,

@@ -297,7 +297,7 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
         reader = self._reader
         t_sent = self._now()
         reader.forget()
-        result, failed = self.bus.retry(reader.exchange, servo_of=reader.servo_of)
+        result, failed = self.bus.retry(reader.exchange, by_servo=True)
         if result != sdk.COMM_SUCCESS and reader.refused:
             servo, why = reader.refused  # a servo's reading no servo can give, at any try: name it
             self._fail(f"servo {servo} on {self.port_name} reported {why}, which no "

@@ -89,7 +89,7 @@ class WatchdogMixin:
         """
         self._check_open()
         status = self._status
-        result, failed = self.bus.retry(status.exchange, servo_of=status.servo_of)
+        result, failed = self.bus.retry(status.exchange, by_servo=True)
         if result != sdk.COMM_SUCCESS:
             self._fail(f"servo {failed} on {self.port_name} did not answer the SyncRead of its "
                        f"status ({describe(result)}, {self._tries()})", result)

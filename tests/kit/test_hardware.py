@@ -316,13 +316,13 @@ def test_a_syncreads_retries_name_the_servo_that_failed_the_most_tries(robot):
 
     import dynamixel_sdk as sdk
 
-    from snakekit.hardware.bus import SyncRead, reported
+    from snakekit.hardware.bus import reported
 
     T, C = sdk.COMM_RX_TIMEOUT, sdk.COMM_RX_CORRUPT
     bus = robot.bus
-    assert bus.retry(iter([(T, 3), (C, 1), (T, 3), (T, 3)]).__next__, tries=3, servo_of=SyncRead.servo_of) == (T, 3)
+    assert bus.retry(iter([(T, 3), (C, 1), (T, 3), (T, 3)]).__next__, tries=3, by_servo=True) == (T, 3)
     for seq in itertools.product([(T, 1), (C, 1), (T, 3), (C, 3)], repeat=4):
-        got = reported(list(seq), SyncRead.servo_of)   # the rule Bus.retry applies, as above
+        got = reported(list(seq), by_servo=True)   # the rule Bus.retry applies, as above
         fails = {servo: [r for r, s in seq if s == servo] for servo in (1, 3)}
         most = max(len(f) for f in fails.values())
         first = next(s for _, s in seq if len(fails[s]) == most)
