@@ -36,6 +36,7 @@ from pathlib import Path
 
 import nbformat
 
+from snakekit import kernel_client
 from grader.scoring import rerun
 from grader.sandbox import namespaces as sandbox
 from grader.sandbox.inside import worker
@@ -411,7 +412,7 @@ class Grader:
 
 def late_replies(work: Path, student: str) -> None:
     """Say (on stderr, for the TA) where a kernel finished a cell whose reply never came, which the
-    worker took as finished (:data:`grader.sandbox.inside.worker.LATE_REPLY`): the kernel's fault, never a score."""
+    worker took as finished (:data:`snakekit.kernel_client.LATE_REPLY`): the kernel's fault, never a score."""
     raw = read_inside(work, "result.json", limit=1 << 20)
     try:
         late = json.loads(raw).get("late_replies") or [] if raw else []
@@ -420,7 +421,7 @@ def late_replies(work: Path, student: str) -> None:
         return
     if where:
         print(f"snakekit grade: {student}: the kernel finished {where} but its reply never came; taken as finished "
-              f"after {worker.LATE_REPLY:g} s (the grade is not affected)", file=sys.stderr)
+              f"after {kernel_client.LATE_REPLY:g} s (the grade is not affected)", file=sys.stderr)
 
 
 def stopped_by_clock(work: Path, outcome, student: str, a) -> bool:

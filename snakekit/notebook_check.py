@@ -21,6 +21,7 @@ from pathlib import Path
 from . import host
 from .cells import cell_name
 from .errors import FileFormatError
+from .kernel_client import NotebookClient
 
 #: What to do with a lesson file that can't be used as it is.
 FRESH_COPY = "take a fresh copy of the lesson from the kit's notebooks/ folder and copy your answers into it"
@@ -97,7 +98,6 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
     Raises:
         FileFormatError: the file is not a lesson notebook (:func:`read_lesson`).
     """
-    import nbclient
     from nbclient.exceptions import CellTimeoutError, DeadKernelError
     from traitlets.config import Config
 
@@ -110,7 +110,7 @@ def check_notebook(path, *, out=None, timeout: float = 300.0) -> int:
         return 1
     running, interrupted = [], set()
 
-    class Client(nbclient.NotebookClient):
+    class Client(NotebookClient):   # a lost execute_reply costs LATE_REPLY s, not the cell's timeout
         async def _async_handle_timeout(self, timeout, cell=None):
             if running[-1] in interrupted:   # interrupted once and still running: the run stops here
                 raise CellTimeoutError.error_from_timeout_and_cell("Cell execution timed out", timeout, cell)

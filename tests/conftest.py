@@ -54,20 +54,22 @@ _KERNEL_SOCKETS: list[str] = []
 def notebook_client(nb, **kwargs):
     """``nbclient.NotebookClient(nb, **kwargs)`` whose kernel listens on Unix sockets in a folder of its
     own (snakekit.host.kernel_sockets, as `snakekit check` and the grader's instructor run), not on
-    TCP ports: kernels started at once by the parallel workers never race for a port."""
+    TCP ports: kernels started at once by the parallel workers never race for a port. It is the kit's
+    client (snakekit.kernel_client): a reply the kernel never sends after a cell's idle costs
+    LATE_REPLY s, not the cell's timeout."""
     import atexit
     import tempfile
 
-    import nbclient
     from traitlets.config import Config
 
     from snakekit.host import kernel_sockets
+    from snakekit.kernel_client import NotebookClient
 
     if not _KERNEL_SOCKETS:  # one short folder per test process, removed when it ends
         _KERNEL_SOCKETS.append(tempfile.mkdtemp(prefix="snakekit-kernels-"))
         atexit.register(shutil.rmtree, _KERNEL_SOCKETS[0], True)
     folder = tempfile.mkdtemp(dir=_KERNEL_SOCKETS[0])
-    return nbclient.NotebookClient(nb, config=Config(kernel_sockets(folder)), **kwargs)
+    return NotebookClient(nb, config=Config(kernel_sockets(folder)), **kwargs)
 
 
 #: What a class adds to the course folder (and what a run of an instructor notebook writes beside it).

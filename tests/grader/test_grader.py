@@ -915,8 +915,9 @@ def test_a_cell_whose_reply_never_comes_counts_as_finished_once_its_kernel_is_id
     from jupyter_core.utils import run_sync
 
     from grader.sandbox.inside import worker
+    from snakekit import kernel_client
 
-    monkeypatch.setattr(worker, "LATE_REPLY", 1.0)
+    monkeypatch.setattr(kernel_client, "LATE_REPLY", 1.0)
     monkeypatch.setattr(worker, "_late", [])
     execute = next(s for s in worker._with_deadline(120, 15) if s.__name__ == "DeadlineExecute")
 
@@ -969,7 +970,7 @@ def test_the_ta_is_told_where_a_lost_reply_was_taken_as_finished(tmp_path, capsy
     late_replies(tmp_path, "fy")
     assert capsys.readouterr().err == (
         "snakekit grade: fy: the kernel finished 03_inverse_kinematics cell 17 but its reply never came; taken as "
-        "finished after 20 s (the grade is not affected)\n")
+        "finished after 5 s (the grade is not affected)\n")
     for written in ('{"success": true}', '{"late_replies": [{"cell": "x"}]}', "not json"):
         (tmp_path / "result.json").write_text(written)      # nothing late, or what a sandbox wrote instead
         late_replies(tmp_path, "fy")

@@ -19,7 +19,7 @@ from snakekit import errors
 PACKAGE = Path(snakekit.__file__).parent
 
 LAYER = {
-    "errors": 0, "model": 0, "host": 0, "handin": 1, "bridge": 1, "validate": 1, "progress": 1, "collision": 2, "kinematics": 2,
+    "errors": 0, "model": 0, "host": 0, "kernel_client": 0, "handin": 1, "bridge": 1, "validate": 1, "progress": 1, "collision": 2, "kinematics": 2,
     "trajectory": 2, "profile_planner": 2,
     "run": 3, "bags": 3, "robot": 3, "sim": 4, "hardware": 4, "emulator": 4, "plots": 5, "ros": 5, "viewer": 5, "widgets": 5,
     "checks": 5, "start": 5, "notebook_check": 5, "watch": 1, "cells": 1, "mistakes": 1, "closeness": 1, "verdicts": 1, "lesson_progress": 5, "cli": 6, "__init__": 6, "__main__": 6,
@@ -280,8 +280,10 @@ NEVER = [
 CORE = ("grader.errors", "grader.markup", "grader.files", "grader.hooks", "grader.batch", "grader.lms", "grader.course",
         "grader.sandbox", "grader.scoring", "grader.feedback")
 # What runs beside the student's code: the standard library, nbgrader and what nbgrader's autograde
-# itself runs on (nbformat, traitlets, its gradebook's sqlalchemy, the kernel's jupyter_client and ipykernel).
-INSIDE_MAY_IMPORT = {"nbgrader", "nbformat", "traitlets", "sqlalchemy", "jupyter_client", "ipykernel"}
+# itself runs on (nbformat, traitlets, its gradebook's sqlalchemy, nbclient, the kernel's jupyter_client and
+# ipykernel); of the kit, only its notebook client (snakekit.kernel_client, which imports nothing of the kit).
+INSIDE_MAY_IMPORT = {"nbgrader", "nbformat", "traitlets", "sqlalchemy", "nbclient", "jupyter_client", "ipykernel"}
+INSIDE_MAY_IMPORT_OF_THE_KIT = {"snakekit.kernel_client"}
 
 
 @pytest.mark.parametrize("module", sorted(GRADER_MODULES))
@@ -324,9 +326,29 @@ def test_what_hides_the_hidden_tests_draws_nothing():
 @pytest.mark.parametrize("module", sorted(m for m in GRADER_MODULES if _in(m, "grader.sandbox.inside")))
 def test_what_runs_inside_the_sandbox_imports_only_the_standard_library_and_nbgrader(module):
     assert {m for m in GRAPH[module] if not _in(m, "grader.sandbox.inside")} <= {"grader", "grader.sandbox"}
-    outside = {n for n in _third_party(GRADER_MODULES[module]) if n not in sys.stdlib_module_names}
+    outside = {n for n in _third_party(GRADER_MODULES[module]) if n not in sys.stdlib_module_names} - {"snakekit"}
     assert outside <= INSIDE_MAY_IMPORT, f"{module} imports {sorted(outside - INSIDE_MAY_IMPORT)}"
-    assert "snakekit" not in _third_party(GRADER_MODULES[module])  # no course data, no kit
+    kit = _kit_imports(GRADER_MODULES[module])   # no course data; of the kit its notebook client alone
+    assert kit <= INSIDE_MAY_IMPORT_OF_THE_KIT, f"{module} imports {sorted(kit - INSIDE_MAY_IMPORT_OF_THE_KIT)}"
+
+
+def _kit_imports(path: Path) -> set[str]:
+    """The kit modules ``path`` imports, by their whole names (``snakekit`` for the package itself)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").split(".")[0] == "snakekit":
+            out |= {node.module} if node.module != "snakekit" else {f"snakekit.{a.name}" for a in node.names}
+        elif isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name.split(".")[0] == "snakekit"}
+    return out
+
+
+def test_the_kit_s_module_the_sandbox_may_import_imports_nothing_of_the_kit_and_no_course_data():
+    for name in INSIDE_MAY_IMPORT_OF_THE_KIT:
+        path = PACKAGE / f"{name.split('.', 1)[1]}.py"
+        assert [i for i, _, _ in imports(path) if i is not None] == []
+        outside = {e for _, e, _ in imports(path) if e is not None and e not in sys.stdlib_module_names} - {"__future__"}
+        assert outside <= INSIDE_MAY_IMPORT, sorted(outside - INSIDE_MAY_IMPORT)
 
 
 @pytest.mark.parametrize("module", sorted(GRADER_MODULES))

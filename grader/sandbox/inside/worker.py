@@ -15,8 +15,8 @@ with a note, and the cells after it do not run. nbgrader then saves the notebook
 the feedback shows every output up to the stopped cell.
 
 A cell the kernel has finished (IOPub: its outputs, then idle) whose reply never comes on the
-shell channel counts as finished :data:`LATE_REPLY` s after the idle (``late_replies`` in
-``result.json``), instead of waiting out the notebook's time.
+shell channel counts as finished ``snakekit.kernel_client.LATE_REPLY`` s after the idle
+(``late_replies`` in ``result.json``), instead of waiting out the notebook's time.
 """
 
 from __future__ import annotations
@@ -34,8 +34,6 @@ ONLY = "only.json"
 #: the note put on the cell that was running when a notebook's time ran out (``{timeout}``: seconds)
 STOPPED_NOTE = "stopped here: the notebook ran longer than {timeout:g} s"
 _stopped: list[dict] = []  # where each notebook was stopped, filled in by the execute preprocessor
-#: How long after a cell's kernel said it is idle (IOPub) its reply (shell) may still be on its way.
-LATE_REPLY = 20.0
 _late: list[dict] = []  # the cells whose reply never came after the kernel had finished them
 def main(argv: list[str], *, warm: bool = False) -> int:
     """Autograde one submission; ``warm``: fork the kernels from this process (see :mod:`grader.sandbox.inside.warmkernel`)."""
@@ -106,8 +104,11 @@ def _with_deadline(timeout: float, cell_timeout: float, tests: set | None = None
     from nbgrader.converters import Autograde
     from nbgrader.preprocessors import Execute
 
-    class DeadlineExecute(Execute):
-        """nbgrader's ``Execute`` with a wall clock for the whole notebook beside the per-cell one."""
+    from snakekit.kernel_client import LateReplies
+
+    class DeadlineExecute(LateReplies, Execute):
+        """nbgrader's ``Execute`` with a wall clock for the whole notebook beside the per-cell one, and
+        a lost reply taken as the cell's end (:class:`snakekit.kernel_client.LateReplies`)."""
 
         def preprocess(self, nb, resources=None, km=None):
             self._deadline = time.monotonic() + timeout
@@ -147,32 +148,9 @@ def _with_deadline(timeout: float, cell_timeout: float, tests: set | None = None
                 _stopped.append({"notebook": self._notebook, "cell": index, "id": cell.get("id", "")})
             return cell, resources
 
-        async def _async_poll_for_reply(self, msg_id, cell, timeout, task_poll_output_msg, task_poll_kernel_alive):
-            """nbclient's wait for the cell's reply on the shell channel, which may never come: about
-            once in 2,000 notebooks the kernel (ipykernel 7) runs a cell to its end, says it is idle
-            on IOPub with every output sent, and its ``execute_reply`` never arrives; the wait would
-            then last the notebook's whole timeout. Once the kernel has said it is idle, the reply
-            gets :data:`LATE_REPLY` s more; then the cell counts as finished, with the outputs it sent."""
-            import asyncio
-
-            reply = asyncio.ensure_future(super()._async_poll_for_reply(
-                msg_id, cell, timeout, task_poll_output_msg, task_poll_kernel_alive))
-            await asyncio.wait({reply, task_poll_output_msg}, return_when=asyncio.FIRST_COMPLETED)
-            if reply.done() or task_poll_output_msg.cancelled() or task_poll_output_msg.exception() is not None:
-                return await reply
-            try:
-                return await asyncio.wait_for(asyncio.shield(reply), LATE_REPLY)
-            except asyncio.TimeoutError:
-                reply.cancel()
-                task_poll_kernel_alive.cancel()
-            _late.append({"notebook": self._notebook, "cell": self._index,
-                          "id": cell.get("id", "")})
-            self.log.warning("cell %s: the kernel finished it but its reply never came; taken as finished", cell.get("id"))
-            errors = [o for o in cell.get("outputs", []) if o.get("output_type") == "error"]
-            content = {"status": "error", "ename": errors[-1].get("ename", ""), "evalue": errors[-1].get("evalue", ""),
-                       "traceback": errors[-1].get("traceback", [])} if errors else {"status": "ok"}
-            return {"parent_header": {"msg_id": msg_id}, "header": {"msg_type": "execute_reply"}, "metadata": {},
-                    "content": {**content, "execution_count": cell.get("execution_count")}}
+        def reply_never_came(self, cell):
+            _late.append({"notebook": self._notebook, "cell": self._index, "id": cell.get("id", "")})
+            super().reply_never_came(cell)
 
     steps = list(Autograde.class_traits()["autograde_preprocessors"].default())
     return [DeadlineExecute if step is Execute else step for step in steps]

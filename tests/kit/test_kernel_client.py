@@ -1,0 +1,126 @@
+"""The kit's notebook client (snakekit.kernel_client): a cell the kernel finished (IOPub: its outputs,
+then idle) whose execute_reply never arrives counts as finished LATE_REPLY s after the idle, with the
+outputs it sent, instead of waiting out the cell's timeout. ipykernel 7 loses such a reply now and
+then on a busy machine (lesson 0's control panel cells, about one run in two under stress-ng);
+`snakekit check`, the suite's notebook runs and the grader's sandboxes all use the client."""
+
+from __future__ import annotations
+
+import io
+import time
+
+import nbclient
+import pytest
+
+from snakekit import kernel_client
+from snakekit.notebook_check import check_notebook
+from tests.conftest import need, notebook_client
+
+LOSE = "# lose my reply"
+
+
+@pytest.fixture
+def losing_shell(monkeypatch):
+    """The shell channel loses the execute_reply of each cell whose code holds LOSE; returns the
+    cells' indices whose reply was lost, in order."""
+    lost, codes = [], {}
+    real_start = nbclient.NotebookClient.async_start_new_kernel_client
+
+    async def start(self, *a, **k):
+        kc = await real_start(self, *a, **k)
+        channel = kc.shell_channel
+        get = channel.get_msg
+
+        async def losing(*a, **k):
+            msg = await get(*a, **k)
+            while msg["msg_type"] == "execute_reply" and LOSE in codes.get(msg["parent_header"]["msg_id"], ""):
+                lost.append(msg["parent_header"]["msg_id"])
+                msg = await get(*a, **k)
+            return msg
+
+        channel.get_msg = losing
+        real = kc.execute
+
+        def execute(code, *a, **k):
+            msg_id = real(code, *a, **k)
+            codes[msg_id] = code
+            return msg_id
+
+        kc.execute = execute
+        return kc
+
+    monkeypatch.setattr(nbclient.NotebookClient, "async_start_new_kernel_client", start)
+    monkeypatch.setattr(kernel_client, "LATE_REPLY", 1.0)
+    return lost
+
+
+def _notebook(*sources, graded=()):
+    nbformat = need("nbformat")
+    cells = [nbformat.v4.new_code_cell(src) for src in sources]
+    for i in graded:
+        cells[i].metadata["nbgrader"] = {"grade": True, "grade_id": f"ex_{i}_test", "points": 1, "solution": False}
+    nb = nbformat.v4.new_notebook(cells=cells)
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    return nb
+
+
+def test_a_lost_reply_costs_late_reply_seconds_and_the_cell_keeps_its_outputs_and_its_error(tmp_path, losing_shell):
+    nb = _notebook("x = 6 * 7\nprint('first', x)",
+                   f"{LOSE}\nprint('second', x + 1)",
+                   f"{LOSE}\nprint('third', x + 2)\nraise ValueError('kept as the cell error')",
+                   "print('fourth', x + 3)")
+    client = notebook_client(nb, timeout=60, kernel_name="python3", allow_errors=True,
+                             resources={"metadata": {"path": str(tmp_path)}})
+    started = time.monotonic()
+    client.execute()
+    took = time.monotonic() - started
+    text = ["".join(o.get("text", "") for o in c.outputs if o.output_type == "stream") for c in nb.cells]
+    assert text == ["first 42\n", "second 43\n", "third 44\n", "fourth 45\n"]
+    assert [o.ename for o in nb.cells[2].outputs if o.output_type == "error"] == ["ValueError"]
+    assert not any(o.output_type == "error" for c in (nb.cells[0], nb.cells[1], nb.cells[3]) for o in c.outputs)
+    assert [c.execution_count for c in nb.cells] == [1, 2, 3, 4]
+    assert len(losing_shell) == 2
+    # the cells did not wait for their 60-s timeout (a bound for a hang, not a speed)
+    assert took < 60, took
+
+
+def test_without_allow_errors_a_lost_reply_of_a_failing_cell_still_stops_the_run_with_its_error(tmp_path, losing_shell):
+    nb = _notebook("print('one')", f"{LOSE}\nraise KeyError('the cell error')", "print('never')")
+    client = notebook_client(nb, timeout=60, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}})
+    with pytest.raises(nbclient.exceptions.CellExecutionError, match="KeyError") as raised:
+        client.execute()
+    assert "the cell error" in str(raised.value)
+    assert nb.cells[2].outputs == [] and len(losing_shell) == 1
+
+
+def test_snakekit_check_grades_cells_whose_replies_were_lost_as_their_outputs_say(tmp_path, losing_shell):
+    nbformat = need("nbformat")
+    nb = _notebook("def answer():\n    return 42",
+                   f"{LOSE}\nassert answer() == 42",
+                   f"{LOSE}\nassert answer() == 43, 'answer() is 42, expected 43'",
+                   "assert answer() == 42",
+                   graded=(1, 2, 3))
+    path = tmp_path / "lesson.ipynb"
+    nbformat.write(nb, path)
+    out = io.StringIO()
+    assert check_notebook(path, out=out, timeout=60) == 1, out.getvalue()
+    rows = [line.split() for line in out.getvalue().splitlines()[1:4]]
+    assert [(r[0], r[3]) for r in rows] == [("ex_1_test", "passed"), ("ex_2_test", "FAILED"), ("ex_3_test", "passed")]
+    assert "answer() is 42, expected 43" in out.getvalue()
+    assert "2 of 3 exercises passed" in out.getvalue()
+    assert len(losing_shell) == 2
+
+
+@pytest.mark.parametrize("outputs, status", [
+    ([], "ok"),
+    ([{"output_type": "stream", "name": "stdout", "text": "x"}], "ok"),
+    ([{"output_type": "error", "ename": "E", "evalue": "v", "traceback": ["t"]}], "error"),
+    # an error shown and then left behind (the cell printed after it): the cell itself ended well
+    ([{"output_type": "error", "ename": "E", "evalue": "v", "traceback": []},
+      {"output_type": "stream", "name": "stdout", "text": "after"}], "ok"),
+])
+def test_the_reply_made_from_the_outputs_is_an_error_only_when_the_cell_ended_on_one(outputs, status):
+    reply = kernel_client.reply_from_outputs(outputs)
+    assert reply["status"] == status
+    if status == "error":
+        assert (reply["ename"], reply["evalue"], reply["traceback"]) == ("E", "v", ["t"])
