@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from snakekit import host
+from snakekit.kernel_client import NotebookClient
 from snakekit.errors import SnakekitError
 from snakekit.handin import decode_results, encode_cases
 from grader.errors import CasesError
@@ -348,10 +349,10 @@ def execute(notebook: Path, batch: Draw, *, timeout: int = 600, allow_errors: bo
         nb = nbformat.read(work / notebook.name, as_version=4)
         env = {"SNAKEKIT_HANDIN_DIR": str(handin), "SNAKEKIT_CASES": sock, "MPLBACKEND": "Agg"}
         with _environ(env):
-            client = nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3", allow_errors=allow_errors,
-                                             resources={"metadata": {"path": str(work)}},
-                                             extra_arguments=["--IPKernelApp.log_level=ERROR"],  # no TCP warning
-                                             config=Config(host.kernel_sockets(tmp)))  # no port to race for
+            client = NotebookClient(nb, timeout=timeout, kernel_name="python3", allow_errors=allow_errors,
+                                    resources={"metadata": {"path": str(work)}},
+                                    extra_arguments=["--IPKernelApp.log_level=ERROR"],  # no TCP warning
+                                    config=Config(host.kernel_sockets(tmp)))  # no port to race for
             try:
                 client.execute()
             except nbclient.exceptions.CellExecutionError as e:

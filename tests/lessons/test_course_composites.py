@@ -19,7 +19,7 @@ import pytest
 
 from grader.scoring.rerun import exercise
 from snakekit import checks
-from tests.conftest import need
+from tests.conftest import need, notebook_client
 
 ROOT = Path(__file__).resolve().parents[2]
 COURSE = ROOT / "course"
@@ -150,7 +150,7 @@ def test_a_demonstration_after_a_composite_names_the_part_that_fails_not_the_fix
     """Lesson 06 with 6.1's times starting at 1/rate: the cell that runs Task 2 stops because the sweep's first goal
     is not home. It says so, and names the cause, 6.1 and its check's hint, not the robot's advice to move the arm
     to the first goal first (the wrong fix); the cells after it that need its run name 6.1 too."""
-    nbformat, nbclient = need("nbformat"), need("nbclient")
+    nbformat = need("nbformat")
     import os
     import sys
 
@@ -162,8 +162,8 @@ def test_a_demonstration_after_a_composite_names_the_part_that_fails_not_the_fix
     answer = next(c for c in nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex06_1_sweep_times")
     answer.source = "def sweep_times(points, rate):\n    return np.arange(1, points + 1) / rate"
     nb.cells = nb.cells[:ids.index("06-code-22") + 1]
-    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", allow_errors=True,
-                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+    notebook_client(nb, timeout=300, kernel_name="python3", allow_errors=True,
+                    resources={"metadata": {"path": str(tmp_path)}}).execute()
 
     def said(cell_id):
         cell = nb.cells[ids.index(cell_id)]

@@ -28,6 +28,7 @@ from grader.scoring.references import REFERENCES, Reference, expected
 from grader.scoring.score import score_exercise
 from grader.scoring.wording import signatures
 from snakekit import host
+from snakekit.kernel_client import NotebookClient
 from tests.conftest import need
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -114,7 +115,6 @@ def as_lists(source: str) -> str:
 
 def _run(nb, batch, folder: Path, tmp: Path):
     """The notebook run (errors allowed) with the batch's cases served: the executed notebook and its hand-ins."""
-    import nbclient
     from traitlets.config import Config
 
     work, handin = tmp / "work", tmp / "handin"
@@ -128,10 +128,10 @@ def _run(nb, batch, folder: Path, tmp: Path):
             for k, v in env.items():
                 mp.setenv(k, v)
             mp.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
-            nbclient.NotebookClient(nb, timeout=600, kernel_name="python3", allow_errors=True,
-                                    resources={"metadata": {"path": str(work)}},
-                                    extra_arguments=["--IPKernelApp.log_level=ERROR"],
-                                    config=Config(host.kernel_sockets(str(sockets)))).execute()
+            NotebookClient(nb, timeout=600, kernel_name="python3", allow_errors=True,
+                           resources={"metadata": {"path": str(work)}},
+                           extra_arguments=["--IPKernelApp.log_level=ERROR"],
+                           config=Config(host.kernel_sockets(str(sockets)))).execute()
     shutil.rmtree(sockets, ignore_errors=True)
     return nb, read_handins(handin)
 
