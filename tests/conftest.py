@@ -157,13 +157,16 @@ def free_port() -> int:
 # instructor run) runs on one worker, so the fixture is built once: its tests that use such a
 # fixture form one group (one per parameter of a parametrized one). The tests that start the
 # private Docker engine form the group ENGINE_GROUP (tests/system/_engine.py): one engine at a time.
-# Groups start before the single tests, the longest first (by the last run's durations when
-# artifacts/test-durations.txt has them), so no long group starts last.
+# The longest start first, groups and single tests alike (each group weighs what its tests took),
+# so no long one starts last while the other worker has nothing left: the last run's durations
+# (artifacts/test-durations.txt) over those kept in the repository (tests/durations.txt, which a
+# fresh clone has: `tools/keep-durations` writes it from a quiet run's artifacts).
 
 #: The xdist group of the tests that run a script on the private Docker engine (docker/engine.sh).
 ENGINE_GROUP = "docker-engine"
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DURATIONS = os.path.join(ROOT, "artifacts", "test-durations.txt")
+KEPT_DURATIONS = os.path.join(ROOT, "tests", "durations.txt")
 
 
 def _module_group(item) -> str | None:
@@ -184,11 +187,11 @@ def _module_group(item) -> str | None:
     return ":".join([module, *sorted(k for k in set(keys) if k)])
 
 
-def _last_durations() -> dict[str, float]:
-    """Seconds per test (setup + call + teardown) from the last run's artifacts/test-durations.txt."""
+def _durations(path: str) -> dict[str, float]:
+    """Seconds per test (setup + call + teardown) from a durations file (artifacts/test-durations.txt's lines)."""
     seconds: dict[str, float] = {}
     try:
-        with open(DURATIONS) as f:
+        with open(path) as f:
             for line in f:
                 parts = line.rstrip("\n").split(None, 2)
                 if len(parts) == 3 and parts[0].endswith("s") and parts[1] in ("setup", "call", "teardown"):
@@ -199,10 +202,20 @@ def _last_durations() -> dict[str, float]:
     return seconds
 
 
+def _bare(nodeid: str) -> str:
+    """A node id without the "@group" xdist appends."""
+    return nodeid.split("@")[0]
+
+
+def _last_durations() -> dict[str, float]:
+    """Seconds per test: the last run's (artifacts/test-durations.txt) over the kept ones (tests/durations.txt)."""
+    return {**_durations(KEPT_DURATIONS), **_durations(DURATIONS)}
+
+
 #: Tests whose check rides on the wall clock of this machine: the emulated servos and the arm's lab
 #: in real time (a stall past the Bus Watchdog's 0.5 s, or past the lab's stall bound, is a fault),
 #: and the adversarial batch's 20 s cell clock. Marked ``serial``: `make test` (tools/run-tests)
-#: runs them one at a time, in a process of their own at a higher priority, beside the rest.
+#: runs them apart from the rest, two at a time, at a higher priority, beside the rest.
 SERIAL_FILES = {"tests/grader/test_arm_lab.py", "tests/grader/test_lab_safety.py", "tests/grader/test_return_lab.py",
                 "tests/grader/test_grader_adversarial.py", "tests/kit/test_bridge.py", "tests/kit/test_emulator.py",
                 "tests/kit/test_hardware.py", "tests/kit/test_late_replies.py", "tests/kit/test_servo_path.py",
@@ -234,10 +247,10 @@ def pytest_collection_modifyitems(config, items):
     last = _last_durations()
     weight: dict[str, float] = {}
     for item, group in groups.items():
-        weight[group] = weight.get(group, 0.0) + last.get(item.nodeid, 1.0)
+        weight[group] = weight.get(group, 0.0) + last.get(_bare(item.nodeid), 1.0)
     weight[ENGINE_GROUP] = float("inf") if not last else weight.get(ENGINE_GROUP, 0.0)
-    # stable: inside a group and among the single tests the order of the files stays
-    items.sort(key=lambda item: (item not in groups, -weight.get(groups.get(item), 0.0)))
+    # the longest first (a group by its sum); stable: inside a group, and among equals, the files' order stays
+    items.sort(key=lambda item: -(weight[groups[item]] if item in groups else last.get(_bare(item.nodeid), 1.0)))
     for item, group in groups.items():
         # xdist sends a group's tests to one worker by the "@group" it appends to their node ids;
         # pytest 9.2 keeps the id in item._id, where xdist 3.8 does not write it (pytest-xdist

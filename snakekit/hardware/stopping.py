@@ -37,27 +37,33 @@ class StopMixin:
                 "they may still have torque on. Switch the arm's power off before touching it.")
 
     def _torque_off_safely(self, ids=None) -> list[int]:
-        """Torque off (broadcast, or to each of ``ids``) and read it back; the ids that did not confirm it."""
+        """Torque off (broadcast, or to each of ``ids``) and read it back; the ids that did not confirm it.
+
+        A servo that read back torque off once has confirmed it (nothing here turns it on again): the
+        next tries send torque off to, and read back, only the servos that have not, so a read that
+        fails after a confirmation (a reply held up on a busy computer) does not count against it.
+        """
         ph, port = self.bus.ph, self.port
         ids = list(self.ids if ids is None else ids)
-        still_on = ids
-        for attempt in range(self.retries + 1):
+        confirmed: set[int] = set()
+        for _ in range(self.retries + 1):
+            left = [i for i in ids if i not in confirmed]
             try:
                 port.clearPort()
-                for target in ([sdk.BROADCAST_ID] if ids == list(self.ids) else ids):
+                for target in ([sdk.BROADCAST_ID] if left == list(self.ids) else left):
                     ph.write1ByteTxOnly(port, target, TORQUE_ENABLE, 0)
                     port.is_using = False
             except Exception:
                 pass
             port.is_using = False
-            still_on = []
-            for i in ids:
+            for i in left:
                 value, result, _ = ph.read1ByteTxRx(port, i, TORQUE_ENABLE)
                 port.is_using = False
-                if result != sdk.COMM_SUCCESS or value != 0:
-                    still_on.append(i)
-            if not still_on:
+                if result == sdk.COMM_SUCCESS and value == 0:
+                    confirmed.add(i)
+            if len(confirmed) == len(ids):
                 break
+        still_on = [i for i in ids if i not in confirmed]
         self.torque_enabled = bool(still_on) or len(ids) < len(self.ids)
         return still_on
 
