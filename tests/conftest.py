@@ -215,7 +215,7 @@ def _last_durations() -> dict[str, float]:
 #: Tests whose check rides on the wall clock of this machine: the emulated servos and the arm's lab
 #: in real time (a stall past the Bus Watchdog's 0.5 s, or past the lab's stall bound, is a fault),
 #: and the adversarial batch's 20 s cell clock. Marked ``serial``: `make test` (tools/run-tests)
-#: runs them apart from the rest, two at a time, at a higher priority, beside the rest.
+#: runs them one at a time, in a process of their own at a higher priority, beside the rest.
 SERIAL_FILES = {"tests/grader/test_arm_lab.py", "tests/grader/test_lab_safety.py", "tests/grader/test_return_lab.py",
                 "tests/grader/test_grader_adversarial.py", "tests/kit/test_bridge.py", "tests/kit/test_emulator.py",
                 "tests/kit/test_hardware.py", "tests/kit/test_late_replies.py", "tests/kit/test_servo_path.py",
