@@ -431,6 +431,27 @@ def test_5_3s_visible_check_judges_the_default_window_and_the_text_says_the_hidd
     assert "the default window (5.3)" in _how_graded("05_simulation")
 
 
+def _overshoot(y, target, *, at_max=False, by_size=False):
+    """5.2 as the text asks (percent of the step from y[0]), or with one of its two slips for a step down:
+    taken at max(y), or divided by the step's size."""
+    y = np.asarray(y, dtype=float)
+    step = abs(target - y[0]) if by_size else target - y[0]
+    return 100 * max(0.0, (y.max() - target) / step if at_max else ((y - target) / step).max())
+
+
+@pytest.mark.parametrize("seed", range(50))
+def test_every_draw_of_5_2_holds_a_step_down_that_overshoots_so_both_step_down_slips_fail(seed):
+    """Taken at max(y), or divided by the step's size, the overshoot of a step up is right: a draw with no step
+    down that passes its target gave both slips full points graded, where the visible check
+    fails them (12 of 50 seeds lacked one). Every draw now holds one, and each slip misses it by more than a point
+    of percent."""
+    cases = _cases("05_simulation", "ex05_2_overshoot_test", seed)
+    for slip in ({"at_max": True}, {"by_size": True}):
+        off = max(abs(_overshoot(y, g, **slip) - _overshoot(y, g)) for y, g in cases)
+        assert off > 1.0, (slip, off)
+    assert any(g < y[0] and _overshoot(y, g) > 9.0 for y, g in cases)
+
+
 def _move_time(d, pv, pa, v_max=np.inf):
     """5.4 as the text asks (the firmware's trapezoid or triangle), with the speed clipped to ``v_max`` for the
     slip that holds a register above the arm's limit to the limit."""
