@@ -101,7 +101,11 @@ def serve(fd: int) -> None:
             for f in fds:
                 os.close(f)
             continue
-        pid = os.fork()
+        pid = _fork()
+        if pid is None:  # the machine's process limit, for all of FORK_WAIT: this sandbox is not made
+            _not_made(msg, fds[0], "fork: [Errno 11] Resource temporarily unavailable (the machine's process "
+                      f"limit), still after {FORK_WAIT:g} s")
+            continue
         if pid == 0:
             code = 125
             try:
@@ -115,6 +119,39 @@ def serve(fd: int) -> None:
             finally:
                 os._exit(code)
         os.close(fds[0])
+
+
+#: how long the server tries again to fork a sandbox the machine's process limit refuses (EAGAIN) [s]
+FORK_WAIT = 20.0
+
+
+def _fork(wait: float | None = None) -> int | None:
+    """``os.fork()``, tried again while the machine refuses it for now (EAGAIN: its process limit, with
+    many kernels and sandboxes alive on a busy machine); None if it still does after ``wait`` s."""
+    end = time.monotonic() + (FORK_WAIT if wait is None else wait)
+    delay = 0.05
+    while True:
+        try:
+            return os.fork()
+        except BlockingIOError:
+            if time.monotonic() + delay > end:
+                return None
+            time.sleep(delay)
+            delay = min(2 * delay, 1.0)
+
+
+def _not_made(msg: bytes, report_fd: int, why: str) -> None:
+    """Tell the grader a sandbox was not made (exit 125, which it makes again), with why in the sandbox's log."""
+    try:
+        with open(json.loads(msg)["log"], "a") as log:
+            print(f"sandbox: {why}", file=log)
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    with socket.socket(fileno=report_fd) as report:
+        try:
+            report.sendall(b"exit 125\n")
+        except OSError:
+            pass
 
 
 def _supervise(cfg: dict, report_fd: int) -> int:

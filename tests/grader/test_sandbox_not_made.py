@@ -107,3 +107,40 @@ def test_a_reference_run_whose_sandbox_is_never_made_names_the_sandboxs_words(tm
     message = str(e.value)
     assert "its sandbox could not be made, three times: sandbox: " in message and f"mount {MISSING}" in message
     assert "nothing of the notebook ran: grade the batch again); nothing was graded" in message
+
+
+def test_the_fork_server_tries_again_while_the_machine_refuses_a_fork_for_now(monkeypatch):
+    """A busy machine at its process limit refuses a fork for a moment (EAGAIN, "Resource temporarily
+    unavailable"): the fork server ended on it, and the batch with it. It now tries again, and gives up only
+    after FORK_WAIT."""
+    from grader.sandbox import forkserver
+
+    refusals = []
+
+    def fork(n):
+        def refused():
+            refusals.append(1)
+            if len(refusals) <= n:
+                raise BlockingIOError(11, "Resource temporarily unavailable")
+            return 4242
+        return refused
+
+    monkeypatch.setattr(forkserver.os, "fork", fork(3))
+    assert forkserver._fork(wait=5.0) == 4242 and len(refusals) == 4
+    refusals.clear()
+    monkeypatch.setattr(forkserver.os, "fork", fork(10 ** 6))
+    assert forkserver._fork(wait=0.3) is None and len(refusals) >= 3
+
+
+def test_a_sandbox_the_server_could_not_fork_is_reported_not_made_with_why(tmp_path):
+    """What the grader reads of it: exit 125 (made again, never a score) and the sandbox's words in its log."""
+    import json
+    import socket
+
+    from grader.sandbox import forkserver, namespaces
+
+    log = tmp_path / "sandbox.log"
+    mine, theirs = socket.socketpair()
+    forkserver._not_made(json.dumps({"log": str(log)}).encode(), theirs.detach(), "fork: refused, still after 20 s")
+    assert mine.recv(100) == f"exit {namespaces.NOT_MADE}\n".encode() and mine.recv(100) == b""
+    assert log.read_text() == "sandbox: fork: refused, still after 20 s\n"
