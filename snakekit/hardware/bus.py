@@ -7,6 +7,7 @@ retry loop of the hardware backend.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import Counter
@@ -35,6 +36,9 @@ COMM_RESULTS = {
 }
 #: the longest lag [s] of a late status packet the bus waits out after a failure
 MAX_LATENESS = 0.4
+#: the share of the Bus Watchdog's period the bus may stay silent waiting out late bytes (one stall of a
+#: busy computer taught it a lateness of MAX_LATENESS, and every wait after it outlasted a 0.5 s watchdog)
+SILENCE_SHARE = 0.6
 SUPPORTED_BAUD_RATES = "57600, 1000000, 2000000, 3000000 or 4000000"
 
 
@@ -205,6 +209,10 @@ class Bus:
         self._failed_at = 0.0  # when the last failed exchange began (perf_counter [s])
         #: the longest that late bytes were seen to lag behind a failed request [s]
         self.lateness = 0.0
+        #: the longest the bus may stay silent while it waits out late bytes [s]: below the servos'
+        #: Bus Watchdog period once it is armed (:data:`SILENCE_SHARE` of it), so that waiting out one
+        #: stall of a busy computer never stops the arm
+        self.silence_limit = math.inf
         #: when the bus last carried a packet (time.perf_counter() [s])
         self.last_used = time.perf_counter()
         self._lock = threading.RLock()
@@ -278,6 +286,7 @@ class Bus:
         ``longest`` [s]): a status packet that arrives after the SDK gave up must not be taken
         as the next answer. ``since``: when the failed request was sent (perf_counter [s]), to
         learn how late bytes come (:attr:`lateness`)."""
+        quiet, longest = min(quiet, self.silence_limit), min(longest, self.silence_limit)
         now = time.perf_counter()
         end, quiet_until = now + longest, now + quiet
         while now < min(end, quiet_until):
@@ -293,7 +302,7 @@ class Bus:
         """How long the line must stay quiet after a failed exchange [s]: twice the SDK's packet
         timeout, at least 50 ms, and a quarter longer than late bytes were seen to lag behind a
         failed request on this bus (:attr:`lateness`)."""
-        return max(2 * self.port.packet_timeout / 1000.0, 0.05, 1.25 * self.lateness)
+        return min(max(2 * self.port.packet_timeout / 1000.0, 0.05, 1.25 * self.lateness), self.silence_limit)
 
     def attempt(self, call: Callable[[], tuple[int, object]], *, answered: bool = True) -> tuple[int, object]:
         """One packet exchange ``call()`` with the bus held, taken only when nothing else came.

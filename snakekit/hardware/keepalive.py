@@ -11,13 +11,14 @@ stop themselves.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 import weakref
 
 from ..errors import BackendError, PortLostError
 from ..host import realtime
-from .bus import describe, sdk
+from .bus import SILENCE_SHARE, describe, sdk
 from .registers import BUS_WATCHDOG, TORQUE_ENABLE, WATCHDOG_UNIT, to_signed
 
 STATUS_BLOCK = (TORQUE_ENABLE, BUS_WATCHDOG - TORQUE_ENABLE + 1)  # 64..98: torque, errors, watchdog
@@ -81,6 +82,8 @@ class WatchdogMixin:
             if units:
                 self._write(i, BUS_WATCHDOG, 1, units)
         self._last_status = {i: (self.torque_enabled, units) for i in self.ids}
+        # waiting out late bytes must not outlast the watchdog (bus.SILENCE_SHARE of its period)
+        self.bus.silence_limit = units * WATCHDOG_UNIT * SILENCE_SHARE if units else math.inf
 
     def servo_status(self) -> dict[int, tuple[bool, int]]:
         """One SyncRead of every servo's Torque Enable and Bus Watchdog: ``{id: (torque on, watchdog)}``.

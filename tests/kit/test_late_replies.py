@@ -243,3 +243,29 @@ def test_a_status_from_another_request_is_refused():
         robot.close()
     finally:
         bus.stop()
+
+
+def test_waiting_out_late_bytes_never_outlasts_the_bus_watchdog():
+    """One stall of a busy computer taught the bus a lateness of MAX_LATENESS (0.4 s); every wait after a failed
+    exchange then held the bus silent 0.5 to 0.67 s, past the servos' 0.5 s Bus Watchdog, which stopped the arm
+    (3 stops in 30 goals, where the keep-alive allows none). The bus now stays silent at most 60 % of the period."""
+    from snakekit.hardware.bus import MAX_LATENESS, SILENCE_SHARE
+
+    robot = make_emulated_robot(motion="profile", watchdog=0.5)
+    try:
+        bus = robot.bus
+        assert bus.silence_limit == pytest.approx(SILENCE_SHARE * 0.5)
+        bus.lateness = MAX_LATENESS   # as after one stall
+        assert bus.quiet_time == pytest.approx(SILENCE_SHARE * 0.5)
+        robot.emulator.faults = Faults(delay=0.3, delay_time=0.1, seed=5)
+        wrong, _, _ = drive_and_read(robot, 30, gap=0.13)   # at most 2 watchdog stops, as before the stall
+        assert wrong == []
+    finally:
+        robot.close()
+    off = make_emulated_robot(motion="profile", watchdog=0)
+    try:
+        assert off.bus.silence_limit == math.inf   # no watchdog: late bytes are waited out in full
+        off.bus.lateness = MAX_LATENESS
+        assert off.bus.quiet_time == pytest.approx(1.25 * MAX_LATENESS)
+    finally:
+        off.close()
