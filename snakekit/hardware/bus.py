@@ -178,7 +178,8 @@ def reported(failed: list[tuple[int, object]], by_servo: bool = False) -> tuple[
     those, a corrupt one, else the last."""
     if by_servo:
         counts = Counter(v for _, v in failed)
-        worst = next(v for _, v in failed if counts[v] == max(counts.values()))
+        most = max(counts.values())
+        worst = next(v for _, v in failed if counts[v] == most)
         failed = [(r, v) for r, v in failed if v == worst]
     return next(((r, v) for r, v in failed if r == sdk.COMM_RX_CORRUPT), failed[-1])
 
