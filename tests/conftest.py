@@ -152,6 +152,29 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+#: how often a raw-SDK read that got no answer in time is sent again (see :func:`sdk_read`)
+SDK_READ_TRIES = 5
+
+
+def sdk_read(ph, port, dxl: int, address: int, size: int, *, clock=None):
+    """One register read through the unmodified dynamixel-sdk: its value, checked. The SDK waits a few
+    milliseconds for the answer (its packet timeout: the bytes' time plus the latency timer), which a busy
+    machine can outlast: a read that got no answer (COMM_RX_TIMEOUT) is sent again, up to SDK_READ_TRIES
+    times; a read has no effect on the servo. Any other failure, or an error number in the answer, fails the
+    test with the SDK's words (the Alert bit, a servo's hardware error, still reads). With ``clock`` (the
+    emulator's ``now``): (value, the middle of the answered exchange, when the servo sampled it)."""
+    sdk = need("dynamixel_sdk")
+    read = {1: ph.read1ByteTxRx, 2: ph.read2ByteTxRx, 4: ph.read4ByteTxRx}[size]
+    for _ in range(SDK_READ_TRIES):
+        t0 = clock() if clock else None
+        value, result, error = read(port, dxl, address)
+        if result != sdk.COMM_RX_TIMEOUT:
+            break
+    assert result == sdk.COMM_SUCCESS and not error & 0x7F, (  # the Alert bit (a hardware error) still reads
+        f"servo {dxl}, address {address}: {ph.getTxRxResult(result)} {ph.getRxPacketError(error)}".strip())
+    return (value, (t0 + clock()) / 2) if clock else value
+
+
 # --- the suite in parallel (`make test`: pytest-xdist, --dist loadgroup) ----------------------------
 # A test module whose module-scoped fixture builds something expensive (a graded class, an
 # instructor run) runs on one worker, so the fixture is built once: its tests that use such a

@@ -91,7 +91,7 @@ def serve(fd: int) -> None:
     """The server's loop: one fork per request on the control socket ``fd``, until it closes."""
     _preload()
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # supervisors are reaped by the kernel
-    ctl = socket.socket(fileno=fd)
+    ctl = _blocking(fd)
     ctl.sendall(b"ready")
     while True:
         msg, fds, _, _ = socket.recv_fds(ctl, 1 << 20, 1)
@@ -121,6 +121,16 @@ def serve(fd: int) -> None:
         os.close(fds[0])
 
 
+def _blocking(fd: int) -> socket.socket:
+    """The socket over ``fd``, blocking. The grader made it, and a grader process with a default timeout
+    (``socket.setdefaulttimeout``, set by a library or a TA's script) makes its sockets non-blocking, the
+    flag shared by every copy of the descriptor: the server's first wait for a request then raised
+    BlockingIOError and ended it."""
+    sock = socket.socket(fileno=fd)
+    sock.setblocking(True)
+    return sock
+
+
 #: how long the server tries again to fork a sandbox the machine's process limit refuses (EAGAIN) [s]
 FORK_WAIT = 20.0
 
@@ -147,7 +157,7 @@ def _not_made(msg: bytes, report_fd: int, why: str) -> None:
             print(f"sandbox: {why}", file=log)
     except (OSError, ValueError, KeyError, TypeError):
         pass
-    with socket.socket(fileno=report_fd) as report:
+    with _blocking(report_fd) as report:
         try:
             report.sendall(b"exit 125\n")
         except OSError:
@@ -155,7 +165,7 @@ def _not_made(msg: bytes, report_fd: int, why: str) -> None:
 
 
 def _supervise(cfg: dict, report_fd: int) -> int:
-    report = socket.socket(fileno=report_fd)
+    report = _blocking(report_fd)
     os.setsid()
     log = os.open(cfg["log"], os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
     null = os.open(os.devnull, os.O_RDONLY)

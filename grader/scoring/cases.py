@@ -182,6 +182,15 @@ def draw(course: Path, assignment: str, seed: int | None = None, spec=None) -> D
 # --- the socket -----------------------------------------------------------------------------
 
 
+def _waiting_socket() -> socket.socket:
+    """A Unix socket that waits as long as it takes: the grader's process may have a default socket timeout
+    (``socket.setdefaulttimeout``, set by a library or a TA's script), which would end a listener's wait for
+    the next sandbox, and the batch's hidden cases with it, after that many seconds."""
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.setblocking(True)
+    return s
+
+
 class CaseServer:
     """Answers the kernels' requests for cases (one thread per listening socket).
 
@@ -216,12 +225,12 @@ class CaseServer:
                              f"allows ({MAX_SOCKET_PATH}): grade from a shorter working folder ({path})")
         with contextlib.suppress(FileNotFoundError):
             os.unlink(path)
-        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        s = _waiting_socket()
         s.bind(path)
         os.chmod(path, mode)  # the sandbox's user connects to it
         s.listen(8)
         if gate is not None:
-            g = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            g = _waiting_socket()
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(str(gate))
             g.bind(str(gate))
@@ -242,6 +251,7 @@ class CaseServer:
             conn, _ = g.accept()
         except OSError:
             return
+        conn.setblocking(True)  # a notebook's cells can run for minutes between two words
         with conn, conn.makefile("rwb", buffering=0) as f:
             for line in f:
                 word, _, gid = line.decode("utf-8", "replace").strip().partition(" ")

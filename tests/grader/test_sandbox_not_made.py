@@ -144,3 +144,25 @@ def test_a_sandbox_the_server_could_not_fork_is_reported_not_made_with_why(tmp_p
     forkserver._not_made(json.dumps({"log": str(log)}).encode(), theirs.detach(), "fork: refused, still after 20 s")
     assert mine.recv(100) == f"exit {namespaces.NOT_MADE}\n".encode() and mine.recv(100) == b""
     assert log.read_text() == "sandbox: fork: refused, still after 20 s\n"
+
+
+@pytest.mark.parametrize("never_made", [None, "bob"])
+def test_a_grader_process_with_a_default_socket_timeout_grades_as_any(never_made, unfailed, tmp_path, monkeypatch):
+    """A library or a TA's script may set ``socket.setdefaulttimeout`` in the grader's process. Its sockets are
+    then non-blocking: the fork server's control socket (its first wait for a request raised BlockingIOError
+    and ended it, "the grader's fork server ended ... did not start again") and the hidden cases' listeners
+    (their wait for the next sandbox ended after the timeout). The class is graded as without it."""
+    import socket
+
+    before = socket.getdefaulttimeout()
+    socket.setdefaulttimeout(1.0)
+    try:
+        results, _ = _grade(_class(make_course(tmp_path)), lambda s, k: s == never_made, monkeypatch)
+    finally:
+        socket.setdefaulttimeout(before)
+    got = {r.student: (r.status, r.score) for r in results}
+    if never_made is None:
+        assert got == unfailed
+    else:
+        assert got["alice"] == unfailed["alice"] and got["bob"][0] == "grader error"
+        assert f"mount {MISSING}" in next(r.detail for r in results if r.student == "bob")

@@ -13,7 +13,7 @@ import pytest
 from snakekit.emulator import BusEmulator, Faults
 from snakekit.emulator import protocol as p
 from snakekit.profile_planner import ProfilePlanner
-from tests.conftest import need
+from tests.conftest import need, sdk_read
 
 sdk = need("dynamixel_sdk")
 serial = need("serial")
@@ -108,14 +108,14 @@ def test_write_then_read_back(client, bus):
 
 def test_defaults_of_the_control_table(client):
     port, ph = client
-    assert ph.read2ByteTxRx(port, 1, 0)[0] == 30          # model number
-    assert ph.read1ByteTxRx(port, 1, 9)[0] == 250          # return delay 500 us
-    assert ph.read1ByteTxRx(port, 1, 11)[0] == 3           # position mode
-    assert ph.read4ByteTxRx(port, 1, 48)[0] == 4095        # max position limit
-    assert ph.read1ByteTxRx(port, 1, 63)[0] == 52          # shutdown
-    assert ph.read1ByteTxRx(port, 1, 68)[0] == 2           # status return level
-    assert ph.read2ByteTxRx(port, 1, 84)[0] == 850         # position P gain
-    assert ph.read4ByteTxRx(port, 1, 132)[0] == 2048       # at home
+    assert sdk_read(ph, port, 1, 0, 2) == 30          # model number
+    assert sdk_read(ph, port, 1, 9, 1) == 250          # return delay 500 us
+    assert sdk_read(ph, port, 1, 11, 1) == 3           # position mode
+    assert sdk_read(ph, port, 1, 48, 4) == 4095        # max position limit
+    assert sdk_read(ph, port, 1, 63, 1) == 52          # shutdown
+    assert sdk_read(ph, port, 1, 68, 1) == 2           # status return level
+    assert sdk_read(ph, port, 1, 84, 2) == 850         # position P gain
+    assert sdk_read(ph, port, 1, 132, 4) == 2048       # at home
 
 
 def test_homing_offset_needing_stuffing_goes_both_ways(client, bus):
@@ -140,7 +140,7 @@ def test_homing_offset_needing_stuffing_goes_both_ways(client, bus):
     assert (result, error) == (sdk.COMM_SUCCESS, 0)
     assert value - (1 << 32) == -131073
     # Present Position = motor position + Homing Offset
-    assert ph.read4ByteTxRx(port, 1, 132)[0] - (1 << 32) == 2048 - 131073
+    assert sdk_read(ph, port, 1, 132, 4) - (1 << 32) == 2048 - 131073
 
 
 def test_bad_crc_gets_a_crc_error_status(bus):
@@ -218,10 +218,10 @@ def test_reg_write_waits_for_action(client, bus):
     data = [0x00, 0x09, 0, 0]  # 2304 ticks
     assert ph.regWriteTxRx(port, 3, 116, 4, data) == (sdk.COMM_SUCCESS, 0)
     assert bus.servo(3).memory.get("Goal Position") == 2048  # the firmware starts with goal = present
-    assert ph.read1ByteTxRx(port, 3, 69)[0] == 1             # Registered Instruction
+    assert sdk_read(ph, port, 3, 69, 1) == 1             # Registered Instruction
     assert ph.action(port, sdk.BROADCAST_ID) == sdk.COMM_SUCCESS
     assert until(lambda: bus.servo(3).memory.get("Goal Position") == 2304)
-    assert ph.read1ByteTxRx(port, 3, 69)[0] == 0
+    assert sdk_read(ph, port, 3, 69, 1) == 0
 
 
 def test_reboot_clears_an_overload_and_ram_only(client, bus):
@@ -232,16 +232,16 @@ def test_reboot_clears_an_overload_and_ram_only(client, bus):
     bus.inject_overload(2)
     model, result, error = ph.ping(port, 2)
     assert result == sdk.COMM_SUCCESS and error & p.ALERT
-    assert ph.read1ByteTxRx(port, 2, 70)[0] == 0x20                  # overload bit
-    assert ph.read1ByteTxRx(port, 2, 64)[0] == 0                     # the firmware cut torque
+    assert sdk_read(ph, port, 2, 70, 1) == 0x20                  # overload bit
+    assert sdk_read(ph, port, 2, 64, 1) == 0                     # the firmware cut torque
     assert ph.write1ByteTxRx(port, 2, 64, 1)[1] & p.ALERT            # and won't give it back
-    assert ph.read1ByteTxRx(port, 2, 64)[0] == 0
+    assert sdk_read(ph, port, 2, 64, 1) == 0
     assert ph.reboot(port, 2) == (sdk.COMM_SUCCESS, p.ALERT)              # answered before it reboots
     assert ph.ping(port, 2)[1] == sdk.COMM_RX_TIMEOUT                 # still booting (0.5 s)
     assert until(lambda: ph.ping(port, 2)[1] == sdk.COMM_SUCCESS)
     assert ph.read1ByteTxRx(port, 2, 70) == (0, sdk.COMM_SUCCESS, 0)
-    assert ph.read4ByteTxRx(port, 2, 112)[0] == 0
-    assert ph.read1ByteTxRx(port, 2, 9)[0] == 0
+    assert sdk_read(ph, port, 2, 112, 4) == 0
+    assert sdk_read(ph, port, 2, 9, 1) == 0
     assert [r.packet.id for r in bus.received("REBOOT")] == [2]
 
 
@@ -251,11 +251,11 @@ def test_factory_reset_keeping_id_and_baud(client, bus):
     assert ph.write1ByteTxRx(port, 4, 8, 3)[1] == 0
     assert ph.factoryReset(port, 4, 0x02) == (sdk.COMM_SUCCESS, 0)
     assert until(lambda: ph.ping(port, 4)[1] == sdk.COMM_SUCCESS)
-    assert ph.read1ByteTxRx(port, 4, 9)[0] == 250
-    assert ph.read1ByteTxRx(port, 4, 8)[0] == 3
+    assert sdk_read(ph, port, 4, 9, 1) == 250
+    assert sdk_read(ph, port, 4, 8, 1) == 3
     assert ph.factoryReset(port, 4, 0x01) == (sdk.COMM_SUCCESS, 0)
     assert until(lambda: ph.ping(port, 4)[1] == sdk.COMM_SUCCESS)
-    assert ph.read1ByteTxRx(port, 4, 8)[0] == 1
+    assert sdk_read(ph, port, 4, 8, 1) == 1
 
 
 # --- SYNC and BULK ----------------------------------------------------------------------------------
@@ -323,7 +323,7 @@ def test_a_goal_moves_the_servo_along_the_firmware_profile(client, bus):
         high = 2048 + planner.at(after)[0][0] * to_ticks
         assert low - 0.5 <= ticks <= high + 0.5, (before - t_goal, ticks, low, high)
     assert samples[-1][2] == 2048 + 512
-    assert ph.read1ByteTxRx(port, 1, 122)[0] == 0  # not moving any more
+    assert sdk_read(ph, port, 1, 122, 1) == 0  # not moving any more
 
 
 # --- faults -------------------------------------------------------------------------------------------
@@ -371,7 +371,7 @@ def test_scheduled_overload_from_faults(client, bus):
     assert ph.ping(port, 5)[2] == 0
     time.sleep(0.6)
     assert ph.ping(port, 5)[2] == p.ALERT
-    assert ph.read1ByteTxRx(port, 5, 70)[0] == 0x20
+    assert sdk_read(ph, port, 5, 70, 1) == 0x20
 
 
 def test_faults_refuse_nonsense():
@@ -404,7 +404,7 @@ def test_return_delay_is_emulated_when_timing_is_on():
                 break
             time.sleep(0.05)
             port.clearPort()
-        assert ph.read1ByteTxRx(port, 1, 9)[0] == value
+        assert sdk_read(ph, port, 1, 9, 1) == value
 
     # Up to 5 rounds of 40 pings each way, each side's fastest kept: on a loaded machine 40 pings may
     # all carry some noise, and more of them only bring each fastest closer to its true time.
@@ -413,7 +413,7 @@ def test_return_delay_is_emulated_when_timing_is_on():
         port.openPort()
         port.setBaudRate(1_000_000)
         ph = sdk.PacketHandler(2.0)
-        assert ph.read1ByteTxRx(port, 1, 9)[0] == 250
+        assert sdk_read(ph, port, 1, 9, 1) == 250
         slow = fast = float("inf")
         for _ in range(5):
             set_delay(ph, port, 250)

@@ -21,7 +21,7 @@ from snakekit import BackendError, ConfigurationError, SnakekitError
 from snakekit.emulator import BusEmulator, Faults, make_emulated_robot
 from snakekit.robot import Run
 from snakekit.trajectory import Trajectory
-from tests.conftest import need
+from tests.conftest import need, sdk_read
 
 sdk = need("dynamixel_sdk")
 serial = need("serial")
@@ -171,7 +171,7 @@ def test_no_profile_sync_write_reaches_every_goal(motion):
             writer.addParam(i, list((2248).to_bytes(4, "little")))
         assert writer.txPacket() == sdk.COMM_SUCCESS
         time.sleep(1.0)
-        ticks = [ph.read4ByteTxRx(port, i, 132)[0] for i in IDS]
+        ticks = [sdk_read(ph, port, i, 132, 4) for i in IDS]
         assert max(abs(t - 2248) for t in ticks) <= (0 if motion == "profile" else 2), ticks
         assert bus.errors == []
     finally:
@@ -181,10 +181,10 @@ def test_no_profile_sync_write_reaches_every_goal(motion):
 
 def test_torque_on_holds_where_the_servo_is(client):
     bus, port, ph = client
-    assert ph.read4ByteTxRx(port, 3, 116)[0] == 2048  # Goal Position starts at the present position
+    assert sdk_read(ph, port, 3, 116, 4) == 2048  # Goal Position starts at the present position
     assert ph.write1ByteTxRx(port, 3, 64, 1) == (sdk.COMM_SUCCESS, 0)
     time.sleep(0.2)
-    assert ph.read4ByteTxRx(port, 3, 132)[0] == 2048
+    assert sdk_read(ph, port, 3, 132, 4) == 2048
 
 
 @pytest.mark.parametrize("motion", ["mujoco", "profile"])
@@ -198,20 +198,18 @@ def test_velocity_mode_turns_at_goal_velocity(motion):
         assert ph.write1ByteTxRx(port, 2, 64, 1) == (sdk.COMM_SUCCESS, 0)
         assert ph.write4ByteTxRx(port, 2, 104, 40) == (sdk.COMM_SUCCESS, 0)  # 40 x 0.229 rev/min
         time.sleep(0.3)
-        t0 = bus.now()
-        p0 = hw.to_signed(ph.read4ByteTxRx(port, 2, 132)[0], 4)
-        t0 = (t0 + bus.now()) / 2  # the servo sampled about half-way through the exchange
-        v = hw.to_signed(ph.read4ByteTxRx(port, 2, 128)[0], 4)
+        p0, t0 = sdk_read(ph, port, 2, 132, 4, clock=bus.now)  # sampled about half-way through the exchange
+        p0 = hw.to_signed(p0, 4)
+        v = hw.to_signed(sdk_read(ph, port, 2, 128, 4), 4)
         time.sleep(0.2)
-        t1 = bus.now()
-        p1 = hw.to_signed(ph.read4ByteTxRx(port, 2, 132)[0], 4)
-        t1 = (t1 + bus.now()) / 2
+        p1, t1 = sdk_read(ph, port, 2, 132, 4, clock=bus.now)
+        p1 = hw.to_signed(p1, 4)
         assert abs(v - 40) <= (0 if motion == "profile" else 3)
         expected = 40 * VELOCITY_UNIT * (t1 - t0) * TICKS_PER_RAD  # ticks between the two readings
         assert abs((p1 - p0) - expected) < 0.1 * expected + 2
         assert ph.write4ByteTxRx(port, 2, 104, 0) == (sdk.COMM_SUCCESS, 0)  # stop
         time.sleep(0.2)
-        assert abs(hw.to_signed(ph.read4ByteTxRx(port, 2, 128)[0], 4)) <= 1
+        assert abs(hw.to_signed(sdk_read(ph, port, 2, 128, 4), 4)) <= 1
         assert ph.write4ByteTxRx(port, 2, 104, 500)[1] == 6  # over Velocity Limit (230): data limit error
     finally:
         port.closePort()
@@ -224,14 +222,14 @@ def test_pwm_and_extended_position_modes(client):
     assert ph.write1ByteTxRx(port, 1, 64, 1) == (sdk.COMM_SUCCESS, 0)
     assert ph.write2ByteTxRx(port, 1, 100, 442) == (sdk.COMM_SUCCESS, 0)  # half the supply voltage
     time.sleep(0.1)
-    v = hw.to_signed(ph.read4ByteTxRx(port, 1, 128)[0], 4) * VELOCITY_UNIT
+    v = hw.to_signed(sdk_read(ph, port, 1, 128, 4), 4) * VELOCITY_UNIT
     assert v == pytest.approx(442 / 885 * 55 * 2 * np.pi / 60, rel=0.02)  # half the no-load speed
     assert ph.write1ByteTxRx(port, 5, 11, 4) == (sdk.COMM_SUCCESS, 0)  # extended position
     assert ph.write4ByteTxRx(port, 5, 48, 3071) == (sdk.COMM_SUCCESS, 0)  # limits don't apply in mode 4
     assert ph.write1ByteTxRx(port, 5, 64, 1) == (sdk.COMM_SUCCESS, 0)
     assert ph.write4ByteTxRx(port, 5, 116, 4096 + 2048) == (sdk.COMM_SUCCESS, 0)  # one turn on
     time.sleep(0.2)
-    assert ph.read4ByteTxRx(port, 5, 132)[0] == 4096 + 2048
+    assert sdk_read(ph, port, 5, 132, 4) == 4096 + 2048
 
 
 def patiently(call, easy):
@@ -363,10 +361,10 @@ def test_the_emulated_watchdog_stops_a_silent_bus_until_cleared(client):
     time.sleep(0.4)  # silence: the servo stops 0.1 s after the last packet, short of its goal
     stopped = physical_angles(bus)[0]
     assert 0.02 < stopped < 0.2
-    assert hw.to_signed(ph.read1ByteTxRx(port, 1, 98)[0], 1) == -1
+    assert hw.to_signed(sdk_read(ph, port, 1, 98, 1), 1) == -1
     time.sleep(0.2)
     assert physical_angles(bus)[0] == stopped  # it stays stopped, torque on
-    assert ph.read1ByteTxRx(port, 1, 64)[0] == 1
+    assert sdk_read(ph, port, 1, 64, 1) == 1
     assert ph.write4ByteTxRx(port, 1, 116, 2048)[1] == 4  # goals refused: data range error
     assert ph.write1ByteTxRx(port, 1, 98, 0) == (sdk.COMM_SUCCESS, 0)  # cleared
     assert ph.write4ByteTxRx(port, 1, 116, 2048) == (sdk.COMM_SUCCESS, 0)
