@@ -118,7 +118,19 @@ def test_a_joint_states_mcap_is_read_back_by_mcap_ros2(tmp_path):
     np.testing.assert_array_equal([s["position"] for s in got["/joint_states"]], POSITIONS)
 
 
-def test_the_live_arm_runs_a_sweep_rosbag_records_and_refuses_a_goal_beyond_the_limits(tmp_path):
+@pytest.fixture
+def default_socket_timeout_kept():
+    """rospy sets the process's default socket timeout to 60 s when it connects a topic
+    (rospy.impl.masterslave), and never sets it back: this test process's later tests would run with it."""
+    import socket
+
+    before = socket.getdefaulttimeout()
+    yield
+    socket.setdefaulttimeout(before)
+
+
+def test_the_live_arm_runs_a_sweep_rosbag_records_and_refuses_a_goal_beyond_the_limits(tmp_path,
+                                                                                        default_socket_timeout_kept):
     need_program("roscore"), need_program("rosbag")
     from rosbags.highlevel import AnyReader
     from snakekit.ros import live_arm
