@@ -49,7 +49,7 @@ from grader.course.gradebook import NOT_CARRIED, keep_release_files, late_penalt
 from grader.feedback import scores
 from grader.scoring.references import course_references, expected
 from grader.sandbox.runner import Runner
-from grader.scoring.verdict import SubmissionResult, Verdicts, busy_machine, real_time
+from grader.scoring.verdict import REAL_TIME_FAULTS, SubmissionResult, Verdicts, busy_machine, real_time
 from grader.scoring.score import read_handin
 from grader.scoring.wording import signatures
 from grader.course.restore import release_order, restore
@@ -108,6 +108,7 @@ class Grader:
         self.draw = None
         self.late_plugin = None
         self._lock = threading.Lock()
+        self.first_runs: dict[str, str] = {}  # student -> why their first run was not the one graded
 
     def students(self) -> list[str]:
         sub = self.course / "submitted"
@@ -271,7 +272,22 @@ class Grader:
             if not path.is_file():
                 raise GradingError(f"{where}: {path} is missing, so the batch has no expected results")
             nbs[name] = nbformat.read(path, as_version=4)
-        work, outcome, _ = self._run(INSTRUCTOR, src, nbs, {})
+        for attempt in range(1, REFERENCE_TRIES + 1):
+            work, outcome, _ = self._run(INSTRUCTOR, src, nbs, {})
+            faults = bus_faults(work, self.draw.cases)
+            if not faults:
+                break
+            if attempt == REFERENCE_TRIES:
+                shutil.rmtree(work, ignore_errors=True)
+                busy = busy_machine()
+                raise GradingError(f"{where}: {faults[0]}, in each of its {REFERENCE_TRIES} runs. That error is the "
+                                   "arm's bus's (a reply of the emulated servos came too late, or the port went), never "
+                                   "an expected result, so the batch has no expected results; "
+                                   + (f"{busy}; " if busy else "") + "nothing was graded")
+            print(f"snakekit grade: the instructor notebook's run at the batch's cases: {faults[0]}; a fault of the "
+                  "arm's bus, not of the solution (a busy machine makes the emulated servos' replies late): running it "
+                  "again", file=sys.stderr, flush=True)
+            shutil.rmtree(work, ignore_errors=True)
         try:
             handins = {}
             for gid in self.draw.cases:
@@ -298,12 +314,22 @@ class Grader:
 
     def _run(self, student: str, src: Path, nbs: dict, tampered: dict):
         """Stage and run one notebook set in a sandbox: (its folder, how it ended, runs). A busy or
-        stuck machine must not cost points: a run stopped by a clock is run once more from scratch,
-        and only a second stop counts (an endless loop costs the batch twice its timeout)."""
+        stuck machine must not cost points: a student's run stopped by a clock, or whose hand-ins hold a fault
+        of the arm's bus (:func:`bus_faults`: a reply of the emulated servos came late), is run once more from
+        scratch, and only the second run counts (an endless loop costs the batch twice its timeout); why, in
+        :attr:`first_runs`, for the TA's line."""
         work, outcome = self._sandboxed(student, src, nbs, tampered)
         late_replies(work, student)
-        if not (self.retry_timeouts and stopped_by_clock(work, outcome, student, self.a)):
+        if not self.retry_timeouts:
             return work, outcome, 1
+        if stopped_by_clock(work, outcome, student, self.a):
+            why = "was stopped by the clock"
+        elif student != INSTRUCTOR and self.draw is not None and (faults := bus_faults(work, self.draw.cases)):
+            why = f"had a fault of the arm's bus ({faults[0]}), which a busy machine causes"
+        else:
+            return work, outcome, 1
+        with self._lock:
+            self.first_runs[student] = why
         shutil.rmtree(work, ignore_errors=True)
         return (*self._sandboxed(student, src, nbs, tampered), 2)
 
@@ -365,7 +391,7 @@ class Grader:
                     keep = True
                     return Again(lambda: self._run_again(student, src, nbs, tampered, again, finish))
                 return self.verdicts.collect(work, student, nbs, tampered, problems, outcome, t0, second, runs,
-                                             restored=restored, not_made=self.runner.not_made(work)
+                                             first_run=self.first_runs.get(student, ""), restored=restored, not_made=self.runner.not_made(work)
                                              if outcome.returncode == sandbox.NOT_MADE else None)
             finally:
                 if not keep:
@@ -422,6 +448,29 @@ def late_replies(work: Path, student: str) -> None:
     if where:
         print(f"snakekit grade: {student}: the kernel finished {where} but its reply never came; taken as finished "
               f"after {kernel_client.LATE_REPLY:g} s (the grade is not affected)", file=sys.stderr)
+
+
+#: runs of the instructor notebook a batch makes at most while a hidden case of it raises a fault of the arm's bus
+REFERENCE_TRIES = 3
+
+
+def bus_faults(work: Path, cases: dict) -> list[str]:
+    """The hidden cases at which a run's hand-ins hold a fault of the arm's bus (:data:`REAL_TIME_FAULTS`:
+    CommunicationError, PortLostError), each as "<grade id> raised <error> at hidden case <k>". The instructor's
+    solution raising one is the machine's doing (a late reply of the emulated servos on a busy machine, an
+    unplugged port), never what an exercise asks for: as an expected result it would cost every student who
+    computed the case right. (An exercise that asks for an error asks for another type: LimitError, ...)"""
+    out = []
+    for gid in cases:
+        raw = read_inside(work, f"handin/{gid}.npz")
+        try:
+            results = read_handin(raw) if raw is not None else []
+        except ValueError:
+            continue
+        for k, r in enumerate(results):
+            if isinstance(r, str) and r.split(":", 1)[0].strip() in REAL_TIME_FAULTS:
+                out.append(f"{gid} raised {r.strip()[:200]} at hidden case {k}")
+    return out
 
 
 def stopped_by_clock(work: Path, outcome, student: str, a) -> bool:

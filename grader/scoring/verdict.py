@@ -100,11 +100,12 @@ class Verdicts:
                     if (gid := c.get("metadata", {}).get("nbgrader", {}).get("grade_id")) in self.a.tests}
         return out
 
-    def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None, runs=1,
+    def collect(self, work, student, nbs, tampered, problems, outcome, t0, second=None, runs=1, first_run="",
                 restored=None, not_made: str | None = None) -> SubmissionResult:
         """``second``: grade id -> (its hand-in, the answer cells replaced) from a second run with the
         instructor's answers in those cells (:mod:`grader.scoring.rerun`); the better score counts. ``runs``: 2
-        when the first run was stopped by a clock and this is the run from scratch after it.
+        when the first run was stopped by a clock (or had a fault of the arm's bus: ``first_run`` says which)
+        and this is the run from scratch after it.
         ``restored``: test cells put back as released before the run (:mod:`grader.course.restore`): no
         points lost, the status says so for the TA. ``not_made``: the sandbox could not be made (its words), so
         nothing of the notebook ran: a grader error, never the student's score."""
@@ -179,8 +180,9 @@ class Verdicts:
         if status == "timeout" and runs > 1:
             detail += " (run twice, so that a busy grading machine is not the cause, and stopped both times)"
         elif runs > 1:
-            detail = (detail + "; " if detail else "") + ("graded on its second run: the first was stopped by the "
-                                                           "clock, so it ran once more from the start")
+            detail = (detail + "; " if detail else "") + (f"graded on its second run: the first "
+                                                           f"{first_run or 'was stopped by the clock'}, so it ran "
+                                                           "once more from the start")
         if (status == "timeout" or runs > 1 or errors & REAL_TIME_FAULTS) and real_time(a):
             busy = busy_machine()
             detail = "; ".join(x for x in (detail, busy) if x)

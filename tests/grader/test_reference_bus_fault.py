@@ -1,0 +1,111 @@
+"""The instructor notebook's run sets what every student is graded against. A fault of the arm's bus in it
+(CommunicationError, PortLostError: a reply of the emulated servos came too late on a busy machine) used to
+become an expected result: "must raise CommunicationError (the exercise asks for it there)", and every
+student who computed that case right lost it (lesson 07, 7.2, 0.6 of 3 points in a run of the suite beside
+other work). Such a run is made again, at most three times; still faulted, the batch stops with the case and
+the error, and grades nobody. A student's run with such a fault is run once more from scratch, as one stopped
+by a clock: the second run is graded, and the TA's line says why.
+
+The fault is put into the run's own hand-in file after the sandbox wrote it (the test course does not run
+the arm's bus), as the kit writes a raise: ``"<type>: <message>"`` at that case.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from conftest import need_program
+from grader_helpers import ASSIGNMENT, REFERENCES, make_course, submit
+
+WRONG = {"ex1_tool_xy": "def tool_xy(q):\n    return np.array([0.3315, 0.0]) + 0 * q[:2]"}
+GID = "ex1_tool_xy_test"
+FAULTS = {"CommunicationError": "servo 3 did not answer (4 tries): is it powered and plugged in?",
+          "PortLostError": "the port /dev/ttyUSB0 went away: was the cable pulled?"}
+
+
+def _class(course):
+    submit(course, "alice")
+    submit(course, "bob", WRONG)
+    return course
+
+
+def _grade(course, faulted_runs: int, error: str, monkeypatch, who=None):
+    """Grade the class, the first ``faulted_runs`` runs of ``who`` (the instructor notebook unless told) given
+    ``error`` at hidden case 1 of GID; (results, the runs of ``who`` made)."""
+    from grader import batch
+    from snakekit import errors
+    from snakekit.handin import decode_results, encode_results
+
+    real_run, runs = batch.Grader._sandboxed, []
+
+    def run(self, student, src, nbs, tampered, **kw):
+        work, outcome = real_run(self, student, src, nbs, tampered, **kw)
+        if student == (who or batch.INSTRUCTOR):
+            runs.append(work)
+            if len(runs) <= faulted_runs:
+                path = work / "handin" / f"{GID}.npz"
+                results = decode_results(path.read_bytes())
+                results[1] = getattr(errors, error)(FAULTS[error])
+                path.write_bytes(encode_results(results))
+        return work, outcome
+
+    monkeypatch.setattr(batch.Grader, "_sandboxed", run)
+    return batch.Grader(course, ASSIGNMENT, jobs=1, timeout=60, references=REFERENCES, seed=5).run(), runs
+
+
+@pytest.fixture(scope="module")
+def unfaulted(tmp_path_factory):
+    need_program("unshare")
+    from grader import batch
+
+    course = _class(make_course(tmp_path_factory.mktemp("fresh")))
+    return {r.student: (r.status, r.score, [(e.grade_id, e.score) for e in r.exercises]) for r in
+            batch.Grader(course, ASSIGNMENT, jobs=1, timeout=60, references=REFERENCES, seed=5).run()}
+
+
+@pytest.mark.parametrize("error", sorted(FAULTS))
+@pytest.mark.parametrize("faulted_runs", [1, 2])
+def test_a_reference_run_with_a_bus_fault_is_made_again_and_grades_as_without(faulted_runs, error, unfaulted, tmp_path,
+                                                                                 monkeypatch, capfd):
+    results, runs = _grade(_class(make_course(tmp_path)), faulted_runs, error, monkeypatch)
+    got = {r.student: (r.status, r.score, [(e.grade_id, e.score) for e in r.exercises]) for r in results}
+    assert got == unfaulted
+    assert unfaulted["alice"][:2] == ("graded", 7.0)
+    assert len(runs) == faulted_runs + 1
+    said = [line for line in capfd.readouterr().err.splitlines() if "running it again" in line]
+    assert len(said) == faulted_runs, said
+    assert all(f"{GID} raised {error}: {FAULTS[error]} at hidden case 1" in line
+               and "a fault of the arm's bus, not of the solution" in line for line in said), said
+
+
+def test_a_reference_run_faulted_every_time_grades_nobody_and_says_why(tmp_path, monkeypatch):
+    from grader.errors import GradingError
+
+    course = _class(make_course(tmp_path))
+    with pytest.raises(GradingError) as e:
+        _grade(course, 3, "CommunicationError", monkeypatch)
+    message = str(e.value)
+    assert f"{GID} raised CommunicationError: {FAULTS['CommunicationError']} at hidden case 1, in each of its 3 runs" \
+        in message, message
+    assert "never an expected result" in message and message.endswith("nothing was graded")
+    assert not (course / "feedback").exists() or not any((course / "feedback").rglob("*.html"))
+
+
+@pytest.mark.parametrize("faulted_runs", [1, 2])
+def test_a_students_run_with_a_bus_fault_runs_once_more_and_the_second_is_graded(faulted_runs, unfaulted, tmp_path,
+                                                                                  monkeypatch):
+    results, runs = _grade(_class(make_course(tmp_path)), faulted_runs, "CommunicationError", monkeypatch, who="alice")
+    got = {r.student: r for r in results}
+    assert len(runs) == 2
+    assert (got["bob"].status, got["bob"].score) == unfaulted["bob"][:2]
+    alice = got["alice"]
+    assert alice.status == "graded"
+    assert alice.detail.startswith(f"graded on its second run: the first had a fault of the arm's bus ({GID} raised "
+                                   f"CommunicationError: {FAULTS['CommunicationError']} at hidden case 1), which a "
+                                   "busy machine causes, so it ran once more from the start"), alice.detail
+    scores = dict((e.grade_id, e.score) for e in alice.exercises)
+    if faulted_runs == 1:   # the second run is the one graded: all of it
+        assert alice.score == 7.0 and scores == dict(unfaulted["alice"][2])
+    else:                   # faulted again: that case is lost, and only it
+        assert scores[GID] < 2.0 and {g: v for g, v in scores.items() if g != GID} == \
+            {g: v for g, v in unfaulted["alice"][2] if g != GID}
