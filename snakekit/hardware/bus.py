@@ -200,6 +200,12 @@ class Bus:
     def __init__(self, port: str, baudrate: int, retries: int):
         self.name = str(port)
         self.retries = int(retries)
+        #: how long [s] a request is tried, more often than :attr:`retries` says if need be, before it counts as
+        #: failed (0: the tries alone). DynamixelSnake's start-up sets it: nothing moves yet, so a computer that
+        #: stalls a few tenths of a second while the arm connects costs a wait, not a failed start.
+        self.patience = 0.0
+        #: how many tries the last failed request took
+        self.tries_made = 0
         #: packets sent again after a loss or corruption, since the bus was opened
         self.retried = 0
         #: bytes thrown away because no request of ours was waiting for them (late or stray)
@@ -341,7 +347,8 @@ class Bus:
     def retry(self, call: Callable[[], tuple[int, object]], *, answered: bool = True,
               tries: int | None = None, by_servo: bool = False) -> tuple[int, object]:
         """:meth:`attempt` ``call()`` (one packet exchange, returning ``(result, value)``), again
-        after each failure, at most ``retries + 1`` times (``tries + 1`` when given). Returns the last ``(result, value)``:
+        after each failure, at most ``retries + 1`` times (``tries + 1`` when given; more while :attr:`patience`
+        has not passed since the first). Returns the last ``(result, value)``:
         ``result`` is ``COMM_SUCCESS`` unless every try failed. When every try failed and one of them
         got a corrupt status packet, that is the result: a servo answered, on a noisy line or at
         another baud rate, even if a later try timed out (on a busy computer, the answer came late),
@@ -353,14 +360,16 @@ class Bus:
         try of its own over its timeouts.
         """
         retries = self.retries if tries is None else tries
-        failed = []
-        for attempt in range(retries + 1):
+        failed, started = [], time.perf_counter()
+        while True:
             result, value = self.attempt(call, answered=answered)
             if result == sdk.COMM_SUCCESS:
                 return result, value
             failed.append((result, value))
-            if attempt < retries:
-                self.retried += 1
+            if len(failed) > retries and time.perf_counter() - started >= self.patience:
+                break
+            self.retried += 1
+        self.tries_made = len(failed)
         return reported(failed, by_servo)
 
     def read(self, servo_id: int, address: int, size: int, *, tries: int | None = None) -> tuple[int, int, int]:

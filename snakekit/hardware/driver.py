@@ -55,6 +55,10 @@ from .startup import check_eeprom
 from .stopping import StopMixin
 
 KIT_PROFILE_VELOCITY = DEFAULT_PROFILE_VELOCITY  # the simulator's too (profile_planner says why 55)
+#: how long [s] each request of the start-up is tried before a servo counts as not answering (its tries are
+#: sent again until then): a lab computer that stalls a few tenths of a second while the arm connects (a suite's
+#: run beside other work saw a start-up fail on 4 tries in 0.4 s) costs a wait, not a failed start
+START_PATIENCE = 1.0
 _OPEN: "weakref.WeakValueDictionary[str, DynamixelSnake]" = weakref.WeakValueDictionary()
 
 
@@ -178,6 +182,15 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
     # --- start-up --------------------------------------------------------------------------
 
     def _start(self, torque: bool, reboot_faulted: bool, fix_eeprom: bool) -> None:
+        self.bus.patience = START_PATIENCE
+        try:
+            self._start_up(torque, reboot_faulted, fix_eeprom)
+        finally:
+            self.bus.patience = 0.0
+        if self.watchdog:
+            self._keepalive = KeepAlive(self, self.watchdog)
+
+    def _start_up(self, torque: bool, reboot_faulted: bool, fix_eeprom: bool) -> None:
         self.servos = [self._check_servo(i) for i in self.ids]
         for i in self.ids:
             bits = self._read(i, HARDWARE_ERROR_STATUS, 1, check_alert=False)
@@ -202,8 +215,6 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
             self._apply_ram(i)
         if torque:
             self.torque_on()
-        if self.watchdog:
-            self._keepalive = KeepAlive(self, self.watchdog)
 
     def _check_servo(self, servo_id: int) -> ServoInfo:
         info = self.ping(servo_id)
@@ -228,7 +239,7 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
         raise CommunicationError(f"{message}; {hint}. {self.stop()}")
 
     def _tries(self) -> str:
-        return f"{self.retries + 1} tries"
+        return f"{max(self.bus.tries_made, self.retries + 1)} tries"
 
     def _check_error(self, servo_id: int, error: int, what: str, check_alert: bool = True) -> None:
         if error & 0x80 and check_alert:
@@ -273,7 +284,7 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
         if result != sdk.COMM_SUCCESS:
             raise CommunicationError(
                 f"no servo answered at id {servo_id} on {self.port_name} (ping "
-                f"{describe(result)}); check the cable and power, or the id")
+                f"{describe(result)}, {self._tries()}); check the cable and power, or the id")
         firmware = self._read(servo_id, FIRMWARE_VERSION, 1, check_alert=False)
         return ServoInfo(servo_id, model, firmware)
 

@@ -119,7 +119,7 @@ def test_a_missing_servo_is_named_with_the_port():
     bus = BusEmulator(motion="profile", faults=Faults(missing=(3,))).start()
     try:
         with pytest.raises(CommunicationError, match=rf"no servo answered at id 3 on {bus.port} "
-                                                     r"\(ping timed out\); check the cable and power, or the id"):
+                                                     r"\(ping timed out, \d+ tries\); check the cable and power, or the id"):
             hw.DynamixelSnake(bus.port, retries=1)
     finally:
         bus.stop()

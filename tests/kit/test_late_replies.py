@@ -7,6 +7,7 @@ the bus, and every goal the emulator received with the path the test asked for.
 
 import math
 import multiprocessing
+import re
 import time
 
 import numpy as np
@@ -269,3 +270,37 @@ def test_waiting_out_late_bytes_never_outlasts_the_bus_watchdog():
         assert off.bus.quiet_time == pytest.approx(1.25 * MAX_LATENESS)
     finally:
         off.close()
+
+
+@pytest.mark.parametrize("lost", [4, 8])
+def test_a_start_up_whose_first_packets_are_lost_waits_them_out(lost):
+    """The start-up tries each request for START_PATIENCE (1 s), more often than its 4 tries if need be: the
+    first ``lost`` instruction packets dropped (as a computer that stalls a few tenths of a second while the
+    arm connects) cost a wait, not a failed start (a run of the suite beside other work saw one fail on 4 tries
+    in 0.4 s). After the start-up, a request is tried 4 times again."""
+    robot = make_emulated_robot(motion="profile", watchdog=0.5, faults=Faults(drop=1.0, count=lost))
+    try:
+        assert robot.bus.retried >= lost and robot.bus.patience == 0.0
+        robot.emulator.faults = Faults(missing=(2,))
+        started = time.perf_counter()
+        with pytest.raises(snakekit.CommunicationError, match=r"servo 2 .*\(timed out, 4 tries\)"):
+            robot._read(2, 11, 1)
+        assert time.perf_counter() - started < hw.driver.START_PATIENCE
+    finally:
+        robot.close()
+
+
+def test_a_servo_missing_at_start_up_is_named_after_the_patience_with_the_tries_made():
+    bus = BusEmulator(motion="profile", faults=Faults(missing=(3,))).start()
+    try:
+        started = time.perf_counter()
+        with pytest.raises(snakekit.CommunicationError, match=r"no servo answered at id 3 .*\(ping timed out, (\d+) "
+                                                              r"tries\); check the cable and power, or the id") as e:
+            hw.DynamixelSnake(bus.port)
+        waited = time.perf_counter() - started
+        assert hw.driver.START_PATIENCE <= waited < 5 * hw.driver.START_PATIENCE, waited
+        made = int(re.search(r"ping timed out, (\d+) tries", str(e.value)).group(1))
+        assert made > 4, str(e.value)  # tried for the whole second, more than the 4 tries of a running arm
+        assert [s for s in range(1, 6) if bus.servo(s).memory.get("Torque Enable")] == []
+    finally:
+        bus.stop()
