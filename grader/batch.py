@@ -280,9 +280,9 @@ class Grader:
             if attempt == REFERENCE_TRIES:
                 shutil.rmtree(work, ignore_errors=True)
                 busy = busy_machine()
-                raise GradingError(f"{where}: {faults[0]}, in each of its {REFERENCE_TRIES} runs. That error is the "
-                                   "arm's bus's (a reply of the emulated servos came too late, or the port went), never "
-                                   "an expected result, so the batch has no expected results; "
+                raise GradingError(f"{where}: {faults[0]}, in each of its {REFERENCE_TRIES} runs. That error is "
+                                   "the arm's bus's (a reply of the emulated servos came too late, or the port went), "
+                                   "never an expected result, so the batch has no expected results; "
                                    + (f"{busy}; " if busy else "") + "nothing was graded")
             print(f"snakekit grade: the instructor notebook's run at the batch's cases: {faults[0]}; a fault of the "
                   "arm's bus, not of the solution (a busy machine makes the emulated servos' replies late): running it "
@@ -391,7 +391,8 @@ class Grader:
                     keep = True
                     return Again(lambda: self._run_again(student, src, nbs, tampered, again, finish))
                 return self.verdicts.collect(work, student, nbs, tampered, problems, outcome, t0, second, runs,
-                                             first_run=self.first_runs.get(student, ""), restored=restored, not_made=self.runner.not_made(work)
+                                             first_run=self.first_runs.get(student, ""), restored=restored,
+                                             not_made=self.runner.not_made(work)
                                              if outcome.returncode == sandbox.NOT_MADE else None)
             finally:
                 if not keep:
