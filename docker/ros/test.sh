@@ -204,8 +204,8 @@ wait; cat info.log" 2>&1) || die "docs/ros.md's record-and-play block failed: $o
 for node in /robot_state_publisher /rosout /snakekit_arm; do grep -q -x "$node" <<<"$out" || die "rosnode list lacks $node: $out"; done
 grep -q "^/rviz_" <<<"$out" || die "rosnode list lacks RViz's node: $out"
 grep -q "^record ended: 124$" <<<"$out" || die "rosbag record, stopped by Ctrl-C: $out"
-info_js=$(grep -oE '/joint_states +[0-9]+ msgs' <<<"$out" | awk '{print $2}')
-info_tf=$(grep -oE '/tf +[0-9]+ msgs' <<<"$out" | awk '{print $2}')
+info_js=$(grep -oE '/joint_states +[0-9]+ msgs' <<<"$out" | awk '{print $2}' || true)
+info_tf=$(grep -oE '/tf +[0-9]+ msgs' <<<"$out" | awk '{print $2}' || true)
 [ "${info_js:-0}" -gt 0 ] && [ "${info_tf:-0}" -gt 0 ] || die "rosbag info of sweep-recorded.bag lists no /joint_states and /tf messages: $out"
 grep -q "^sweep written$" <<<"$out" || die "snakekit sweep --out kit-sweep.bag failed: $out"
 publishers=$(sed -n '/^Publishers:/,/^$/p' <<<"$out" | grep -c '^ \* ' || true)
