@@ -119,30 +119,51 @@ def fresh_verdicts():
 
 @pytest.fixture(scope="session")
 def graded_slips(tmp_path_factory):
-    """``lesson -> graded course folder``: a lesson's known mistakes (tests/grader/test_hints_graded.py's
-    ``packed``) and its forgotten returns (tests/lessons/test_forgot_return.py's ``returnless``) handed in
-    together and graded in one batch of ``snakekit grade`` (:func:`grader.course.fairness.grade_students`) on
-    its first use in this test process: one batch start and one instructor run per lesson for both files, where
-    each had its own. The students' names differ between the two (``group*`` and ``slip*``), and each file
-    reads only its own; under `make test` both files' tests of a lesson join one xdist group (``slipsNN``)."""
-    done = {}
+    """``lesson -> graded course folder``: a lesson's slips handed in together and graded in one batch of
+    ``snakekit grade`` (:func:`grader.course.fairness.grade_students`) on its first use in this test process:
+    its known mistakes (tests/grader/test_hints_graded.py's ``packed``), its forgotten returns
+    (tests/lessons/test_forgot_return.py's ``returnless``) and the variants of its answers that the fairness rules
+    are checked on (tests/grader/test_fairness_mutation.py: ``fairness.SAMPLE``). One batch start and one
+    instructor run per lesson for the three files, where each had its own. The students' names differ between them
+    (``group*``, ``slip*``, ``exNN_k_<operator>``) and each file reads only its own; under `make test` the three
+    files' tests of a lesson join one xdist group (``slipsNN``). ``graded.batches[lesson]``: the batch's seconds
+    and ``snakekit grade``'s stderr."""
+    done, batches = {}, {}
 
     def graded(lesson: str):
         if lesson not in done:
             from grader.course import fairness
+            from grader.course.mutants import variants
             from tests.grader.test_hints_graded import packed
             from tests.lessons.test_forgot_return import returnless
 
             mistakes, returns = packed(lesson)[0], returnless(lesson)[0]
-            assert not set(mistakes) & set(returns)
-            course, seconds, _ = fairness.grade_students(lesson, {**mistakes, **returns},
-                                                         tmp_path_factory.mktemp(f"slips{lesson[:2]}"))
-            print(f"\n{lesson}: {len(mistakes)} notebooks of known mistakes and {len(returns)} of forgotten returns "
-                  f"graded in {seconds:.0f} s")
-            done[lesson] = course
+            made, skipped = variants(fairness.ROOT / "course", lesson, fairness.SAMPLE)
+            assert made and not skipped, (lesson, skipped)
+            mutants = fairness.variant_students(made)
+            assert not set(mistakes) & set(returns) and not set(mutants) & (set(mistakes) | set(returns))
+            course, seconds, stderr = fairness.grade_students(lesson, {**mistakes, **returns, **mutants},
+                                                              tmp_path_factory.mktemp(f"slips{lesson[:2]}"))
+            print(f"\n{lesson}: {len(mistakes)} notebooks of known mistakes, {len(returns)} of forgotten returns and "
+                  f"{len(mutants)} variants graded in {seconds:.0f} s")
+            done[lesson], batches[lesson] = course, (seconds, stderr)
         return done[lesson]
 
+    graded.batches = batches
     return graded
+
+
+_DATA_URI = None  # compiled on first use
+
+
+def without_data(page: str) -> str:
+    """``page`` with the payload of every ``data:`` URI (a plot's base64 PNG) left out: a check for an address
+    ("http") reads the page's text and tags, where a picture's bytes spell "http" now and then by chance."""
+    import re
+
+    global _DATA_URI
+    _DATA_URI = _DATA_URI or re.compile(r"data:[\w/+.-]+;base64,[A-Za-z0-9+/=\s]+")
+    return _DATA_URI.sub("data:", page)
 
 
 def free_port() -> int:

@@ -212,16 +212,28 @@ def grade_students(lesson: str, students: dict, tmp: Path, *, seed: int | None =
 def grade_lesson(lesson: str, mutants: list[Mutant], tmp: Path, *, seed: int | None = None, jobs: int | None = None,
                  timeout: float | None = None, cell_timeout: float | None = None) -> tuple[list[Row], dict]:
     """Grade ``mutants`` of ``lesson`` in one batch; the rows, and the batch's facts (seed, seconds)."""
+    course, seconds, stderr = grade_students(lesson, variant_students(mutants), tmp, seed=seed, jobs=jobs,
+                                             timeout=timeout, cell_timeout=cell_timeout)
+    return rows_of(lesson, mutants, course, seconds, stderr, seed=seed)
+
+
+def variant_students(mutants: list[Mutant]) -> dict:
+    """Each variant as a student of its own (:func:`grade_students`'s ``students``): its answer typed in, every other
+    answer the instructor's. Their names (``ex04_1_endless_loop``) are those of no other submission."""
+    return {_student(m): {m.grade_id: m.source} for m in mutants}
+
+
+def rows_of(lesson: str, mutants: list[Mutant], course: Path, seconds: float, stderr: str, *,
+            seed: int | None = None) -> tuple[list[Row], dict]:
+    """The rows of ``mutants`` graded in the batch that graded ``course`` (as :func:`variant_students`; other
+    students may have been graded beside them), and the batch's facts (seed, seconds)."""
     from nbgrader.api import Gradebook
 
-    students = {_student(m): {m.grade_id: m.source} for m in mutants}
-    course, seconds, stderr = grade_students(lesson, students, tmp, seed=seed, jobs=jobs, timeout=timeout,
-                                             cell_timeout=cell_timeout)
     with open(course / f"grades-{lesson}.csv", newline="") as f:
         status = {row["student"]: row["status"] for row in csv.DictReader(f)}
     scores = {}
     with Gradebook(f"sqlite:///{course / 'gradebook.db'}") as gb:
-        for name in students:
+        for name in variant_students(mutants):
             per = {}
             for g in gb.find_submission_notebook(lesson, lesson, name).grades:
                 per[exercise(g.name)] = per.get(exercise(g.name), 0.0) + float(g.score or 0.0)
