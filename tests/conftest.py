@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import shutil
 import signal
 import socket
@@ -126,8 +127,8 @@ def graded_slips(tmp_path_factory):
     are checked on (tests/grader/test_fairness_mutation.py: ``fairness.SAMPLE``). One batch start and one
     instructor run per lesson for the three files, where each had its own. The students' names differ between them
     (``group*``, ``slip*``, ``exNN_k_<operator>``) and each file reads only its own; under `make test` the three
-    files' tests of a lesson join one xdist group (``slipsNN``). ``graded.batches[lesson]``: the batch's seconds
-    and ``snakekit grade``'s stderr."""
+    files' tests of a lesson join one xdist group (``slipsNN``). ``graded.batches[lesson]``: the variants graded,
+    the batch's seconds and ``snakekit grade``'s stderr."""
     done, batches = {}, {}
 
     def graded(lesson: str):
@@ -146,23 +147,19 @@ def graded_slips(tmp_path_factory):
                                                               tmp_path_factory.mktemp(f"slips{lesson[:2]}"))
             print(f"\n{lesson}: {len(mistakes)} notebooks of known mistakes, {len(returns)} of forgotten returns and "
                   f"{len(mutants)} variants graded in {seconds:.0f} s")
-            done[lesson], batches[lesson] = course, (seconds, stderr)
+            done[lesson], batches[lesson] = course, (made, seconds, stderr)
         return done[lesson]
 
     graded.batches = batches
     return graded
 
 
-_DATA_URI = None  # compiled on first use
+_DATA_URI = re.compile(r"data:[\w/+.-]+;base64,[A-Za-z0-9+/=\s]+")
 
 
 def without_data(page: str) -> str:
     """``page`` with the payload of every ``data:`` URI (a plot's base64 PNG) left out: a check for an address
     ("http") reads the page's text and tags, where a picture's bytes spell "http" now and then by chance."""
-    import re
-
-    global _DATA_URI
-    _DATA_URI = _DATA_URI or re.compile(r"data:[\w/+.-]+;base64,[A-Za-z0-9+/=\s]+")
     return _DATA_URI.sub("data:", page)
 
 
