@@ -19,7 +19,8 @@ import numpy as np
 
 from .errors import FileFormatError, InputTypeError, whole_sentences
 
-__all__ = ["encode_cases", "decode_cases", "fetch_cases", "encode_results", "decode_results", "quick", "live_off"]
+__all__ = ["encode_cases", "decode_cases", "fetch_cases", "encode_results", "decode_results", "quick", "graded",
+           "live_off"]
 
 
 # --- how this run goes: graded (``SNAKEKIT_CASES`` set) or shortened under test -----------------
@@ -30,10 +31,15 @@ def quick() -> bool:
                for v in ("SNAKEKIT_QUICK", "SNAKEKIT_TEST"))
 
 
+def graded() -> bool:
+    """True while the grader runs the notebook: its socket of hidden cases is named (``SNAKEKIT_CASES``)."""
+    return bool(os.environ.get("SNAKEKIT_CASES"))
+
+
 def live_off() -> str | None:
     """Why a lesson's live part (a ROS master, a node in real time) is left out here, or None: while the
     grader runs the notebook (it grades what needs no live master), and when long runs shrink (:func:`quick`)."""
-    if os.environ.get("SNAKEKIT_CASES"):
+    if graded():
         return "a graded run leaves the live arm out (the grade comes from the exercises, which need no ROS master)"
     if quick():
         return "quick mode leaves the live arm out"

@@ -247,3 +247,29 @@ def test_a_closed_view_gets_a_polite_message_not_an_error(sim):
     assert panel.viewer is None
     panel.set_joints([0.0, 0.2, 0.0, 0.0, 0.0])  # and the panel goes on working
     assert "3D view is closed" not in panel.message
+
+
+def test_a_graded_run_keeps_the_panels_figure_but_draws_it_into_no_widget():
+    """In a kernel the panel's plot is a picture in its output widget. While the grader runs the notebook
+    (``SNAKEKIT_CASES`` names its socket) the figure is made (``last_figure``) but not drawn: the widget's
+    contents are in no page (the feedback shows a widget as one line), and a PNG per move was a third of
+    lesson 00's grading time."""
+    nbformat = need("nbformat")
+    from tests.conftest import notebook_client
+
+    setup = ("%matplotlib inline\nimport os\nimport snakekit\nfrom snakekit.widgets import ControlPanel\n"
+             "os.environ.pop('SNAKEKIT_CASES', None)\nrobot = snakekit.make_robot('sim')")
+    move = ("panel = ControlPanel(robot)\npanel.set_joints([0.3, -0.2, 0.1, 0.0, 0.0])\nrun = panel.execute()\n"
+            "print(type(panel.last_figure).__name__, len(panel.last_figure.axes[0].get_lines()))")
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(setup), nbformat.v4.new_code_cell(move),
+                                         nbformat.v4.new_code_cell("os.environ['SNAKEKIT_CASES'] = 'graded.sock'"),
+                                         nbformat.v4.new_code_cell(move)])
+    notebook_client(nb, timeout=120, kernel_name="python3").execute()
+    printed = ["".join(o.get("text", "") for o in c.outputs if o.output_type == "stream") for c in nb.cells]
+    assert printed[1] == printed[3] == "RunFigure 12\n", printed  # made both times: 5 joints x 2 lines + 2 legend keys
+    state = nb.metadata["widgets"]["application/vnd.jupyter.widget-state+json"]["state"]
+    outputs = [m["state"].get("outputs", []) for m in state.values() if m["model_name"] == "OutputModel"]
+    # one output widget per panel, in the order made: the first holds the plot as a picture, the graded one nothing
+    pictures = [[o for o in out if "image/png" in o.get("data", {})] for out in outputs]
+    assert [len(p) for p in pictures] == [1, 0], outputs
+    assert pictures[0][0]["data"]["image/png"]  # base64 of a PNG
