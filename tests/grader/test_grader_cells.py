@@ -46,7 +46,9 @@ def test_an_endless_loop_in_one_exercise_leaves_the_others_their_points(tmp_path
     need_program("unshare")
     course = make_course(tmp_path)
     submit(course, "good")
-    submit(course, "loop", {"ex1_tool_xy": "def tool_xy(q):\n    while True:\n        pass"})
+    # a loop that waits for an arrival that never comes (a busy one is the corpus's: test_grader_adversarial.py)
+    submit(course, "loop", {"ex1_tool_xy": "import time\n\ndef tool_xy(q):\n    arrived = False\n    while not arrived:\n"
+                                           "        time.sleep(0.05)"})
     r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
                         "--references", str(REFERENCES), "--timeout", str(TIMEOUT)], capture_output=True, text=True,
                        timeout=900, cwd=REPO)
