@@ -48,7 +48,7 @@ from grader.hooks import NO_HOOKS, BatchHooks
 from grader.course.gradebook import NOT_CARRIED, keep_release_files, late_penalties, not_carried, write_grade
 from grader.feedback import scores
 from grader.scoring.references import course_references, expected
-from grader.sandbox.runner import Runner
+from grader.sandbox.runner import Runner, release
 from grader.scoring.verdict import REAL_TIME_FAULTS, SubmissionResult, Verdicts, busy_machine, real_time
 from grader.scoring.score import read_handin
 from grader.scoring.wording import signatures
@@ -160,8 +160,7 @@ class Grader:
                 self.runner.mpl_cache(base / "mplcache")
             return self._grade_all(students)
         finally:
-            if server is not None:
-                server.close()
+            release(server)
             if self.runner.cases is not None:
                 self.runner.cases.close()
             self.runner.server = None

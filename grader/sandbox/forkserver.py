@@ -2,8 +2,9 @@
 
 Every sandbox used to start a fresh Python, import nbgrader (0.8 s), then start a fresh kernel
 that imported ipykernel, numpy, matplotlib, Pinocchio and MuJoCo (1 s) - for each student. The
-fork server is one process per batch that imports all of that once (:data:`PRELOAD`; nothing of
-the course: no references, tests or gradebook are ever read in it). For each submission:
+fork server is one process that imports all of that once (:data:`PRELOAD`; nothing of any course:
+no references, tests or gradebook are ever read in it), started by a grading process's first batch
+and kept for its later ones (:func:`grader.sandbox.runner.fork_server`). For each submission:
 
 1. the grader sends the sandbox's configuration (the same one :func:`grader.sandbox.namespaces.run` uses)
    and one end of a socket pair over a Unix socket;
@@ -234,7 +235,8 @@ def _supervise(cfg: dict, report_fd: int) -> int:
 
 
 class ForkServer:
-    """One fork server per batch; :meth:`run` is :func:`grader.sandbox.namespaces.run` through it (thread-safe)."""
+    """A warm fork server (one per grading process: :func:`grader.sandbox.runner.fork_server`); :meth:`run` is
+    :func:`grader.sandbox.namespaces.run` through it (thread-safe)."""
 
     def __init__(self, env: dict, *, start_timeout: float = 120.0):
         """Start the server; :meth:`wait_ready` before the first :meth:`run`."""
@@ -245,6 +247,7 @@ class ForkServer:
         self._start()
 
     def _start(self) -> None:
+        self._ready = False
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         theirs.set_inheritable(True)
         self._ctl = ours
@@ -296,7 +299,10 @@ class ForkServer:
                                    "nothing was graded wrong: grade the ungraded students again") from None
 
     def wait_ready(self) -> "ForkServer":
-        """Wait until the server has imported everything; raises RuntimeError if it could not."""
+        """Wait until the server has imported everything (at once when it said so before); raises RuntimeError
+        if it could not."""
+        if self._ready:
+            return self
         self._ctl.settimeout(self._start_timeout)
         try:
             ready = self._ctl.recv(16)
@@ -309,7 +315,12 @@ class ForkServer:
             self.close()
             raise RuntimeError(f"the grader's fork server did not start: {lines[-1] if lines else 'no message'}")
         self._ctl.settimeout(None)
+        self._ready = True
         return self
+
+    def alive(self) -> bool:
+        """Whether the server can take a sandbox now (neither closed nor ended)."""
+        return self._ctl.fileno() >= 0 and self.proc.poll() is None
 
     def run(self, cfg: dict, wall: float) -> tuple[int | None, bool]:
         """Run one sandbox (``cfg`` as grader.sandbox.namespaces builds it, plus ``log``): (exit code or None, timed out)."""

@@ -1,13 +1,16 @@
 """Running one notebook in a sandbox: its private copy of the course, the case socket in its
-folder, nbgrader's autograde (:mod:`grader.sandbox.inside.worker`) forked from the batch's warm server."""
+folder, nbgrader's autograde (:mod:`grader.sandbox.inside.worker`) forked from the process's warm server."""
 
 from __future__ import annotations
 
+import atexit
 import os
 import secrets
 import shutil
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -127,18 +130,20 @@ class Runner:
                 return sandbox.Outcome(None, True, time.monotonic() - t0)
 
     def mpl_cache(self, path: Path) -> None:
-        """Build matplotlib's font list once; each sandbox starts with a copy."""
+        """matplotlib's font list, once a batch (the one the fork server made as it imported matplotlib, else
+        built here); each sandbox starts with a copy."""
+        made = getattr(self.server, "home", None)
+        if made is not None and any((made / "mplcache").glob("fontlist-*.json")):
+            shutil.copytree(made / "mplcache", path)
+            return
         path.mkdir()
         subprocess.run([sys.executable, "-c", "import matplotlib.font_manager"], env={**os.environ, "MPLCONFIGDIR": str(path)},
                        capture_output=True, timeout=120)
 
     def start_fork_server(self, base: Path):
-        """Start the batch's warm fork server (:mod:`grader.sandbox.forkserver`), or None if it cannot start."""
-        from grader.sandbox.forkserver import ForkServer
-
+        """The process's warm fork server (:func:`fork_server`) for this batch, or None if it cannot start."""
         try:
-            extra = {k: os.environ[k] for k in ("SNAKEKIT_FORKSERVER_PRELOAD",) if k in os.environ}
-            return ForkServer({**self.env(base), "MPLCONFIGDIR": str(base / "mplcache"), **extra})
+            return fork_server(self.env)
         except Exception as e:  # noqa: BLE001
             self.no_server(e)
             return None
@@ -157,3 +162,69 @@ class Runner:
     @staticmethod
     def no_server(e: Exception) -> None:
         warnings.warn(f"grading without the fork server (each submission starts Python afresh): {e}", stacklevel=3)
+
+
+# --- one warm fork server per process ------------------------------------------------------------
+#: The process's warm fork servers, by what they preload. A batch hands its sandboxes to the server an earlier
+#: batch of the same process started: a TA's `snakekit grade` grades one batch, where the hub's grading service
+#: and a test process grade many, and each server's imports cost about 2.4 s of CPU. A server reads nothing of
+#: any course or batch (each sandbox's folder, environment and limits come with its own request), so one batch's
+#: students share nothing with another's through it.
+_SERVERS: dict[tuple, object] = {}
+_SERVERS_LOCK = threading.Lock()
+
+
+def fork_server(env):
+    """This process's running fork server, started (in a folder of its own, ``env(folder)`` its environment)
+    when there is none, or the last one ended. Started, not yet ready: ``wait_ready`` before the first sandbox."""
+    from grader.sandbox.forkserver import ForkServer
+
+    extra = {k: os.environ[k] for k in ("SNAKEKIT_FORKSERVER_PRELOAD",) if k in os.environ}
+    key = (os.path.abspath(sys.executable), extra.get("SNAKEKIT_FORKSERVER_PRELOAD", ""))
+    with _SERVERS_LOCK:
+        server = _SERVERS.pop(key, None)
+        if server is not None and server.alive():
+            _SERVERS[key] = server
+            return server
+        if server is not None:
+            _close(server)
+        home = Path(tempfile.mkdtemp(prefix="snakekit-forkserver-"))
+        try:
+            server = ForkServer({**env(home), "MPLCONFIGDIR": str(home / "mplcache"), **extra})
+        except Exception:
+            shutil.rmtree(home, ignore_errors=True)
+            raise
+        server.home = home  # matplotlib's font list, made there as the server imports it
+        _SERVERS[key] = server
+        return server
+
+
+def release(server) -> None:
+    """After a batch: its server stays for the next one, unless the batch was stopped (Ctrl-C: it is killed, as
+    the batch's sandboxes are) or the server did not come up."""
+    if server is None:
+        return
+    if sandbox.STOP.is_set() or not getattr(server, "_ready", False):
+        with _SERVERS_LOCK:
+            for key, s in list(_SERVERS.items()):
+                if s is server:
+                    del _SERVERS[key]
+        _close(server)
+
+
+def _close(server) -> None:
+    server.close()
+    if getattr(server, "home", None) is not None:
+        shutil.rmtree(server.home, ignore_errors=True)
+
+
+@atexit.register
+def _close_all() -> None:
+    with _SERVERS_LOCK:
+        servers = list(_SERVERS.values())
+        _SERVERS.clear()
+    for server in servers:
+        try:
+            _close(server)
+        except Exception:  # noqa: BLE001 - the process is ending
+            pass

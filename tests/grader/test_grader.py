@@ -766,6 +766,42 @@ def test_warm_and_fresh_sandboxes_give_the_same_grades(tmp_path, monkeypatch):
     assert printed[False]["alice"] == f"preloaded: False False uid {want_uid}\nloops freed: True"
 
 
+def test_batches_of_one_process_share_its_fork_server_and_grade_alike(tmp_path, monkeypatch):
+    """A process that grades several batches (the hub's grading service, the test suite) starts its warm fork server
+    once: the second batch's sandboxes are forked from the server the first started, which stays alive between them;
+    with the process's servers stopped, a third batch starts a new one. The three grade alike."""
+    need_program("unshare")
+    from grader import batch
+    from grader.sandbox import runner
+
+    real_execute, used = runner.Runner.execute, []
+
+    def execute(self, work, student, **kw):
+        used[-1].add(self.server.proc.pid if self.server is not None else None)
+        assert self.server is None or self.server.proc.poll() is None
+        return real_execute(self, work, student, **kw)
+
+    monkeypatch.setattr(runner.Runner, "execute", execute)
+    built = []  # matplotlib's font list built for a batch: none, each copies the one its server made as it started
+    real_run = runner.subprocess.run
+    monkeypatch.setattr(runner.subprocess, "run", lambda argv, *a, **kw: (built.append(argv), real_run(argv, *a, **kw))[1])
+    grades = []
+    for k in range(3):
+        if k == 2:
+            runner._close_all()   # as at the process's exit: its servers stop, their folders go
+        used.append(set())
+        course = make_course(tmp_path / f"batch{k}")
+        submit(course, "alice")
+        submit(course, "bob", {"ex1_tool_xy": "def tool_xy(q):\n    return np.array([0.3315, 0.0]) + 0 * q[:2]"})
+        results = batch.Grader(course, ASSIGNMENT, jobs=1, timeout=60, references=REFERENCES, seed=5).run()
+        grades.append({r.student: (r.status, r.score) for r in results})
+    assert [len(u) for u in used] == [1, 1, 1] and None not in set.union(*used), used
+    assert used[0] == used[1] != used[2], used
+    assert not [argv for argv in built if "matplotlib.font_manager" in " ".join(map(str, argv))], built
+    assert grades[0] == grades[1] == grades[2] and grades[0]["alice"] == ("graded", 7.0), grades
+    assert grades[0]["bob"][0] == "graded" and grades[0]["bob"][1] < 7.0, grades
+
+
 def test_fork_server_that_cannot_start_says_why(tmp_path):
     from grader.sandbox.forkserver import ForkServer
 
