@@ -323,7 +323,8 @@ class Grader:
             return work, outcome, 1
         if stopped_by_clock(work, outcome, student, self.a):
             why = "was stopped by the clock"
-        elif student != INSTRUCTOR and self.draw is not None and (faults := bus_faults(work, self.draw.cases)):
+        elif student != INSTRUCTOR and (faults := (bus_faults(work, self.draw.cases) if self.draw is not None else [])
+                                        or check_faults(work, student, self.a)):
             why = f"had a fault of the arm's bus ({faults[0]}), which a busy machine causes"
         else:
             return work, outcome, 1
@@ -470,6 +471,29 @@ def bus_faults(work: Path, cases: dict) -> list[str]:
         for k, r in enumerate(results):
             if isinstance(r, str) and r.split(":", 1)[0].strip() in REAL_TIME_FAULTS:
                 out.append(f"{gid} raised {r.strip()[:200]} at hidden case {k}")
+    return out
+
+
+def check_faults(work: Path, student: str, a) -> list[str]:
+    """The test cells of a run whose check stopped on a fault of the arm's bus (:data:`REAL_TIME_FAULTS`), each as
+    "<grade id>'s check raised <error>": the student's page would show "servo 1 did not answer" where the check's
+    own words belong (a late reply of the emulated servos on a busy machine, whatever the answer)."""
+    out = []
+    for name in a.notebooks:
+        raw = read_inside(work, f"course/autograded/{student}/{a.name}/{name}.ipynb")
+        if not raw or not any(f'"ename": "{e}"'.encode() in raw for e in REAL_TIME_FAULTS):
+            continue
+        try:
+            cells = json.loads(raw).get("cells", [])
+        except (ValueError, AttributeError):
+            continue
+        for cell in cells:
+            meta = (cell.get("metadata") or {}).get("nbgrader") or {}
+            if not meta.get("grade") or meta.get("solution"):
+                continue
+            for o in cell.get("outputs") or []:
+                if o.get("output_type") == "error" and o.get("ename") in REAL_TIME_FAULTS:
+                    out.append(f"{meta.get('grade_id')}'s check raised {o['ename']}: {str(o.get('evalue', ''))[:200]}")
     return out
 
 

@@ -109,3 +109,43 @@ def test_a_students_run_with_a_bus_fault_runs_once_more_and_the_second_is_graded
     else:                   # faulted again: that case is lost, and only it
         assert scores[GID] < 2.0 and {g: v for g, v in scores.items() if g != GID} == \
             {g: v for g, v in unfaulted["alice"][2] if g != GID}
+
+
+def test_a_students_check_stopped_by_a_bus_fault_runs_once_more_and_the_second_is_graded(unfaulted, tmp_path,
+                                                                                        monkeypatch):
+    """The check cell of an exercise stopped on a fault of the arm's bus (lesson 07's 7.2 in a run of the suite: "servo
+    1 ... did not answer the SyncRead of the joint state (timed out, 4 tries)"): the student's page would show that
+    where the check's own hint belongs, whatever the answer. The run is made once more from scratch, as one whose
+    hand-ins hold such a fault, and the second one is graded. The fault is put into the first run's graded notebook,
+    as the kernel writes an error."""
+    import nbformat
+
+    from grader import batch
+
+    real_run, runs = batch.Grader._sandboxed, []
+
+    def run(self, student, src, nbs, tampered, **kw):
+        work, outcome = real_run(self, student, src, nbs, tampered, **kw)
+        if student == "alice":
+            runs.append(work)
+            if len(runs) == 1:
+                path = work / "course" / "autograded" / "alice" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb"
+                nb = nbformat.read(path, as_version=4)
+                cell = next(c for c in nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == GID)
+                cell.outputs.append(nbformat.v4.new_output("error", ename="CommunicationError",
+                                                           evalue=FAULTS["CommunicationError"], traceback=[]))
+                nbformat.write(nb, path)
+        return work, outcome
+
+    monkeypatch.setattr(batch.Grader, "_sandboxed", run)
+    results = batch.Grader(_class(make_course(tmp_path)), ASSIGNMENT, jobs=1, timeout=60, references=REFERENCES,
+                           seed=5).run()
+    got = {r.student: r for r in results}
+    assert len(runs) == 2
+    assert got["alice"].detail.startswith(
+        f"graded on its second run: the first had a fault of the arm's bus ({GID}'s check raised CommunicationError: "
+        f"{FAULTS['CommunicationError']}), which a busy machine causes, so it ran once more from the start"), \
+        got["alice"].detail
+    assert (got["alice"].status, got["alice"].score) == ("graded", 7.0)
+    assert [(e.grade_id, e.score) for e in got["alice"].exercises] == unfaulted["alice"][2]
+    assert (got["bob"].status, got["bob"].score) == unfaulted["bob"][:2] and "second run" not in got["bob"].detail
