@@ -166,10 +166,11 @@ class Runner:
 
 # --- one warm fork server per process ------------------------------------------------------------
 #: The process's warm fork servers, by what they preload. A batch hands its sandboxes to the server an earlier
-#: batch of the same process started: a TA's `snakekit grade` grades one batch, where the hub's grading service
-#: and a test process grade many, and each server's imports cost about 2.4 s of CPU. A server reads nothing of
-#: any course or batch (each sandbox's folder, environment and limits come with its own request), so one batch's
-#: students share nothing with another's through it.
+#: batch of the same process started: a TA's `snakekit grade` (also the one the hub's grading service runs) grades
+#: one batch, where the test suite's processes, or a script that calls ``grader.batch.Grader`` more than once, grade
+#: many, and each server's imports cost about 2.4 s of CPU. A server reads nothing of any course or batch (each
+#: sandbox's folder, environment and limits come with its own request), so one batch's students share nothing
+#: with another's through it.
 _SERVERS: dict[tuple, object] = {}
 _SERVERS_LOCK = threading.Lock()
 

@@ -767,9 +767,9 @@ def test_warm_and_fresh_sandboxes_give_the_same_grades(tmp_path, monkeypatch):
 
 
 def test_batches_of_one_process_share_its_fork_server_and_grade_alike(tmp_path, monkeypatch):
-    """A process that grades several batches (the hub's grading service, the test suite) starts its warm fork server
-    once: the second batch's sandboxes are forked from the server the first started, which stays alive between them;
-    with the process's servers stopped, a third batch starts a new one. The three grade alike."""
+    """A process that grades several batches (the test suite's, a script that calls Grader more than once) starts
+    its warm fork server once: the second batch's sandboxes are forked from the server the first started, which stays
+    alive between them; with the process's servers stopped, a third batch starts a new one. The three grade alike."""
     need_program("unshare")
     from grader import batch
     from grader.sandbox import runner
