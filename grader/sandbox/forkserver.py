@@ -318,6 +318,11 @@ class ForkServer:
         self._ready = True
         return self
 
+    @property
+    def ready(self) -> bool:
+        """Whether the server said it has imported everything."""
+        return self._ready
+
     def alive(self) -> bool:
         """Whether the server can take a sandbox now (neither closed nor ended)."""
         return self._ctl.fileno() >= 0 and self.proc.poll() is None

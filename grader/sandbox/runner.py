@@ -205,7 +205,7 @@ def release(server) -> None:
     the batch's sandboxes are) or the server did not come up."""
     if server is None:
         return
-    if sandbox.STOP.is_set() or not getattr(server, "_ready", False):
+    if sandbox.STOP.is_set() or not server.ready:
         with _SERVERS_LOCK:
             for key, s in list(_SERVERS.items()):
                 if s is server:
