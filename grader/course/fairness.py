@@ -4,7 +4,7 @@ For each lesson, every single-slip variant of the instructor's answers (:mod:`gr
 is typed into the lesson's student notebook (``notebooks/NN_*.ipynb``, generated from the source),
 every other answer cell holding the instructor's answer, and handed in as one student. The lesson's
 variants are graded in one batch by ``snakekit grade`` on a copy of the course, as a TA grades a
-class; each exercise's loss is counted from its full points (every answer right earns them all:
+class (the command run in this process: the lessons' batches share one warm fork server); each exercise's loss is counted from its full points (every answer right earns them all:
 ``tests/lessons/test_course.py``). The graded notebook of each variant shows
 what its visible checks said (the same cells ``snakekit check`` runs). Each variant must meet the
 rules of grader/README.md ("Fairness, tested by mutation"):
@@ -29,12 +29,13 @@ import os
 import re
 import runpy
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+from snakekit import cli
 
 from grader.course.folder import course_copy_ignore
 from grader.course.mutants import OPERATORS, Mutant, Skipped, exercises, variants
@@ -198,12 +199,13 @@ def grade_students(lesson: str, students: dict, tmp: Path, *, seed: int | None =
     timeout = timeout or TIMEOUTS.get(lesson, TIMEOUT)
     jobs = jobs or JOBS.get(lesson, 2)
     cell_timeout = cell_timeout or CELL_TIMEOUTS.get(lesson, timeout / 3)
-    command = [sys.executable, "-m", "snakekit.cli", "grade", lesson, "--course", str(course), "--jobs", str(jobs),
-               "--timeout", f"{timeout:g}", "--cell-timeout", f"{cell_timeout:g}"]
+    command = ["grade", lesson, "--course", str(course), "--jobs", str(jobs), "--timeout", f"{timeout:g}",
+               "--cell-timeout", f"{cell_timeout:g}"]
     command += ["--seed", str(seed)] if seed is not None else []
     started = time.monotonic()
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
-    r = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, env=env, timeout=3600)
+    # the TA's command, in this process: the batches of one process share its warm fork server
+    r = cli.run(command, cwd=ROOT, env=env)
     if r.returncode != 0:
         raise RuntimeError(f"snakekit grade {lesson} exited {r.returncode}:\n{r.stderr[-3000:]}")
     return course, time.monotonic() - started, r.stderr

@@ -11,6 +11,7 @@ from pathlib import Path
 import nbformat
 
 HERE = Path(__file__).resolve().parent
+REPO = HERE.parents[1]
 FIXTURE = HERE / "grader_course"
 ASSIGNMENT = "t1_sweep"
 REFERENCES = FIXTURE / "references"
@@ -28,6 +29,17 @@ GOOD = {
     return snakekit.Trajectory(t, np.repeat(angle[:, None], 5, axis=1))''',
     "ex3_peak_speed": "peak_speed = float(np.abs(my_sweep().finite_difference_velocities()).max())",
 }
+
+
+def snakekit(*args, cwd: Path = REPO, env: dict | None = None):
+    """``snakekit ARGS`` as a TA types it in the folder ``cwd``, run in this test process (:func:`snakekit.cli.run`):
+    the exit code, stdout and stderr a subprocess would give. A test process that grades several batches keeps one
+    warm fork server for them, where each command's own process started one (about 4 CPU-s a batch). The tests of
+    what only a process of its own shows (Ctrl-C, the entry point, the TA's whole week) start one.
+    """
+    from snakekit.cli import run
+
+    return run(args, cwd=cwd, env=env)
 
 
 _released: Path | None = None

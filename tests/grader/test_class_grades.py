@@ -22,7 +22,6 @@ from __future__ import annotations
 import csv
 import os
 import re
-import subprocess
 import sys
 import time
 import warnings
@@ -38,6 +37,7 @@ sys.path.insert(1, str(HERE.parent))  # tests/conftest.py, also when run as a sc
 from class_submissions import exercise_of, hand_in, points, score_range  # noqa: E402
 from class_submissions import lesson02, lesson03, lesson04, lesson06  # noqa: E402
 from conftest import copy_course  # noqa: E402
+from grader_helpers import snakekit  # noqa: E402
 
 #: the grader of issue 20 (partial credit that follows the work) grades the classes in the suite
 NEW_GRADER = True
@@ -62,14 +62,13 @@ def grade_class(lesson: str, tmp: Path) -> dict:
     for student in module.STUDENTS:
         hand_in(course, lesson, student)
     # a loaded machine must not turn a right notebook into a timeout: 300 s a notebook, not 120
-    command = [sys.executable, "-m", "snakekit.cli", "grade", lesson, "--course", str(course), "--jobs", "2",
-               "--timeout", "300"]
+    command = ["grade", lesson, "--course", str(course), "--jobs", "2", "--timeout", "300"]
     if getattr(module, "CELL_TIMEOUT", None):   # a class with an infinite loop waits this long for it, twice
         command += ["--cell-timeout", str(module.CELL_TIMEOUT)]
     if os.environ.get("SNAKEKIT_CLASS_SEED"):   # the hidden cases of an earlier batch, drawn again
         command += ["--seed", os.environ["SNAKEKIT_CLASS_SEED"]]
     started = time.monotonic()
-    r = subprocess.run(command, capture_output=True, text=True, timeout=1800, cwd=REPO)
+    r = snakekit(*command)   # the TA's command, in this process (its fork server serves the next class too)
     seconds = time.monotonic() - started
     assert r.returncode == 0, f"snakekit grade {lesson} exited {r.returncode}:\n{r.stderr[-3000:]}"
     seed = re.search(r"drawn with seed (\d+)", r.stderr)

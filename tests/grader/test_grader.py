@@ -20,7 +20,7 @@ from grader.scoring import compare
 from grader.scoring.references import REFERENCES as COURSE_REFERENCES
 from grader.scoring.references import Reference, differences, main as references_main, spec_hash
 from grader.scoring.score import Expected, score_exercise
-from grader_helpers import ASSIGNMENT, FIXTURE, REFERENCES, make_course, read_csv, submit
+from grader_helpers import ASSIGNMENT, FIXTURE, REFERENCES, make_course, read_csv, snakekit, submit
 from snakekit.trajectory import Trajectory, side_sweep
 
 REPO = Path(__file__).resolve().parents[2]
@@ -258,9 +258,7 @@ def graded(tmp_path_factory):
                                         "    return snakekit.Trajectory(t, np.repeat(a[:, None], 5, 1))"})
 
     def grade(*extra):
-        return subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
-                               "--references", str(REFERENCES), "--timeout", "60", *extra],
-                              capture_output=True, text=True, timeout=600, cwd=REPO)
+        return snakekit("grade", ASSIGNMENT, "--course", course, "--references", REFERENCES, "--timeout", "60", *extra)
 
     first = grade("--seed", "20261124")
     csv1 = (course / f"grades-{ASSIGNMENT}.csv").read_text()
@@ -334,8 +332,7 @@ def test_feedback_has_verdicts_and_plots_but_no_hidden_tests(graded):
 
 def test_exit_code_2_for_bad_arguments(tmp_path):
     def run(*args):
-        return subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", *args], capture_output=True, text=True,
-                              cwd=REPO, timeout=120)
+        return snakekit("grade", *args)
 
     r = run("t1_sweep", "--course", str(tmp_path / "nowhere"))
     assert r.returncode == 2 and "no course folder" in r.stderr
@@ -351,8 +348,7 @@ def test_exit_code_1_when_the_grader_fails(tmp_path):
     refs = tmp_path / "refs"
     refs.mkdir()
     (refs / f"{ASSIGNMENT}.npz").write_bytes(b"not a zip")
-    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
-                        "--references", str(refs)], capture_output=True, text=True, cwd=REPO, timeout=300)
+    r = snakekit("grade", ASSIGNMENT, "--course", course, "--references", refs)
     assert r.returncode == 1 and "not a readable reference file" in r.stderr
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import nbformat
 
 from conftest import need_program
-from grader_helpers import ASSIGNMENT, REFERENCES, make_course, read_csv, submit
+from grader_helpers import ASSIGNMENT, REFERENCES, make_course, read_csv, snakekit, submit
 
 REPO = Path(__file__).resolve().parents[2]
 TIMEOUT = 45  # the notebook's clock [s]: its cells get 15 s each, 5x what a cell of the test course needs
@@ -49,9 +49,7 @@ def test_an_endless_loop_in_one_exercise_leaves_the_others_their_points(tmp_path
     # a loop that waits for an arrival that never comes (a busy one is the corpus's: test_grader_adversarial.py)
     submit(course, "loop", {"ex1_tool_xy": "import time\n\ndef tool_xy(q):\n    arrived = False\n    while not arrived:\n"
                                            "        time.sleep(0.05)"})
-    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
-                        "--references", str(REFERENCES), "--timeout", str(TIMEOUT)], capture_output=True, text=True,
-                       timeout=900, cwd=REPO)
+    r = snakekit("grade", ASSIGNMENT, "--course", course, "--references", REFERENCES, "--timeout", TIMEOUT)
     assert r.returncode == 0, r.stderr[-3000:]
     rows = read_csv(course / f"grades-{ASSIGNMENT}.csv")
     assert float(rows["good"]["score"]) == 7.0

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import nbformat
@@ -15,6 +13,7 @@ import snakekit
 
 from conftest import copy_course, need_program
 from grader_helpers import read_csv
+from grader_helpers import snakekit as command
 
 REPO = Path(__file__).resolve().parents[2]
 LESSON = "06_coded_sweep"
@@ -49,8 +48,7 @@ def graded(tmp_path_factory):
     _hand_in(course, "dan", {**sol, "ex06_1_sweep_times": "def sweep_times(points, rate):\n"
                                                           "    return np.arange(points) / 10.0"})
     _hand_in(course, "eve", {})  # handed in untouched
-    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", LESSON, "--course", str(course)],
-                       capture_output=True, text=True, timeout=900, cwd=REPO)
+    r = command("grade", LESSON, "--course", course)
     return course, r
 
 
@@ -127,8 +125,7 @@ def graded01(tmp_path_factory):
     sol = _solutions(LESSON01)
     _hand_in(course, "ana", sol, LESSON01)
     _hand_in(course, "mal", {**sol, "ex01_1_planar_fk": CHEAT}, LESSON01)
-    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", LESSON01, "--course", str(course)],
-                       capture_output=True, text=True, timeout=900, cwd=REPO)
+    r = command("grade", LESSON01, "--course", course)
     return course, r
 
 

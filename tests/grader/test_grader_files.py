@@ -14,25 +14,17 @@ from __future__ import annotations
 import codecs
 import hashlib
 import os
-import sqlite3
 import subprocess
-import sys
 import zipfile
 from pathlib import Path
 
 import pytest
 
-from grader_helpers import ASSIGNMENT, REFERENCES, make_course
+from grader_helpers import ASSIGNMENT, REFERENCES, make_course, snakekit
 
 REPO = Path(__file__).resolve().parents[2]
 A = ASSIGNMENT
 SOURCE_NB = f"source/{A}/{A}.ipynb"
-
-
-def snakekit(*args, cwd=REPO):
-    """A command as the TA types it (its own process)."""
-    return subprocess.run([sys.executable, "-m", "snakekit.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, timeout=600)
 
 
 def run(capsys, *args):

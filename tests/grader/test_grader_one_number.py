@@ -29,8 +29,6 @@ import random
 import re
 import shutil
 import statistics
-import subprocess
-import sys
 import urllib.request
 import zipfile
 from pathlib import Path
@@ -40,7 +38,7 @@ import nbformat
 import pytest
 
 from conftest import need, need_program
-from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, box_title, good_notebook, make_course, use_safe_grading
+from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, box_title, good_notebook, make_course, snakekit, use_safe_grading
 from test_grader_week import notebook_bytes
 
 A = ASSIGNMENT
@@ -51,11 +49,6 @@ HANDED_IN = {"alice": (101, DUE - dt.timedelta(hours=1)), "bob": (102, DUE + dt.
              "carol": (103, DUE - dt.timedelta(minutes=10))}
 SLIP = {"ex1_tool_xy": GOOD["ex1_tool_xy"].replace("np.cos(phi)", "np.sin(phi)")}
 STUDENTS = sorted(HANDED_IN)
-
-
-def snakekit(*args):
-    return subprocess.run([sys.executable, "-m", "snakekit.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=REPO, timeout=900)
 
 
 def grade(course, *extra):

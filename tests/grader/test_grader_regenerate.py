@@ -12,24 +12,16 @@
 from __future__ import annotations
 
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import nbformat
 import pytest
 
-from grader_helpers import ASSIGNMENT, REFERENCES, make_course, submit
+from grader_helpers import ASSIGNMENT, REFERENCES, make_course, snakekit, submit
 from test_grader_files import run, tree
 
 A = ASSIGNMENT
 REPO = Path(__file__).resolve().parents[2]
-
-
-def snakekit(*args, cwd: Path):
-    """The command as a TA types it, from the folder ``cwd``."""
-    return subprocess.run([sys.executable, "-m", "snakekit.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, timeout=600)
 
 
 @pytest.fixture(scope="module")

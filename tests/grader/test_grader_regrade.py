@@ -12,14 +12,12 @@ from __future__ import annotations
 
 import difflib
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from conftest import need_program
-from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, make_course, submit
+from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, make_course, snakekit, submit
 
 REPO = Path(__file__).resolve().parents[2]
 #: right where joint 1 is at or above 0, wrong below: its score is the share of such cases it meets
@@ -30,9 +28,7 @@ RUNS = GOOD["ex3_peak_speed"] + ("\nwith snakekit.make_robot('sim') as robot:\n"
 
 
 def _grade(course, *extra):
-    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
-                        "--references", str(REFERENCES), "--timeout", "120", *extra], capture_output=True, text=True,
-                       timeout=900, cwd=REPO)
+    r = snakekit("grade", ASSIGNMENT, "--course", course, "--references", REFERENCES, "--timeout", "120", *extra)
     assert r.returncode == 0, r.stderr[-3000:]
     return r
 

@@ -12,15 +12,13 @@ import csv
 import datetime as dt
 import io
 import shutil
-import subprocess
-import sys
 import zipfile
 from pathlib import Path
 
 import pytest
 
 from conftest import need_program
-from grader_helpers import ASSIGNMENT, REFERENCES, good_notebook, make_course
+from grader_helpers import ASSIGNMENT, REFERENCES, good_notebook, make_course, snakekit
 from test_grader_files import one_line_error, run, tree
 
 A = ASSIGNMENT
@@ -50,11 +48,6 @@ def course(released, tmp_path):
                                        "alice,Alice Smith,101,alice@uni.test,as1,A\n"
                                        "bob,Bob Jones,102,bob@uni.test,bj2,A\n")
     return course
-
-
-def snakekit(*args, cwd=REPO):
-    return subprocess.run([sys.executable, "-m", "snakekit.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, timeout=900)
 
 
 def test_every_rule_in_the_help_is_read_as_it_says():

@@ -17,7 +17,7 @@ import pytest
 from conftest import need_program
 from grader.course.assignment import load_assignment, tampered_cells
 from grader.course.restore import release_order, restore
-from grader_helpers import ASSIGNMENT, GOOD, make_course, read_csv, submit
+from grader_helpers import ASSIGNMENT, GOOD, REFERENCES, make_course, read_csv, snakekit, submit
 
 REPO = Path(__file__).resolve().parents[2]
 LESSONS = sorted(p.name for p in (REPO / "course" / "source").iterdir() if (p / f"{p.name}.ipynb").exists())
@@ -139,10 +139,6 @@ def test_a_graded_cell_the_release_does_not_have_is_not_graded(course):
 
 def test_an_edited_and_a_stripped_submission_score_as_the_good_one_and_the_ta_is_told(course, tmp_path):
     need_program("unshare")
-    import subprocess
-    import sys
-
-    from grader_helpers import REFERENCES
 
     def debug_print(nb):
         cell = next(c for c in nb.cells if _gid(c) == "ex2_sweep_test")
@@ -151,9 +147,7 @@ def test_an_edited_and_a_stripped_submission_score_as_the_good_one_and_the_ta_is
     submit(course, "good")
     submit(course, "eegger", edit=debug_print)
     submit(course, "iito", edit=_strip)
-    r = subprocess.run([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
-                        "--references", str(REFERENCES), "--timeout", "120"], capture_output=True, text=True,
-                       timeout=900, cwd=REPO)
+    r = snakekit("grade", ASSIGNMENT, "--course", course, "--references", REFERENCES, "--timeout", "120")
     assert r.returncode == 0, r.stderr[-3000:]
     rows = read_csv(course / f"grades-{ASSIGNMENT}.csv")
     assert (rows["good"]["status"], float(rows["good"]["score"])) == ("graded", 7.0)

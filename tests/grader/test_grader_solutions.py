@@ -22,7 +22,7 @@ import nbformat
 import pytest
 
 from conftest import need, notebook_client
-from grader_helpers import ASSIGNMENT, make_course
+from grader_helpers import ASSIGNMENT, make_course, snakekit
 from test_grader_files import one_line_error, run, tree
 
 A = ASSIGNMENT
@@ -77,11 +77,6 @@ def course(released, tmp_path):
     course = tmp_path / "course"
     shutil.copytree(released, course)
     return course
-
-
-def snakekit(*args, cwd=REPO, env=None):
-    return subprocess.run([sys.executable, "-m", "snakekit.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, env=env, timeout=600)
 
 
 def texts(folder: Path) -> str:

@@ -91,6 +91,37 @@ def test_every_commands_help_prints_its_usage(command):
     r = subprocess.run(SNAKEKIT + [command, "--help"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.startswith("usage: ") and "Traceback" not in r.stdout + r.stderr, r.stdout[:500] + r.stderr[-500:]
+    # the command run in this process (snakekit.cli.run, for scripts and the suite) says the same, and so does
+    # its refusal of an option it does not know
+    from snakekit.cli import run
+
+    here = run([command, "--help"])
+    assert (here.returncode, here.stdout, here.stderr) == (r.returncode, r.stdout, r.stderr)
+    bad = [command, "--no-such-option"]
+    r, here = subprocess.run(SNAKEKIT + bad, capture_output=True, text=True, timeout=120), run(bad)
+    assert r.returncode == 2 and r.stderr.strip() and "Traceback" not in r.stderr, r.stderr[-2000:]
+    assert (here.returncode, here.stdout, here.stderr) == (r.returncode, r.stdout, r.stderr)
+
+
+def test_a_command_run_in_this_process_reads_the_folder_and_environment_given_then_leaves_them(tmp_path):
+    """snakekit.cli.run: a relative path is read from ``cwd`` and a variable from ``env``, as a subprocess's would be;
+    afterwards this process's folder and environment are as they were, and the command's output is in the result,
+    not on this process's stdout."""
+    import os
+
+    from snakekit.cli import run
+
+    (tmp_path / "notes.txt").write_text("not a notebook")
+    before, environ = os.getcwd(), dict(os.environ)
+    env = {**os.environ, "SNAKEKIT_PORT": str(tmp_path / "no-such-port")}
+    for argv, kw in ((["check", "notes.txt"], {"cwd": tmp_path}),
+                     (["sweep", "--backend", "hardware", "--out", "run.npz"], {"cwd": tmp_path, "env": env})):
+        r = subprocess.run(SNAKEKIT + argv, capture_output=True, text=True, timeout=120, **kw)
+        here = run(argv, **kw)
+        assert r.returncode != 0 and r.stderr, (argv, r.stdout, r.stderr)
+        assert (here.returncode, here.stdout, here.stderr) == (r.returncode, r.stdout, r.stderr), argv
+        assert os.getcwd() == before and dict(os.environ) == environ
+    assert "no-such-port" in here.stderr   # the port the environment named, not "needs --port"
 
 
 def test_a_commands_process_runs_its_exit_handlers_then_leaves_what_it_loaded_to_the_system(tmp_path):
