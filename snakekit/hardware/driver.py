@@ -241,16 +241,19 @@ class DynamixelSnake(StopMixin, WatchdogMixin, Robot):
     def _tries(self) -> str:
         return f"{max(self.bus.tries_made, self.retries + 1)} tries"
 
+    def _hardware_error(self, servo_id: int, bits: int) -> HardwareError:
+        """The arm stopped, and the error that names ``servo_id``'s fault (Hardware Error Status ``bits``)."""
+        stopped = self.stop()
+        names = ", ".join(decode_hardware_error(bits)) or "an alert that has cleared"
+        return HardwareError(
+            f"servo {servo_id} (joint {self.ids.index(servo_id) + 1}) on {self.port_name} reports "
+            f"a hardware error: {names} (Hardware Error Status 0x{bits:02X}). The servo turned its "
+            f"torque off. {stopped} Remove the cause "
+            f"(a blocked joint, heat, the supply), then robot.reboot({servo_id}) and robot.torque_on().")
+
     def _check_error(self, servo_id: int, error: int, what: str, check_alert: bool = True) -> None:
         if error & 0x80 and check_alert:
-            bits = self._read(servo_id, HARDWARE_ERROR_STATUS, 1, check_alert=False)
-            stopped = self.stop()
-            names = ", ".join(decode_hardware_error(bits)) or "an alert that has cleared"
-            raise HardwareError(
-                f"servo {servo_id} (joint {self.ids.index(servo_id) + 1}) on {self.port_name} reports "
-                f"a hardware error: {names} (Hardware Error Status 0x{bits:02X}). The servo turned its "
-                f"torque off. {stopped} Remove the cause "
-                f"(a blocked joint, heat, the supply), then robot.reboot({servo_id}) and robot.torque_on().")
+            raise self._hardware_error(servo_id, self._read(servo_id, HARDWARE_ERROR_STATUS, 1, check_alert=False))
         code = error & 0x7F
         if code:
             raise InstructionError(

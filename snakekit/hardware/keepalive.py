@@ -19,7 +19,7 @@ import weakref
 from ..errors import BackendError, PortLostError
 from ..host import realtime
 from .bus import SILENCE_SHARE, describe, sdk
-from .registers import BUS_WATCHDOG, TORQUE_ENABLE, WATCHDOG_UNIT, to_signed
+from .registers import BUS_WATCHDOG, HARDWARE_ERROR_STATUS, TORQUE_ENABLE, WATCHDOG_UNIT, to_signed
 
 STATUS_BLOCK = (TORQUE_ENABLE, BUS_WATCHDOG - TORQUE_ENABLE + 1)  # 64..98: torque, errors, watchdog
 
@@ -123,7 +123,9 @@ class WatchdogMixin:
         return run
 
     def _check_ready(self, status=None) -> None:
-        """Refuse to send goals the servos would ignore: torque off, or stopped by the watchdog.
+        """Refuse to send goals the servos would ignore: torque off, or stopped by the watchdog. A servo
+        whose torque is off because of a fault it reports (an overload the run's last reading came too early
+        to see) raises its :class:`~snakekit.errors.HardwareError`, as the run would have.
 
         ``status`` (``{id: (torque on, watchdog)}``) is read from the servos when not given.
         """
@@ -136,6 +138,10 @@ class WatchdogMixin:
                 f"the Bus Watchdog stopped servo(s) {', '.join(map(str, stopped))} on {self.port_name}: they "
                 f"heard nothing for more than {self.watchdog:g} s, so they hold where they stopped and "
                 "refuse goals. Call robot.torque_on() to clear it and go on.")
+        for i in off:  # a servo that turned its torque off itself: its fault, not "torque is off", is the cause
+            bits = self._read(i, HARDWARE_ERROR_STATUS, 1, check_alert=False)
+            if bits:
+                raise self._hardware_error(i, bits)
         if off:
             raise BackendError(
                 f"torque is off on servo(s) {', '.join(map(str, off))} on {self.port_name} (read back from the "
