@@ -353,20 +353,26 @@ def run(argv: list, *, cwd=None, env: dict | None = None):
     """``snakekit ARGV`` in this process, as ``subprocess.run([... "snakekit", *ARGV], capture_output=True, text=True,
     cwd=cwd, env=env)`` gives it: a ``subprocess.CompletedProcess`` with the exit code and what the command printed.
 
-    For a script or a test that runs many commands: each costs no new interpreter, and a process that grades
-    several batches keeps one warm fork server for them (``grader.sandbox.runner``), about 4 CPU-s a batch.
-    Only what this process prints is captured (a sandbox's or nbgrader's own processes print to this process's
-    stderr). The folder and the environment are this process's while the command runs, then restored: call it
-    from one thread at a time.
+    For a script or a test that runs many commands: each costs no interpreter's start and imports of its own, and
+    a process that grades several batches keeps one warm fork server for them (``grader.sandbox.runner``): about
+    4 CPU-s a batch less, the command's process and its server's imports together. The folder, the environment
+    and the warning filters are this process's while the command runs, then restored, whatever the command
+    changed (call it from one thread at a time); a warning shows at each call, as in a process of its own. Only
+    what this process prints is captured (a sandbox's or nbgrader's own processes print to this process's
+    stderr), and an error the command does not catch is raised, where its own process would print the
+    traceback and exit 1.
     """
     import contextlib
     import io
     import subprocess
+    import warnings
 
     out, err = io.StringIO(), io.StringIO()
     saved = dict(os.environ)
     try:
-        with contextlib.chdir(cwd or os.getcwd()), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        # catch_warnings: the filters are restored after, and "once per place" starts afresh, as in a new process
+        with contextlib.chdir(cwd or os.getcwd()), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+                warnings.catch_warnings():
             if env is not None:
                 os.environ.clear()
                 os.environ.update(env)
@@ -377,7 +383,7 @@ def run(argv: list, *, cwd=None, env: dict | None = None):
                 if not isinstance(e.code, (int, type(None))):
                     print(e.code, file=sys.stderr)
     finally:
-        if env is not None:
-            os.environ.clear()
-            os.environ.update(saved)
-    return subprocess.CompletedProcess(["snakekit", *map(str, argv)], code, out.getvalue(), err.getvalue())
+        os.environ.clear()
+        os.environ.update(saved)
+    return subprocess.CompletedProcess(["snakekit", *map(str, argv)], 0 if code is None else code, out.getvalue(),
+                                       err.getvalue())

@@ -168,7 +168,9 @@ def generate(config_dir: Path, root: Path, assignment: str, *, db: str | None = 
     cfg = config(config_dir)
     cfg.merge(Config({"CourseDirectory": {"root": str(root), "course_id": course_id(config_dir),
                                           "db_url": db or db_url(root)}}))
-    os.environ["PATH"] = f"{Path(os.path.abspath(sys.executable)).parent}{os.pathsep}{os.environ.get('PATH', '')}"
+    venv_bin = str(Path(os.path.abspath(sys.executable)).parent)  # nbgrader calls alembic
+    if venv_bin not in os.environ.get("PATH", "").split(os.pathsep):
+        os.environ["PATH"] = f"{venv_bin}{os.pathsep}{os.environ.get('PATH', '')}"
     cwd = os.getcwd()
     os.chdir(root)  # nbgrader resolves some paths from the working folder
     try:

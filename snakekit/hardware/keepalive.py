@@ -125,7 +125,7 @@ class WatchdogMixin:
     def _check_ready(self, status=None) -> None:
         """Refuse to send goals the servos would ignore: torque off, or stopped by the watchdog. A servo
         whose torque is off because of a fault it reports (an overload the run's last reading came too early
-        to see) raises its :class:`~snakekit.errors.HardwareError`, as the run would have.
+        to see) raises its :class:`~snakekit.errors.HardwareError` first, the arm stopped, as the run would have.
 
         ``status`` (``{id: (torque on, watchdog)}``) is read from the servos when not given.
         """
@@ -133,15 +133,15 @@ class WatchdogMixin:
         stopped = [i for i, (_, w) in status.items() if w < 0]
         off = [i for i, (on, _) in status.items() if not on]
         self.torque_enabled = not off
+        for i in off:  # a servo that turned its torque off itself: its fault (first: torque_on does not clear it)
+            bits = self._read(i, HARDWARE_ERROR_STATUS, 1, check_alert=False)
+            if bits:
+                raise self._hardware_error(i, bits)   # the arm is stopped, as for a fault a reading saw
         if stopped:
             raise BackendError(
                 f"the Bus Watchdog stopped servo(s) {', '.join(map(str, stopped))} on {self.port_name}: they "
                 f"heard nothing for more than {self.watchdog:g} s, so they hold where they stopped and "
                 "refuse goals. Call robot.torque_on() to clear it and go on.")
-        for i in off:  # a servo that turned its torque off itself: its fault, not "torque is off", is the cause
-            bits = self._read(i, HARDWARE_ERROR_STATUS, 1, check_alert=False)
-            if bits:
-                raise self._hardware_error(i, bits)
         if off:
             raise BackendError(
                 f"torque is off on servo(s) {', '.join(map(str, off))} on {self.port_name} (read back from the "

@@ -34,7 +34,8 @@ GOOD = {
 def snakekit(*args, cwd: Path = REPO, env: dict | None = None):
     """``snakekit ARGS`` as a TA types it in the folder ``cwd``, run in this test process (:func:`snakekit.cli.run`):
     the exit code, stdout and stderr a subprocess would give. A test process that grades several batches keeps one
-    warm fork server for them, where each command's own process started one (about 4 CPU-s a batch). The tests of
+    warm fork server for them, where each command's own process started and imported everything again and started
+    a server of its own (about 4 CPU-s a batch, the server's imports 2.4 of them). The tests of
     what only a process of its own shows (Ctrl-C, the entry point, the TA's whole week) start one.
     """
     from snakekit.cli import run

@@ -140,6 +140,32 @@ def test_a_commands_process_runs_its_exit_handlers_then_leaves_what_it_loaded_to
     assert list(tmp_path.iterdir()) == [], "the temporary folder's cleanup did not run"
 
 
+def test_a_command_run_in_this_process_leaves_no_trace_of_what_it_changed(tmp_path, monkeypatch):
+    """snakekit.cli.run, given no folder or environment: whatever the command changed of them (nbgrader's steps add
+    to PATH and change folder) is undone after it, its warning shows at each call as it would in a process of its
+    own (not once per process), and a command that returns nothing exits 0."""
+    import os
+    import warnings
+
+    from snakekit import cli
+
+    def command(argv, out):
+        os.environ["PATH"] = f"{tmp_path}{os.pathsep}{os.environ.get('PATH', '')}"
+        os.environ["SNAKEKIT_LEFT_BEHIND"] = "1"
+        os.chdir(tmp_path)
+        warnings.warn("the same warning from the same line", UserWarning)
+        print("ran", argv, file=out)
+
+    monkeypatch.setattr(cli, "plugin_command", lambda name: command)
+    before, environ = os.getcwd(), dict(os.environ)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("default")   # Python's own: a warning once per place and process
+        runs = [cli.run(["grade", "x"]) for _ in range(2)]
+    assert [(r.returncode, r.stdout) for r in runs] == [(0, "ran ['x']\n")] * 2
+    assert os.getcwd() == before and dict(os.environ) == environ
+    assert [str(w.message) for w in seen] == ["the same warning from the same line"] * 2
+
+
 def test_emulator_command_prints_a_port_the_sdk_can_use():
     import re
     import signal

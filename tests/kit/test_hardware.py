@@ -364,19 +364,21 @@ def test_overload_mid_run_raises_hardware_error_then_reboot_recovers(robot):
 def test_a_fault_no_reading_saw_is_named_by_the_next_goal_not_taken_for_torque_left_off(robot):
     """A servo that overloads while no reading is taken (between runs, or after a run's last reading on a busy
     computer) turns its torque off itself: the next run raises its HardwareError at the status read before it,
-    sending no goal, where it said "torque is off ... call robot.torque_on()" (which does not clear a fault).
+    sending no goal, where it said "torque is off ... call robot.torque_on()" (which does not clear a fault), and
+    before a watchdog stop of another servo.
     (Few exchanges on purpose: what follows a reboot is test_overload_mid_run_raises_hardware_error_then_reboot_recovers's.)"""
     bus = robot.emulator
     sent = len(goal_ticks_on_the_bus(bus))
     bus.inject_overload(3)
+    bus.servo(2).watchdog_stop(bus.now())   # and a watchdog stop beside it: the fault, which torque_on can't clear, first
     ahead = snakekit.Trajectory(np.array([0.0, 0.3]), np.stack([np.zeros(5), np.full(5, 0.3)]))
     with pytest.raises(HardwareError, match=r"servo 3 \(joint 3\) on .* overload \(Hardware Error Status 0x20\)"
                                             r".*robot.reboot\(3\) and robot.torque_on\(\)"):
         robot.run(ahead)
     assert len(goal_ticks_on_the_bus(bus)) == sent and not robot.torque_enabled
     robot.reboot(3)
-    # torque off by the program, no fault: still "torque is off", with no fault to name
-    with pytest.raises(snakekit.BackendError, match=r"torque is off on servo\(s\) 1, 2, 3, 4, 5 .* robot.torque_on"):
+    # no fault left: the watchdog's stop is named, and what clears it, as before
+    with pytest.raises(snakekit.BackendError, match=r"the Bus Watchdog stopped servo\(s\) 2 .* Call robot.torque_on\(\)"):
         robot.run(ahead)
 
 
