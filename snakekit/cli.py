@@ -345,9 +345,6 @@ def main(argv: list[str] | None = None, out=None) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
-if __name__ == "__main__":
-    sys.exit(main())
-
 
 def run(argv: list, *, cwd=None, env: dict | None = None):
     """``snakekit ARGV`` in this process, as ``subprocess.run([... "snakekit", *ARGV], capture_output=True, text=True,
@@ -387,3 +384,7 @@ def run(argv: list, *, cwd=None, env: dict | None = None):
         os.environ.update(saved)
     return subprocess.CompletedProcess(["snakekit", *map(str, argv)], 0 if code is None else code, out.getvalue(),
                                        err.getvalue())
+
+
+if __name__ == "__main__":
+    sys.exit(main())
