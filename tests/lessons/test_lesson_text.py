@@ -204,10 +204,14 @@ def markdown(nb) -> str:
 
 
 def computed(name: str, expressions: list[str], work: Path, monkeypatch) -> list:
-    """Run the instructor version of ``name``, then evaluate ``expressions`` in its kernel."""
+    """Run the instructor version of ``name``, then evaluate ``expressions`` in its kernel. A lesson run as a
+    student runs it, checks and all, leaves nothing in the temporary folder (a check runs again and again)."""
     nbformat = need("nbformat")
     need("nbclient")
     shutil.copytree(COURSE / "source" / name, work, ignore=shutil.ignore_patterns(".ipynb_checkpoints", "*.npz"))
+    scratch = work.parent / f"{work.name}-tmp"
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))   # the kernel's temporary folder (this process keeps its own)
     monkeypatch.setenv("SNAKEKIT_TEST", "1")
     monkeypatch.delenv("SNAKEKIT_HANDIN_DIR", raising=False)
     monkeypatch.setenv("PATH", f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
@@ -216,6 +220,8 @@ def computed(name: str, expressions: list[str], work: Path, monkeypatch) -> list
         expressions,)
     nb.cells.append(nbformat.v4.new_code_cell(probe))
     notebook_client(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(work)}}).execute()
+    left = sorted(str(p.relative_to(scratch)) for p in scratch.rglob("*"))
+    assert left == [], f"a run of {name} left these in the temporary folder: {left[:10]}"
     out = "".join(o.get("text", "") for o in nb.cells[-1].outputs if o.output_type == "stream")
     return json.loads(out.strip().splitlines()[-1])
 
