@@ -30,7 +30,7 @@ sys.path.insert(0, str(HERE))
 
 from snakekit.host import choose_mujoco_gl  # noqa: E402
 
-#: the study's figures (ROBOT.md): Windows host, ROS Melodic, RViz/Gazebo GUI - other hardware
+#: the study's published figures: Windows host, ROS Melodic, RViz/Gazebo GUI - other hardware
 STUDY = [
     # set-up, start to a working shell, image size, Task 1 CPU, Task 2 CPU, RAM
     ("VM (VMware, Ubuntu desktop)", "34 s", "14.4 GB", "7.67 %", "27.93 %", "384-450 MB"),
@@ -621,7 +621,7 @@ def write_results(plan: list[Step], results: dict, info: dict, figures, out: Pat
             "over roscore, arm, state-publisher and rviz; the node that sends the goals runs in the arm's "
             "container (`docker compose exec`) and is counted; the headless Chromium on noVNC runs on the host "
             "and is not. RViz draws in software GL (Mesa, no GPU), at most 15 frames a second (docker/ros/arm.rviz).")
-    add("- **The study's figures** come from ROBOT.md: other hardware, other software (ROS, RViz, Gazebo, "
+    add("- **The study's figures** are the study's published ones: other hardware, other software (ROS, RViz, Gazebo, "
         "a desktop in a VM); they frame ours, they are not measured here.")
     add("")
 

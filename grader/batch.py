@@ -42,7 +42,7 @@ from grader.sandbox import namespaces as sandbox
 from grader.sandbox.inside import worker
 from grader.course.assignment import MAX_FILE, load_assignment, read_inside, tampered_cells, template_gradebook
 from grader.scoring.cases import CaseServer, draw
-from grader.errors import CasesError, GradingError, InstructorReferenceError
+from grader.errors import CasesError, GradeInterrupted, GradingError, InstructorReferenceError
 from grader.files import uninterrupted
 from grader.hooks import NO_HOOKS, BatchHooks
 from grader.course.gradebook import NOT_CARRIED, keep_release_files, late_penalties, not_carried, write_grade
@@ -56,14 +56,6 @@ from grader.course.restore import release_order, restore
 
 #: The student id the instructor notebook runs under in its sandbox (never a row of the gradebook).
 INSTRUCTOR = "_instructor_reference"
-
-
-class Interrupted(KeyboardInterrupt):
-    """Ctrl-C stopped the batch between two students; ``results`` are those written to the gradebook."""
-
-    def __init__(self, results: list[SubmissionResult]):
-        super().__init__(f"interrupted after {len(results)} submission(s)")
-        self.results = results
 
 
 #: One cell's default share of the notebook's wall clock. The slowest cells of the course take about 6 s
@@ -187,7 +179,7 @@ class Grader:
                         f.cancel()
                     pool.shutdown(wait=False, cancel_futures=True)
                     post.shutdown(wait=False, cancel_futures=True)
-                    raise Interrupted(sorted(results, key=lambda r: r.student)) from None
+                    raise GradeInterrupted(sorted(results, key=lambda r: r.student)) from None
         finally:
             bar.close()
         return sorted(results, key=lambda r: r.student)

@@ -1,4 +1,5 @@
-"""Every exception the grader raises, all under :class:`snakekit.errors.SnakekitError`.
+"""Every exception the grader raises: its errors, all under :class:`snakekit.errors.SnakekitError`, and
+:class:`Interrupted`, Ctrl-C between two students (a :class:`KeyboardInterrupt`, carrying what was done by then).
 
 A command catches these and prints one line (exit 2); nothing here is raised inside the sandbox
 (:mod:`grader.sandbox.inside` reports through its exit code and files instead).
@@ -52,3 +53,32 @@ class Busy(LabError):
 
 class Stalled(BackendError):
     """The lab computer stalled during every try of a run (the goals went out late): the lab's fault."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a command between two students. A KeyboardInterrupt, not an error: it stops the command as
+    Ctrl-C does, and carries what was done by then, which the command reports (exit 130)."""
+
+
+class GradeInterrupted(Interrupted):
+    """``snakekit grade`` stopped between two students: ``results`` are those written to the gradebook."""
+
+    def __init__(self, results: list):
+        super().__init__(f"interrupted after {len(results)} submission(s)")
+        self.results = results
+
+
+class CollectInterrupted(Interrupted):
+    """``snakekit collect`` stopped between two students: ``placed`` of ``total`` were placed and listed."""
+
+    def __init__(self, placed: int, total: int):
+        super().__init__(f"{placed} of {total}")
+        self.placed, self.total = placed, total
+
+
+class ReturnInterrupted(Interrupted):
+    """``snakekit return`` stopped between two students: ``released`` to the exchange, ``zips`` written whole."""
+
+    def __init__(self, released: int, zips: list | None = None):
+        super().__init__(f"{released} released")
+        self.released, self.zips = released, list(zips or [])

@@ -207,6 +207,8 @@ def sdk_read(ph, port, dxl: int, address: int, size: int, *, clock=None):
 ENGINE_GROUP = "docker-engine"
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DURATIONS = os.path.join(ROOT, "artifacts", "test-durations.txt")
+#: the run before `make test`'s (tools/run-tests sets it aside, so that its own file holds this run alone)
+PREVIOUS_DURATIONS = os.path.join(ROOT, "artifacts", "test-durations.previous.txt")
 KEPT_DURATIONS = os.path.join(ROOT, "tests", "durations.txt")
 
 
@@ -249,8 +251,9 @@ def _bare(nodeid: str) -> str:
 
 
 def _last_durations() -> dict[str, float]:
-    """Seconds per test: the last run's (artifacts/test-durations.txt) over the kept ones (tests/durations.txt)."""
-    return {**_durations(KEPT_DURATIONS), **_durations(DURATIONS)}
+    """Seconds per test: the last runs' (artifacts/test-durations.txt, and the one before a `make test`) over the
+    kept ones (tests/durations.txt)."""
+    return {**_durations(KEPT_DURATIONS), **_durations(PREVIOUS_DURATIONS), **_durations(DURATIONS)}
 
 
 #: Tests whose check rides on the wall clock of this machine: the emulated servos and the arm's lab

@@ -28,7 +28,7 @@ from snakekit.sim import SimRobot
 WORK, HANG = Path(sys.argv[1]), float(sys.argv[2])
 NAMES = [f"joint{i + 1}" for i in range(5)]
 SWEEP = snakekit.side_sweep(points=40, rate=10.0, sweeps=3, amplitude=0.2)  # 3.9 s, every joint swings
-FOLD = ([4.0], [[1.57, 1.57, 1.57, 1.57, 0.0]])  # joint 5 onto joint 1 (ROBOT.md)
+FOLD = ([4.0], [[1.57, 1.57, 1.57, 1.57, 0.0]])  # joint 5 onto joint 1
 POSE = ([4.0], [[0.8, -0.6, 0.6, 0.4, 0.0]])  # 0.2 rad/s at most: a pose RViz shows unlike home
 TOLERANCE = 1e-6  # [rad]; why: at the sweep's comparison
 

@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import ast
 import copy
+import pkgutil
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from grader.markup import without_solution_markers
-from snakekit.checks import _resolve
 
 #: The operators, in the order the matrix shows them: name -> what the slip is, as a TA notes it.
 OPERATORS = {
@@ -227,7 +227,7 @@ def forbidden(fn, ctx) -> ast.AST | None:
     if name is None:
         return None
     owner, _, attr = name.rpartition(".")
-    value = _resolve(owner)   # the kit's own lookup, as its forbid() finds the name
+    value = pkgutil.resolve_name(owner)   # the longest module, then attributes, as the kit's forbid() finds it
     if isinstance(value, type):   # a method or property of the robot's spec: reached through the lesson's spec
         import snakekit
 

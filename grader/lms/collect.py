@@ -48,21 +48,12 @@ from pathlib import Path
 from snakekit.errors import SnakekitError
 
 from grader.course.folder import default_course, default_roster, gradebook, require
-from grader.errors import CourseError
+from grader.errors import CollectInterrupted, CourseError
 from grader.files import CommandParser, excerpt, file_name, one_line, read_table, student_id, uninterrupted, unique_in
 from grader.lms.download import RESUBMISSION, Upload, read_download
 from grader.lms.roster import Roster, no_roster_who, normal_name
 
 MANIFEST_COLUMNS = ["student", "lms", "lms_id", "lms_name", "file", "notebook", "submitted_at", "late", "attempts", "note"]
-
-
-
-class Interrupted(KeyboardInterrupt):
-    """Ctrl-C stopped collect between two students: ``placed`` of ``total`` were placed and listed."""
-
-    def __init__(self, placed: int, total: int):
-        super().__init__(f"{placed} of {total}")
-        self.placed, self.total = placed, total
 
 
 # --- submission times ---------------------------------------------------------------------------
@@ -222,7 +213,7 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
     except KeyboardInterrupt:
         with uninterrupted():
             _write_manifest(course, assignment, rows, old)  # the students placed before it are listed
-        raise Interrupted(len(rows), len(by_student)) from None
+        raise CollectInterrupted(len(rows), len(by_student)) from None
     _write_manifest(course, assignment, rows, old)
     if roster is not None:  # formgrader lists them by name
         roster.into_gradebook(course, [r["student"] for r in rows])
@@ -411,7 +402,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
         return 2
     except KeyboardInterrupt as e:
         placed = f"{e.placed} of {e.total} student(s) placed and listed in {course}/collected/{args.assignment}.csv, " \
-            "the others as they were" if isinstance(e, Interrupted) else "nothing was placed"
+            "the others as they were" if isinstance(e, CollectInterrupted) else "nothing was placed"
         print(f"snakekit collect: interrupted; {placed}; collect the same download again to finish", file=sys.stderr)
         return 130
     return 1 if problems else 0

@@ -51,7 +51,7 @@ from snakekit.errors import SnakekitError
 
 from grader.course.folder import config, course_id, default_course, default_roster, gradebook, require
 from grader.course.gradebook import NO_TIME, untimed
-from grader.errors import CourseError
+from grader.errors import CourseError, ReturnInterrupted
 from grader.files import CommandParser, check_output, excerpt, one_line, uninterrupted
 
 CANVAS_PREFIX = re.compile(r"^(?P<prefix>.*?_(?:\d+|anon_[A-Za-z0-9]+)_\d+_)")
@@ -252,14 +252,6 @@ def lms_name(row: dict, page: Path) -> str | None:
     return None
 
 
-class Interrupted(KeyboardInterrupt):
-    """Ctrl-C stopped return between two students: ``released`` to the exchange, ``zips`` written whole."""
-
-    def __init__(self, released: int, zips: list | None = None):
-        super().__init__(f"{released} released")
-        self.released, self.zips = released, list(zips or [])
-
-
 def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip_path: Path | None, out,
                     before=None) -> tuple[int, list]:
     """Hand the pages back; ``before(course, assignment, out)`` runs once the pages and the manifest
@@ -318,7 +310,7 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
                    "moodle": "Moodle: View all submissions > Upload multiple feedback files in a zip"}[lms]
             print(f"wrote {path}: {len(names)} page(s) for the {lms} bulk upload ({how})", file=out)
     except KeyboardInterrupt:
-        raise Interrupted(done["exchange"], written) from None
+        raise ReturnInterrupted(done["exchange"], written) from None
     if done["exchange"]:
         print(f"released {done['exchange']} student(s)' feedback to the exchange: they get it with Fetch Feedback "
               f"(JupyterLab's Nbgrader > Assignment List) or `nbgrader fetch_feedback {assignment}`", file=out)
@@ -353,7 +345,7 @@ def return_main(argv: list[str] | None = None, out=None, *, before=None) -> int:
         print(f"snakekit return: {one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:
-        released, zips = (e.released, e.zips) if isinstance(e, Interrupted) else (0, [])
+        released, zips = (e.released, e.zips) if isinstance(e, ReturnInterrupted) else (0, [])
         print(f"snakekit return: interrupted; {released} student(s)' feedback released to the exchange, "
               f"{len(zips)} LMS zip(s) written whole{' (' + ', '.join(map(str, zips)) + ')' if zips else ''}, "
               f"no zip half-written; run `snakekit return {args.assignment}` again to finish", file=sys.stderr)

@@ -89,7 +89,7 @@ class FailureGroup:
 
     @property
     def unwritten(self) -> bool:
-        """The hand-out's stub still raised (COURSE.md: it raises ``NotImplementedError``): not a mistake, no answer."""
+        """The hand-out's stub still raised (course/README.md: it raises ``NotImplementedError``): not a mistake, no answer."""
         return not self.hinted and "raised NotImplementedError" in self.text
 
 

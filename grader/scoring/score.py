@@ -37,7 +37,7 @@ from grader.scoring.wording import Wording
 
 __all__ = ["ExerciseScore", "Expected", "kind_of", "read_handin", "score_exercise"]
 
-#: Default tolerances by kind: exact math (COURSE.md); a commanded trajectory 1e-6 rad.
+#: Default tolerances by kind: exact math (course/README.md); a commanded trajectory 1e-6 rad.
 DEFAULT_TOLERANCES = {"values": {"rtol": 1e-9, "atol": 1e-12}, "trajectory": {"max": 1e-6, "rms": 1e-6}}
 
 

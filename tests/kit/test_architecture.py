@@ -24,9 +24,12 @@ LAYER = {
     "run": 3, "bags": 3, "robot": 3, "sim": 4, "hardware": 4, "emulator": 4, "plots": 5, "ros": 5, "viewer": 5, "widgets": 5,
     "checks": 5, "start": 5, "notebook_check": 5, "watch": 1, "cells": 1, "mistakes": 1, "closeness": 1, "verdicts": 1, "lesson_progress": 5, "cli": 6, "__init__": 6, "__main__": 6,
 }
-# Imports across one layer, on purpose (docs/architecture.md says why).
-ALLOWED_SIDEWAYS = {("kinematics", "collision"), ("robot", "run"), ("run", "bags"), ("emulator", "sim"), ("emulator", "hardware"),
-                    ("widgets", "plots"), ("lesson_progress", "notebook_check")}
+# Imports across one layer, on purpose (docs/architecture.md says why): at the module's top, and inside a function
+# (they cost nothing until used)
+SIDEWAYS_AT_IMPORT = {("lesson_progress", "notebook_check"), ("kinematics", "collision"), ("robot", "run"),
+                      ("widgets", "plots")}
+SIDEWAYS_INSIDE = {("run", "bags"), ("emulator", "sim"), ("emulator", "hardware")}
+ALLOWED_SIDEWAYS = SIDEWAYS_AT_IMPORT | SIDEWAYS_INSIDE
 # Third-party packages that only some parts of the kit may import.
 HEAVY = {"pinocchio": {"kinematics", "collision"}, "coal": {"collision"}, "mujoco": {"sim"}, "meshcat": {"viewer"}, "zmq": {"viewer"},
          "ipywidgets": {"widgets"}, "dynamixel_sdk": {"hardware"}, "rosbags": {"bags"}, "mcap": {"bags"},
@@ -90,6 +93,61 @@ def test_imports_go_downwards(path):
         if external in HEAVY and me not in HEAVY[external]:
             bad.append(f"line {line}: {me} imports {external}, which belongs to {sorted(HEAVY[external])}")
     assert bad == [], "\n".join(bad)
+
+
+def _inside_functions(tree: ast.AST) -> set[int]:
+    """The ids of the import statements of ``tree`` that are inside a function."""
+    return {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
+            for n in ast.walk(f) if isinstance(n, (ast.Import, ast.ImportFrom))}
+
+
+def test_every_markdown_file_the_repository_names_exists():
+    """A page, a comment or a message that sends a reader to a Markdown file sends them to one that is there
+    (beside the file that names it, at the repository's top, or in docs/)."""
+    root = PACKAGE.parent
+    tracked = subprocess.run(["git", "ls-files"], cwd=root, capture_output=True, text=True).stdout.split()
+    if not tracked:
+        pytest.fail("git ls-files listed nothing: run the suite from a clone of the repository")
+    missing = []
+    for name in tracked:
+        path = root / name
+        if path.suffix not in (".py", ".md", ".sh", ".toml", ".txt", ".yaml", ".yml", ".ipynb") or name == "tests/durations.txt" \
+                or not path.is_file():
+            continue
+        for ref in set(re.findall(r"(?<![\w/.:-])((?:\.{1,2}/|[\w-]+/)*[\w-]+\.md)\b", path.read_text(errors="replace"))):
+            if not any((base / ref).exists() for base in (path.parent, root, root / "docs")):
+                missing.append(f"{name}: {ref}")
+    assert missing == [], missing
+
+
+@pytest.mark.parametrize("package", sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file()))
+def test_every_module_of_a_kit_package_is_named_in_its_row_of_the_map(package):
+    rows = [line for line in GRADER_MAP.read_text().splitlines() if line.startswith("| ")
+            and line.split("|")[1].strip().isdigit() and line.split("|")[2].strip() in (f"`{package}/`", f"`{package}`")]
+    assert len(rows) == 1, f"docs/architecture.md has no row for {package}/"
+    missing = [p.stem for p in sorted((PACKAGE / package).glob("*.py")) if p.stem != "__init__"
+               and f"`{p.stem}`" not in rows[0] and f"`{package}.{p.stem}`" not in rows[0]]
+    assert missing == [], f"the row of {package}/ in docs/architecture.md does not name {missing}"
+
+
+def test_the_sideways_imports_are_the_ones_the_map_lists_and_the_last_are_inside_a_function():
+    text = GRADER_MAP.read_text()
+    listed = re.findall(r"^- `(\w+)` -> `(\w+)`", text, re.M)
+    assert set(listed) == ALLOWED_SIDEWAYS and len(listed) == len(ALLOWED_SIDEWAYS), listed
+    inside = len(SIDEWAYS_INSIDE)
+    words = {3: "three", 4: "four", 2: "two"}
+    assert f"the last {words[inside]} are done inside a function" in " ".join(text.split())
+    assert set(listed[-inside:]) == SIDEWAYS_INSIDE, listed
+    at_top = []
+    for path in sources():
+        tree = ast.parse(path.read_text())
+        inner = _inside_functions(tree)
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Import, ast.ImportFrom)) and id(node) not in inner:
+                for internal, _, line in imports(path):
+                    if line == node.lineno and (part_of(path), internal) in SIDEWAYS_INSIDE:
+                        at_top.append(f"{path.relative_to(PACKAGE)} line {line}: {internal}")
+    assert at_top == [], f"these sideways imports are said to be inside a function: {at_top}"
 
 
 def test_the_layer_rules_catch_an_upward_import(tmp_path, monkeypatch):
@@ -277,8 +335,11 @@ NEVER = [
     ("grader.scoring", "grader.commands", "the core never imports a command"),
     ("grader.feedback", "grader.commands", "the core never imports a command"),
 ]
-CORE = ("grader.errors", "grader.markup", "grader.files", "grader.hooks", "grader.batch", "grader.lms", "grader.course",
-        "grader.sandbox", "grader.scoring", "grader.feedback")
+#: the grader's entry points besides its commands: the old dotted name of nbgrader's plug-ins, kept for course
+#: folders made before the sub-packages (it imports grader.commands.nbgrader_plugins)
+ENTRY_POINTS = {"grader.nbgrader_plugins"}
+#: the core: every module but the commands, the arm's lab and those entry points
+CORE = sorted(m for m in GRADER_MODULES if not (_in(m, "grader.commands") or _in(m, "grader.arm") or m in ENTRY_POINTS))
 # What runs beside the student's code: the standard library, nbgrader and what nbgrader's autograde
 # itself runs on (nbformat, traitlets, its gradebook's sqlalchemy, nbclient, the kernel's jupyter_client and
 # ipykernel); of the kit, only its notebook client (snakekit.kernel_client, which imports nothing of the kit).
@@ -292,9 +353,16 @@ def test_the_grader_s_rooms_import_only_what_they_may(module):
     for room, banned, why in NEVER:
         if _in(module, room):
             assert not [m for m in imported if _in(m, banned)], why
-    if any(_in(module, c) for c in CORE):
-        assert not [m for m in imported if _in(m, "grader.arm") or _in(m, "grader.commands")], \
-            "the core never imports the arm's lab or a command (the arm comes in through grader.hooks)"
+    if module in CORE:
+        assert not [m for m in _reached(module) if _in(m, "grader.arm") or _in(m, "grader.commands")], \
+            "the core never imports the arm's lab or a command, not even through another module (the arm comes in " \
+            "through grader.hooks)"
+
+
+def test_the_core_is_every_module_but_the_commands_the_arm_and_the_old_plug_ins_name():
+    assert {"grader", "grader.report", "grader.batch", "grader.errors"} <= set(CORE)
+    assert not [m for m in CORE if _in(m, "grader.commands") or _in(m, "grader.arm")]
+    assert ENTRY_POINTS <= set(GRADER_MODULES) and "grader.nbgrader_plugins" not in CORE
 
 
 def _reached(module: str) -> set[str]:
@@ -308,10 +376,11 @@ def _reached(module: str) -> set[str]:
     return seen
 
 
-@pytest.mark.parametrize("module", sorted(m for m in GRADER_MODULES if _in(m, "grader.feedback")))
-def test_the_feedback_never_reaches_the_sandbox(module):
+@pytest.mark.parametrize("module", sorted(m for m in GRADER_MODULES if _in(m, "grader.feedback") or _in(m, "grader.scoring")))
+def test_the_feedback_and_the_scoring_never_reach_the_sandbox(module):
     assert not [m for m in _reached(module) if _in(m, "grader.sandbox")], \
-        "the pages are made from results, never inside a sandbox (not even through another module)"
+        "scoring judges results and the pages are made from them, never inside a sandbox (not even through another " \
+        "module)"
 
 
 def test_what_hides_the_hidden_tests_draws_nothing():
@@ -368,21 +437,51 @@ def _classes(path: Path):
 
 @pytest.mark.parametrize("module", sorted(GRADER_MODULES))
 def test_every_grader_exception_lives_in_grader_errors(module):
-    errors_defined = set(vars(importlib.import_module("grader.errors")))
-    for c in _classes(GRADER_MODULES[module]):
-        bases = {b.id if isinstance(b, ast.Name) else getattr(b, "attr", "") for b in c.bases}
-        if module != "grader.errors":
-            assert not (bases & (errors_defined | {"Exception", "SnakekitError"}) or c.name.endswith("Error")), \
-                f"{c.name} (line {c.lineno}): exception classes live in grader/errors.py"
+    """As Python sees it, whatever the class is called or written as: every class a grader module defines that is
+    an exception (Ctrl-C's KeyboardInterrupt too) is defined in grader/errors.py."""
+    if module == "grader.errors":
+        return
+    mod = importlib.import_module(module)
+    defined = [n for n, c in vars(mod).items() if inspect.isclass(c) and issubclass(c, BaseException)
+               and c.__module__ == module]
+    assert defined == [], f"{module} defines {defined}: exception classes live in grader/errors.py"
+    # and none inside a function or a class, where the module's names do not show it
+    nested = [c.name for c in _classes(GRADER_MODULES[module]) if c.name not in vars(mod)]
+    assert not [n for n in nested if n.endswith(("Error", "Interrupted", "Exception"))], nested
 
 
 def test_the_grader_s_exceptions_are_in_the_kit_s_tree_and_shadow_no_built_in():
+    """Its errors derive from SnakekitError; Ctrl-C between two students (Interrupted and one subclass per
+    command) from KeyboardInterrupt, so that what catches errors does not catch it."""
     mod = importlib.import_module("grader.errors")
     classes = [c for c in vars(mod).values() if inspect.isclass(c) and c.__module__ == "grader.errors"]
     assert len(classes) >= 9
     for c in classes:
-        assert issubclass(c, errors.SnakekitError), c
+        if issubclass(c, mod.Interrupted):
+            assert issubclass(c, KeyboardInterrupt) and not issubclass(c, Exception), c
+        else:
+            assert issubclass(c, errors.SnakekitError), c
         assert c.__name__ not in dir(builtins), f"{c.__name__} shadows a built-in"
+
+
+#: the kit's modules the grader imports (docs/architecture.md names each), and those only its arm's lab imports
+KIT_USED_BY_THE_GRADER = {"cells", "cli", "closeness", "errors", "handin", "host", "kernel_client", "kinematics",
+                          "mistakes", "model", "trajectory", "validate", "verdicts", "watch"}
+KIT_USED_BY_THE_ARM = {"collision", "profile_planner", "sim"}
+
+
+def test_the_map_names_every_kit_module_the_grader_imports():
+    used = {m: set() for m in ("core", "arm")}
+    for module, path in GRADER_MODULES.items():
+        kit = {k.split(".")[1] for k in _kit_imports(path) if k.count(".") >= 1}
+        kit = {k for k in kit if (PACKAGE / f"{k}.py").exists() or (PACKAGE / k).is_dir()}
+        used["arm" if _in(module, "grader.arm") else "core"] |= kit
+    assert used["core"] == KIT_USED_BY_THE_GRADER, sorted(used["core"] ^ KIT_USED_BY_THE_GRADER)
+    assert used["arm"] - used["core"] == KIT_USED_BY_THE_ARM, sorted((used["arm"] - used["core"]) ^ KIT_USED_BY_THE_ARM)
+    text = " ".join(GRADER_MAP.read_text().split())
+    said = text[text.index("The grader uses the kit's"):].split(". ", 1)[0]
+    named = set(re.findall(r"`(\w+)`", said))
+    assert KIT_USED_BY_THE_GRADER | KIT_USED_BY_THE_ARM <= named, sorted(KIT_USED_BY_THE_GRADER | KIT_USED_BY_THE_ARM - named)
 
 
 def _strings(path: Path) -> list[tuple[int, str]]:
@@ -403,8 +502,9 @@ def test_nbgrader_s_markers_are_written_only_in_grader_markup(module):
 
 @pytest.mark.parametrize("module", sorted(GRADER_MODULES))
 def test_no_private_name_crosses_a_grader_module(module):
+    """Not from another grader module, nor from the kit."""
     bad = [f"line {n.lineno}: {a.name} from {n.module}" for n in ast.walk(ast.parse(GRADER_MODULES[module].read_text()))
-           if isinstance(n, ast.ImportFrom) and (n.module or "").startswith("grader") for a in n.names
+           if isinstance(n, ast.ImportFrom) and (n.module or "").split(".")[0] in ("grader", "snakekit") for a in n.names
            if a.name.startswith("_")]
     assert bad == []
 

@@ -30,7 +30,7 @@ SWEEP = snakekit.side_sweep(points=40, rate=10.0, sweeps=3, amplitude=0.2)  # 3.
 AS_SENT = goal_trajectory(NAMES, [int(t) + int((t - int(t)) * 1e9) / 1e9 for t in SWEEP.times], SWEEP.positions,
                           np.zeros(5))
 OVER_LIMIT = {"times": [3.0], "positions": [[2.0, 0.0, 0.0, 0.0, 0.0]]}
-FOLD = {"times": [4.0], "positions": [[1.57, 1.57, 1.57, 1.57, 0.0]]}  # joint 5 onto joint 1 (ROBOT.md)
+FOLD = {"times": [4.0], "positions": [[1.57, 1.57, 1.57, 1.57, 0.0]]}  # joint 5 onto joint 1
 
 # Sends each goal of a plan in turn and waits for the node's word on /rosout about it; keeps
 # every /joint_states message, and the index of the first one received after each goal left.

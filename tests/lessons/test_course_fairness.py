@@ -26,7 +26,7 @@ COURSE = ROOT / "course"
 LESSONS = sorted(p.name for p in (COURSE / "source").iterdir() if (p / f"{p.name}.ipynb").exists())
 
 
-def test_cells():
+def graded_test_cells():
     nbformat = need("nbformat")
     out = []
     for lesson in LESSONS:
@@ -36,7 +36,7 @@ def test_cells():
     return out
 
 
-CELLS = test_cells()
+CELLS = graded_test_cells()
 
 
 # (Which exercises refuse a list, and that the check and the grader refuse it alike: tests/lessons/test_list_where_array.py.)
