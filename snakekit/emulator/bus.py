@@ -100,10 +100,7 @@ class BusEmulator:
         elif not isinstance(motion, MotionSource):
             raise InputTypeError(f"motion is one of {', '.join(map(repr, MOTION_SOURCES))} or a MotionSource, got "
                                  f"{quote(motion)} ({type(motion).__name__})")
-        self.motion = motion
-        self.ids = ids
-        self.baudrate = baudrate
-        self.timing = timing
+        self.motion, self.ids, self.baudrate, self.timing = motion, ids, baudrate, timing
         self.boot_time = boot_time
         self.spec = spec
         self.servos = [EmulatedServo(i, j, motion, stall_torque=spec.servo.stall_torque) for j, i in enumerate(ids)]
@@ -246,7 +243,7 @@ class BusEmulator:
             if self._chip is not None:
                 wait = self._chip.wait(wait)
             ready, _, _ = select.select(line.readers() + [self._wake_r], [], [], wait)
-            self._not_listening(self.now() - listened - wait)
+            self._not_listening((read_at := self.now()) - listened - wait)   # what this read brings was there by then
             if self._chip is not None:
                 self._chip.poll()
             if ready:
@@ -256,7 +253,7 @@ class BusEmulator:
                 if data:
                     for packet in self._parser.feed(data):
                         try:
-                            self.handle(packet)
+                            self.handle(packet, read_at)
                         except Exception as e:  # a bug must not kill the bus: keep it, go on
                             self.errors.append((packet, e))
                             if len(self.errors) == 1:
@@ -324,8 +321,9 @@ class BusEmulator:
 
     # --- the firmware -----------------------------------------------------------------------
 
-    def handle(self, packet: p.Packet) -> None:
-        """Process one received packet and send the replies (public for unit tests)."""
+    def handle(self, packet: p.Packet, arrived: float | None = None) -> None:
+        """Process one received packet and send the replies (public for unit tests). The Bus Watchdog goes by
+        ``arrived`` [s], when the serve loop read it: this thread held up after the read left the bus no quieter."""
         with self._lock:
             t = self.now()
             if packet.instruction == p.STATUS:
@@ -338,7 +336,7 @@ class BusEmulator:
             self.record.append(Received(t, packet, fault))
             if fault == "dropped":
                 return
-            self._watchdog(t)
+            self._watchdog(t if arrived is None else min(arrived, t))
             self._heard = t
             replies = self._execute(t, packet)
             if not replies:

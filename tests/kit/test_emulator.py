@@ -432,6 +432,35 @@ def test_return_delay_is_emulated_when_timing_is_on():
     assert SLOWER < slow - fast < 0.002, (slow, fast)
 
 
+def test_a_stall_of_the_emulators_thread_after_a_read_is_not_the_clients_silence(client, bus, monkeypatch):
+    """The Bus Watchdog goes by when a packet reached the servos. A machine that holds the emulator's thread up
+    after it read the bytes (another thread's long call under load) must not trip it: the client was not quiet,
+    only the reading was late. Seen beside stress-ng: lesson 07's instructor run stopped by the watchdog."""
+    port, ph = client
+    assert ph.write1ByteTxRx(port, 1, 98, 25)[:2] == (sdk.COMM_SUCCESS, 0)    # Bus Watchdog 0.5 s
+    assert ph.write1ByteTxRx(port, 1, 64, 1)[:2] == (sdk.COMM_SUCCESS, 0)     # torque on
+    feed, calls, held = bus._parser.feed, [], 0.8
+    held_at = []
+
+    def late_feed(data):   # the bytes are read; then the thread is held up for longer than the period
+        calls.append(1)
+        if len(calls) == 10:
+            held_at.append(bus.now())
+            time.sleep(held)
+        return feed(data)
+
+    monkeypatch.setattr(bus._parser, "feed", late_feed)
+    end = time.perf_counter() + 2.0
+    while time.perf_counter() < end:   # the client: a goal every 50 ms, never quiet for long
+        ph.write4ByteTxOnly(port, 1, 116, 2048)
+        time.sleep(0.05)
+    assert held_at, "the emulator's thread was never held up: the test did not test"
+    assert sdk_read(ph, port, 1, 98, 1) == 25, "the Bus Watchdog fired although the client never went quiet"
+    # the client's real silence still trips it: nothing for longer than the period
+    time.sleep(0.8)
+    assert until(lambda: bus.servo(1).memory.get("Bus Watchdog") == -1)
+
+
 # --- the command line -------------------------------------------------------------------------------
 
 def test_cli_prints_the_port_and_stops_on_ctrl_c():
