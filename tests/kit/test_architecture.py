@@ -482,6 +482,12 @@ def test_the_map_names_every_kit_module_the_grader_imports():
     said = text[text.index("The grader uses the kit's"):].split(". ", 1)[0]
     named = set(re.findall(r"`(\w+)`", said))
     assert KIT_USED_BY_THE_GRADER | KIT_USED_BY_THE_ARM <= named, sorted(KIT_USED_BY_THE_GRADER | KIT_USED_BY_THE_ARM - named)
+    # and what the fork server imports by name, each named where the page says so
+    from grader.sandbox.forkserver import PRELOAD
+
+    preloaded = {m.split(".")[1] for m in PRELOAD if m.startswith("snakekit.")}
+    warm = text[text.index("The fork server's warm start imports by name"):].split(". ", 1)[0]
+    assert preloaded == set(re.findall(r"`(\w+)`", warm)) - {"PRELOAD"}, sorted(preloaded)
 
 
 def _strings(path: Path) -> list[tuple[int, str]]:
