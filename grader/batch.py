@@ -45,7 +45,7 @@ from grader.scoring.cases import CaseServer, draw
 from grader.errors import CasesError, GradeInterrupted, GradingError, InstructorReferenceError
 from grader.files import uninterrupted
 from grader.hooks import NO_HOOKS, BatchHooks
-from grader.course.gradebook import NOT_CARRIED, keep_release_files, late_penalties, not_carried, write_grade
+from grader.course.gradebook import NOT_CARRIED, keep_release_files, not_carried, write_grade
 from grader.feedback import scores
 from grader.scoring.references import course_references, expected
 from grader.sandbox.runner import Runner, release
