@@ -75,14 +75,15 @@ def assert_told_the_last_goal(message: str, bus, socket_between: bool, step: flo
     """The message's goal is the last that reached the servos (the emulator's own record); through
     a socket, the last goal that left the driver, which may have been lost on the way (it says so).
     On the pty itself (``step``: the largest change between two goals of the run), the servos' record
-    may end one goal before it: the line was cut while that goal was written into it, before the
-    emulator, held up by a loaded machine, had read it (a real adapter pulled out loses it the same way)."""
+    may end a goal or a few before it: the line was cut while those goals were written into it, before the
+    emulator, held up by a loaded machine, had read them (a real adapter pulled out loses them the same way;
+    beside stress-ng, two goals were still in the line)."""
     told, arrived = goal_in_message(message), last_goal_on_the_bus(bus)
     if not socket_between:
-        # one goal on: a step, plus the record's tick (2 pi / 4096) and the message's 3 decimals
-        one_on = (np.all(np.abs(told) >= np.abs(arrived) - 1e-3)
-                  and np.abs(told - arrived).max() <= step + 2 * np.pi / 4096 + 1e-3)
-        assert np.allclose(told, arrived, atol=1e-3) or one_on, (told, arrived, step)
+        # up to three goals on: three steps, plus the record's tick (2 pi / 4096) and the message's 3 decimals
+        a_few_on = (np.all(np.abs(told) >= np.abs(arrived) - 1e-3)
+                    and np.abs(told - arrived).max() <= 3 * step + 2 * np.pi / 4096 + 1e-3)
+        assert np.allclose(told, arrived, atol=1e-3) or a_few_on, (told, arrived, step)
         return
     assert "; it may not have reached the arm)" in message
     assert np.all(np.abs(told) >= np.abs(arrived) - 1e-3) and np.allclose(told, arrived, atol=0.03)  # on the way out
@@ -277,10 +278,24 @@ def test_the_tcp_emulator_stopped_mid_run_is_a_port_lost_error():
     robot.close()
 
 
+def stop_once_goals_arrive(bus, goals: int = 5) -> None:
+    """Stop the emulated bus (the line cut) once the run's first ``goals`` goals reached every servo: a loaded
+    machine can start the run later than any fixed delay (beside stress-ng, 0.4 s was before its first goal)."""
+    before = len(bus.writes(116, 4))
+
+    def cut():
+        end = time.perf_counter() + 120   # a bound for a hang
+        while len(bus.writes(116, 4)) < before + goals * len(bus.ids) and time.perf_counter() < end:
+            time.sleep(0.005)
+        bus.stop()
+
+    threading.Thread(target=cut, daemon=True).start()
+
+
 def test_the_pty_closed_mid_run_is_a_port_lost_error_not_a_serial_exception():
     robot = make_emulated_robot(motion="profile")
     bus = robot.emulator
-    threading.Timer(0.4, bus.stop).start()
+    stop_once_goals_arrive(bus)
     move = snakekit.joint_trajectory(np.zeros(5), TARGET, duration=1.0)
     with pytest.raises(PortLostError) as e:
         robot.run(move)
