@@ -129,30 +129,42 @@ def test_the_emulated_servos_never_bring_two_links_within_the_margin(pairs):
     pair is tried as one command; a refused one goes by robot.move_to, as its message says,
     or stays where it is. The servos are read every 10 ms."""
     clearance = MujocoClearance()
-    seen, moved, refused = [], 0, 0
-    for kind, A, B in pairs:
+    seen, moved, refused, again = [], 0, 0, []
+
+    def tried(A, B):
+        """(refused, the poses read back) of one pair on a new emulated arm."""
         with snakekit.make_robot("emulator", q0=A) as robot:  # the profile, then MuJoCo's servo loop
             try:
                 robot.command(B)
             except CollisionError:
-                refused += 1
                 try:  # checked along the servos' way too; its record is the servos read every 10 ms
-                    run = robot.move_to(B, record_rate=100.0)
+                    return True, robot.move_to(B, record_rate=100.0).measured.positions
                 except CollisionError:
-                    continue
-                poses = run.measured.positions
-            else:
-                poses, still, deadline = [], 0, time.monotonic() + 8.0
-                while time.monotonic() < deadline and still < 5:
-                    poses.append(robot.read().positions)
-                    still = still + 1 if len(poses) > 1 and np.abs(poses[-1] - poses[-2]).max() < 1e-4 else 0
-                    time.sleep(0.01)
-            moved += 1
-            seen += [(clearance(q), planar_clearance(q) if i % 10 == 0 else -np.inf, kind)
-                     for i, q in enumerate(poses)]
-            assert poses[-1] == pytest.approx(B, abs=5e-3)
+                    return True, None
+            poses, still, deadline = [], 0, time.monotonic() + 8.0
+            while time.monotonic() < deadline and still < 5:
+                poses.append(robot.read().positions)
+                still = still + 1 if len(poses) > 1 and np.abs(poses[-1] - poses[-2]).max() < 1e-4 else 0
+                time.sleep(0.01)
+            return False, poses
+
+    for kind, A, B in pairs:
+        try:
+            was_refused, poses = tried(A, B)
+        except snakekit.CommunicationError as e:
+            # the emulated servos' thread, held up by the machine for longer than the driver's 4 tries (the
+            # suite's own Docker tests beside it): not the property. The pair is tried once more, from the start
+            again.append(str(e)[:80])
+            was_refused, poses = tried(A, B)
+        refused += was_refused
+        if poses is None:
+            continue
+        moved += 1
+        seen += [(clearance(q), planar_clearance(q) if i % 10 == 0 else -np.inf, kind) for i, q in enumerate(poses)]
+        assert poses[-1] == pytest.approx(B, abs=5e-3)
     d = np.array([s[0] for s in seen])
     assert moved >= 9 and refused >= 6 and len(seen) > 500
+    assert len(again) <= 2, f"the emulated bus failed {len(again)} pairs (a bus that fails this often is a defect): {again}"
     print(f"{len(seen)} poses read back over {moved} moves ({refused} commands refused): "
           f"smallest clearance {1000 * d.min():.2f} mm; of the grazing pairs' moves "
           f"{1000 * min(m for m, _, k in seen if k == 'grazing'):.2f} mm")
