@@ -140,13 +140,13 @@ def test_the_sideways_imports_are_the_ones_the_map_lists_and_the_last_are_inside
     assert set(listed[-inside:]) == SIDEWAYS_INSIDE, listed
     at_top = []
     for path in sources():
+        said_inside = {line: internal for internal, _, line in imports(path) if (part_of(path), internal) in SIDEWAYS_INSIDE}
+        if not said_inside:
+            continue
         tree = ast.parse(path.read_text())
         inner = _inside_functions(tree)
-        for node in ast.walk(tree):
-            if isinstance(node, (ast.Import, ast.ImportFrom)) and id(node) not in inner:
-                for internal, _, line in imports(path):
-                    if line == node.lineno and (part_of(path), internal) in SIDEWAYS_INSIDE:
-                        at_top.append(f"{path.relative_to(PACKAGE)} line {line}: {internal}")
+        at_top += [f"{path.relative_to(PACKAGE)} line {node.lineno}: {said_inside[node.lineno]}" for node in ast.walk(tree)
+                   if isinstance(node, (ast.Import, ast.ImportFrom)) and id(node) not in inner and node.lineno in said_inside]
     assert at_top == [], f"these sideways imports are said to be inside a function: {at_top}"
 
 
