@@ -27,7 +27,6 @@ import json
 import os
 import shutil
 import sys
-import tempfile
 import threading
 import time
 import warnings
@@ -48,7 +47,7 @@ from grader.hooks import NO_HOOKS, BatchHooks
 from grader.course.gradebook import NOT_CARRIED, keep_release_files, not_carried, write_grade
 from grader.feedback import scores
 from grader.scoring.references import course_references, expected
-from grader.sandbox.runner import Runner, release
+from grader.sandbox.runner import Runner, grader_folder, release
 from grader.scoring.verdict import REAL_TIME_FAULTS, SubmissionResult, Verdicts, busy_machine, real_time
 from grader.scoring.score import read_handin
 from grader.scoring.wording import signatures
@@ -115,7 +114,7 @@ class Grader:
         # a submission's duplicated or missing cell ids are repaired on reading; nothing for the TA to do
         warnings.filterwarnings("ignore", category=DuplicateCellId)
         warnings.filterwarnings("ignore", category=MissingIDFieldWarning)
-        base = Path(tempfile.mkdtemp(prefix="snakekit-grade-", dir=self.workroot))
+        base = grader_folder("snakekit-grade-", self.workroot)
         os.chmod(base, 0o711)  # the sandbox user may pass through, never list
         self.base = base
         self.runner = Runner(self.course, None, base, timeout=self.timeout, cell_timeout=self.cell_timeout,

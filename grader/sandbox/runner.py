@@ -175,6 +175,64 @@ _SERVERS: dict[tuple, object] = {}
 _SERVERS_LOCK = threading.Lock()
 
 
+#: the grader's folders in the temporary root: a batch's (its sandboxes' copies of the course, the gradebook's
+#: template) and a fork server's; each holds a stamp of the process that made it (:data:`OWNER`)
+FOLDERS = ("snakekit-grade-", "snakekit-forkserver-")
+#: the stamp: "<pid> <start time>" (the start time tells a process from a later one given the same pid)
+OWNER = ".owner"
+
+
+def _started(pid: int) -> str:
+    """When process ``pid`` started (clock ticks since boot, /proc/<pid>/stat's 22nd field); "" when unknown."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
+    except (OSError, IndexError):
+        return ""
+
+
+def _running(pid: int, started: str) -> bool:
+    """Whether the process that wrote a stamp still runs (another user's counts as running)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    now = _started(pid)
+    return not (started and now and now != started)
+
+
+def remove_leftovers(root: Path) -> list[Path]:
+    """Remove the grader's folders in ``root`` whose process ended without removing them (a `kill -9`, the
+    out-of-memory killer, a power cut): they hold copies of students' notebooks. Only this user's folders with
+    a stamp are looked at; the folders of a grader that runs are left alone. Returns the removed ones."""
+    removed = []
+    for path in sorted(p for prefix in FOLDERS for p in Path(root).glob(f"{prefix}*")):
+        try:
+            if path.is_symlink() or not path.is_dir() or path.stat().st_uid != os.getuid():
+                continue
+            pid, _, started = (path / OWNER).read_text().strip().partition(" ")
+            if _running(int(pid), started):
+                continue
+        except (OSError, ValueError):   # no stamp yet (being made), or not one of ours
+            continue
+        shutil.rmtree(path, ignore_errors=True)
+        removed.append(path)
+    return removed
+
+
+def grader_folder(prefix: str, root: Path | None = None) -> Path:
+    """A new folder of the grader's (``prefix`` one of :data:`FOLDERS`) in ``root`` (default: the temporary
+    root), stamped with this process, once the folders of graders that ended without removing theirs are gone."""
+    root = Path(root or tempfile.gettempdir())
+    remove_leftovers(root)
+    path = Path(tempfile.mkdtemp(prefix=prefix, dir=root))
+    (path / OWNER).write_text(f"{os.getpid()} {_started(os.getpid())}\n")
+    return path
+
+
 def fork_server(env):
     """This process's running fork server, started (in a folder of its own, ``env(folder)`` its environment)
     when there is none, or the last one ended. Started, not yet ready: ``wait_ready`` before the first sandbox."""
@@ -189,7 +247,7 @@ def fork_server(env):
             return server
         if server is not None:
             _close(server)
-        home = Path(tempfile.mkdtemp(prefix="snakekit-forkserver-"))
+        home = grader_folder("snakekit-forkserver-")
         try:
             server = ForkServer({**env(home), "MPLCONFIGDIR": str(home / "mplcache"), **extra})
         except Exception:

@@ -879,17 +879,23 @@ def test_a_grader_killed_mid_batch_leaves_no_sandbox_running(tmp_path):
     """`snakekit grade` killed with SIGKILL (the TA's `kill -9`, the out-of-memory killer) while a
     student's cell sleeps for 300 s: its fork server, the sandbox's supervisor, the sandbox and the
     student's kernel all end within seconds, not at the notebook's 600 s deadline that nobody is left
-    to enforce."""
+    to enforce. The folders it had in the temporary root (copies of the students' notebooks) are removed by
+    the TA's next `snakekit grade`, which leaves none of its own."""
     need_program("unshare")
     import signal
     import time
 
     course = make_course(tmp_path / "course")
     submit(course, "sleeper", {"ex1_tool_xy": "import time\ntime.sleep(300)\ndef tool_xy(q):\n    return q[:2]"})
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
-    grade = subprocess.Popen([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
-                              "--jobs", "1", "--timeout", "600", "--references", str(REFERENCES)],
-                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    # a temporary root of the test's own (the sandbox's user passes through it, as through /tmp)
+    tmp = Path(tempfile.mkdtemp(prefix="snakekit-killed-"))
+    os.chmod(tmp, 0o711)
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+           "TMPDIR": str(tmp)}
+    command = [sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course), "--jobs", "1",
+               "--references", str(REFERENCES)]
+    grade = subprocess.Popen([*command, "--timeout", "600"], env=env, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE)
     try:
         deadline, seen = time.monotonic() + 120, set()
         while time.monotonic() < deadline and grade.poll() is None:
@@ -908,6 +914,15 @@ def test_a_grader_killed_mid_batch_leaves_no_sandbox_running(tmp_path):
             time.sleep(0.2)
         left = {p: _cmdline(p) for p in seen if _alive(p)}
         assert not left, f"still running after the grader was killed: {left}"
+        killed = sorted(p.name for p in tmp.iterdir())
+        # the batch's folder and its fork server's: nobody was left to remove them
+        assert [n.rsplit("-", 1)[0] for n in killed] == ["snakekit-forkserver", "snakekit-grade"], killed
+        # the TA grades again (the sleeper's cell fixed): the killed grader's folders go, and this one's
+        submit(course, "sleeper")
+        again = subprocess.run([*command, "--timeout", "120"], env=env, capture_output=True, text=True, timeout=600)
+        assert again.returncode == 0, again.stderr[-2000:]
+        assert read_csv(course / f"grades-{ASSIGNMENT}.csv")["sleeper"]["status"] == "graded"
+        assert sorted(p.name for p in tmp.iterdir()) == [], (killed, sorted(p.name for p in tmp.iterdir()))
     finally:
         for p in _descendants(grade.pid) | seen:
             try:
@@ -917,6 +932,7 @@ def test_a_grader_killed_mid_batch_leaves_no_sandbox_running(tmp_path):
         if grade.poll() is None:
             grade.kill()
             grade.wait()
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def _cmdline(pid: int) -> str:
@@ -1007,3 +1023,55 @@ def test_the_ta_is_told_where_a_lost_reply_was_taken_as_finished(tmp_path, capsy
         (tmp_path / "result.json").write_text(written)      # nothing late, or what a sandbox wrote instead
         late_replies(tmp_path, "fy")
         assert capsys.readouterr().err == ""
+
+
+def test_only_the_folders_of_an_ended_grader_are_removed(tmp_path):
+    """The folders a grader leaves behind when killed go at the next batch; a running grader's stay, and so do
+    folders with no stamp, of another name, or reached through a link."""
+    import time
+
+    from grader.sandbox.runner import OWNER, _started, grader_folder, remove_leftovers
+
+    ended = subprocess.Popen(["true"])
+    ended.wait()
+    running = subprocess.Popen(["sleep", "60"])
+    try:
+        time.sleep(0.1)
+        stamps = {
+            "snakekit-grade-ended": f"{ended.pid} {_started(os.getpid())}",           # its process is gone
+            "snakekit-forkserver-ended": f"{ended.pid} ",                             # the same, no start time known
+            "snakekit-grade-running": f"{running.pid} {_started(running.pid)}",       # its grader runs
+            "snakekit-forkserver-running": f"{running.pid} ",
+            "snakekit-grade-reused": f"{running.pid} {int(_started(running.pid)) - 7}",  # the pid, given again
+            "snakekit-grade-ours": f"{os.getpid()} {_started(os.getpid())}",           # this very process
+            "snakekit-killed-ended": f"{ended.pid} ",                                 # not a grader's name
+        }
+        for name, stamp in stamps.items():
+            (tmp_path / name).mkdir()
+            (tmp_path / name / OWNER).write_text(stamp + "\n")
+            (tmp_path / name / "notebook.ipynb").write_text("{}")
+        (tmp_path / "snakekit-grade-unstamped").mkdir()          # being made: no stamp yet
+        theirs = tmp_path / "snakekit-grade-theirs"               # another user's, their grader ended
+        theirs.mkdir()
+        (theirs / OWNER).write_text(f"{ended.pid} \n")
+        if os.getuid() == 0:   # as a user, the folder stays this user's: it goes too (below)
+            os.chown(theirs, 65534, -1)
+        away = tmp_path / "away"
+        away.mkdir()
+        (away / OWNER).write_text(f"{ended.pid} \n")
+        (tmp_path / "snakekit-grade-link").symlink_to(away)
+        removed = remove_leftovers(tmp_path)
+        gone = ["snakekit-forkserver-ended", "snakekit-grade-ended", "snakekit-grade-reused"]
+        if os.getuid() != 0:
+            gone = sorted([*gone, theirs.name])
+        assert sorted(p.name for p in removed) == gone
+        assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+            {*stamps, "snakekit-grade-unstamped", "away", "snakekit-grade-link"} - set(gone)
+            | ({theirs.name} if os.getuid() == 0 else set()))
+        assert (away / OWNER).exists()
+        made = grader_folder("snakekit-grade-", tmp_path)     # a new batch's folder: stamped with this process
+        assert (made / OWNER).read_text().split() == [str(os.getpid()), _started(os.getpid())]
+        assert remove_leftovers(tmp_path) == [] and made.is_dir()
+    finally:
+        running.kill()
+        running.wait()
