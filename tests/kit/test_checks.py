@@ -268,8 +268,9 @@ def test_a_composites_note_starts_a_sentence_of_its_own_after_an_error_that_has_
 
     ex = checks.Exercise("2.3", "manipulability", builds_on=("2.1",))
     PASSED["2.1"] = False
+    rows = [[0.0]]   # a list, indexed as an array (a name, not the literal: Python warns of a literal's [:, 0])
     try:
-        said = message(lambda: ex(lambda q: [[0.0]][:, 0], np.zeros(5)))
+        said = message(lambda: ex(lambda q: rows[:, 0], np.zeros(5)))
     finally:
         PASSED.pop("2.1", None)
     assert "list indices must be integers or slices, not tuple.\n2.3 uses your 2.1, which fails its check" in said, said
