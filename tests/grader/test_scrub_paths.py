@@ -13,7 +13,8 @@ from tests.conftest import need, notebook_client
 CELLS = ["import tempfile\nfrom pathlib import Path\nimport numpy as np\n\ndef read_joint_states(path):\n"
          "    raise ValueError(f'{path} holds no /joint_states messages')\n\ndef rms(e):\n    return np.sqrt(e)",
          "rms(-1.0)",     # numpy's warning names the line of the cell's function, in the kernel's file of the cell
-         "read_joint_states(Path(tempfile.mkdtemp()) / 'recorded.bag')"]
+         # a file in a temporary folder (the folder removed again: the error still names it)
+         "folder = Path(tempfile.mkdtemp())\nfolder.rmdir()\nread_joint_states(folder / 'recorded.bag')"]
 
 
 def test_a_traceback_through_a_cells_function_shows_no_kernel_file_and_no_temporary_folder(tmp_path, monkeypatch):
