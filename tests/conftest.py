@@ -70,7 +70,55 @@ def notebook_client(nb, **kwargs):
         _KERNEL_SOCKETS.append(tempfile.mkdtemp(prefix="snakekit-kernels-"))
         atexit.register(shutil.rmtree, _KERNEL_SOCKETS[0], True)
     folder = tempfile.mkdtemp(dir=_KERNEL_SOCKETS[0])
-    return NotebookClient(nb, config=Config(kernel_sockets(folder)), **kwargs)
+    client = _run_again_on_bus_silence(NotebookClient)(nb, config=Config(kernel_sockets(folder)), **kwargs)
+    client.again = lambda: notebook_client(nb, **kwargs)
+    return client
+
+
+def bus_silence(nb) -> str:
+    """The first error of ``nb``'s outputs where the emulated servos did not answer a request at any of the driver's
+    tries (a CommunicationError that says "did not answer"), or "" when there is none."""
+    for cell in nb.cells:
+        for o in cell.get("outputs", []):
+            if (o.get("output_type") == "error" and o.get("ename") == "CommunicationError"
+                    and "did not answer" in str(o.get("evalue", ""))):
+                return str(o["evalue"])
+    return ""
+
+
+_CLIENTS: dict = {}
+
+
+def _run_again_on_bus_silence(base):
+    """``base`` (a NotebookClient class) whose ``execute`` runs the notebook once more, in a new kernel, when the
+    emulated servos stayed silent through the driver's tries (:func:`bus_silence`: the machine held the emulator's
+    thread up, in the kernel's own process; the grader runs such a submission again too, ``grader.batch``'s
+    ``bus_faults``). It says so as a warning, which CI's summary shows; a second silence is the notebook's result."""
+    if base not in _CLIENTS:
+        import warnings
+
+        from nbclient.exceptions import CellExecutionError
+
+        class Client(base):
+            again = None
+
+            def execute(self, **kw):
+                try:
+                    result = super().execute(**kw)
+                    said = bus_silence(self.nb) if self.again is not None else ""
+                except CellExecutionError as e:
+                    if self.again is None or e.ename != "CommunicationError" or "did not answer" not in str(e.evalue):
+                        raise
+                    said = str(e.evalue)
+                if not said:
+                    return result
+                warnings.warn(f"the emulated servos did not answer, the notebook was run again: {said}", stacklevel=2)
+                second = self.again()
+                second.again = None
+                return second.execute(**kw)
+
+        _CLIENTS[base] = Client
+    return _CLIENTS[base]
 
 
 #: What a class adds to the course folder (and what a run of an instructor notebook writes beside it).
