@@ -317,7 +317,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
 
         return bridge(argv[1:])
     if argv[:1] and argv[0] in PLUGIN_COMMANDS:  # the grader's commands: its own package, its own options
-        return plugin_command(argv[0])(argv[1:], out)
+        return _terminated_as_interrupted(argv[0], lambda: plugin_command(argv[0])(argv[1:], out))
     if argv[:1] == ["start"]:  # JupyterLab takes over the process: no signal handlers of ours
         from .start import main as start
 
@@ -344,6 +344,31 @@ def main(argv: list[str] | None = None, out=None) -> int:
         if in_main:
             signal.signal(signal.SIGTERM, previous)
 
+
+
+def _terminated_as_interrupted(name: str, command) -> int:
+    """``command()`` (a grader's command) with SIGTERM taken as Ctrl-C: the command stops as it does for Ctrl-C
+    (`grade` kills its sandboxes, keeps the students graded before and removes its folders) and exits 143, not
+    130. A command that handles SIGTERM itself (`snakekit lab`) sets its own handler over this one."""
+    terminated = []
+
+    def terminate(signum, frame):
+        terminated.append(signum)
+        raise KeyboardInterrupt
+
+    in_main = threading.current_thread() is threading.main_thread()  # only there can signals be caught
+    previous = signal.signal(signal.SIGTERM, terminate) if in_main else None
+    try:
+        code = command()
+    except KeyboardInterrupt:
+        if not terminated:   # Ctrl-C in a command that does not stop on it: as before
+            raise
+        print(f"snakekit {name}: terminated (SIGTERM)", file=sys.stderr)
+        return 143
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)
+    return 143 if terminated and code == 130 else code
 
 
 def run(argv: list, *, cwd=None, env: dict | None = None):

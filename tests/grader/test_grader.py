@@ -935,6 +935,55 @@ def test_a_grader_killed_mid_batch_leaves_no_sandbox_running(tmp_path):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def test_a_grader_stopped_with_sigterm_stops_as_on_ctrl_c_and_leaves_nothing(tmp_path):
+    """`kill PID` (SIGTERM: the TA's `kill`, a shutdown, a hub culling the server) stops `snakekit grade` as Ctrl-C
+    does: the sandbox and its kernel end, it says who is left and how to grade them, its folders go, exit 143."""
+    need_program("unshare")
+    import signal
+    import time
+
+    course = make_course(tmp_path / "course")
+    submit(course, "sleeper", {"ex1_tool_xy": "import time\ntime.sleep(300)\ndef tool_xy(q):\n    return q[:2]"})
+    tmp = Path(tempfile.mkdtemp(prefix="snakekit-terminated-"))
+    os.chmod(tmp, 0o711)
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+           "TMPDIR": str(tmp)}
+    grade = subprocess.Popen([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
+                              "--jobs", "1", "--timeout", "600", "--references", str(REFERENCES)],
+                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    seen = set()
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and grade.poll() is None:
+            seen |= _descendants(grade.pid)
+            if any("ipykernel" in _cmdline(p) or _depth(p, grade.pid) >= 4 for p in seen):
+                break
+            time.sleep(0.2)
+        time.sleep(2.0)
+        assert grade.poll() is None, grade.stderr.read()[-2000:]
+        seen |= _descendants(grade.pid)
+        grade.send_signal(signal.SIGTERM)
+        _, err = grade.communicate(timeout=60)
+        assert grade.returncode == 143, err[-2000:]
+        assert "interrupted; 0 submission(s) graded before it are in the gradebook" in err, err[-2000:]
+        assert "--student sleeper" in err, err[-2000:]
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(_alive(p) for p in seen):
+            time.sleep(0.2)
+        assert not {p: _cmdline(p) for p in seen if _alive(p)}
+        assert sorted(p.name for p in tmp.iterdir()) == []
+    finally:
+        for p in _descendants(grade.pid) | seen:
+            try:
+                os.kill(p, signal.SIGKILL)
+            except OSError:
+                pass
+        if grade.poll() is None:
+            grade.kill()
+            grade.wait()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def _cmdline(pid: int) -> str:
     try:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
