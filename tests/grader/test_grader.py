@@ -875,113 +875,107 @@ def _alive(pid: int) -> bool:
         return False
 
 
+class _SleepingBatch:
+    """`snakekit grade` started as a TA starts it, on a course whose one student's cell sleeps for 300 s, with a
+    temporary root of its own (the sandbox's user passes through it, as through /tmp). Entered: the sleeping cell
+    runs (``seen``: the grader's processes by then); left: every one of them killed and the root removed."""
+
+    def __init__(self, tmp_path: Path, name: str):
+        need_program("unshare")
+        self.course = make_course(tmp_path / "course")
+        submit(self.course, "sleeper", {"ex1_tool_xy": "import time\ntime.sleep(300)\ndef tool_xy(q):\n    return q[:2]"})
+        self.tmp = Path(tempfile.mkdtemp(prefix=f"snakekit-{name}-"))
+        os.chmod(self.tmp, 0o711)
+        self.env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+                    "TMPDIR": str(self.tmp)}
+        self.command = [sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(self.course),
+                        "--jobs", "1", "--references", str(REFERENCES)]
+        self.grade, self.seen = None, set()
+
+    def __enter__(self):
+        import time
+
+        self.grade = subprocess.Popen([*self.command, "--timeout", "600"], env=self.env, stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and self.grade.poll() is None:
+            self.seen |= _descendants(self.grade.pid)
+            # the server, its helpers, a supervisor, the sandbox's PID 1 and its kernel: the sleeping cell runs
+            if len(self.seen) >= 5 and any("ipykernel" in _cmdline(p) or _depth(p, self.grade.pid) >= 4
+                                           for p in self.seen):
+                break
+            time.sleep(0.2)
+        time.sleep(2.0)
+        self.seen |= _descendants(self.grade.pid)
+        assert self.grade.poll() is None and len(self.seen) >= 4, (self.grade.poll(), self.seen,
+                                                                   self.grade.stderr.read()[-2000:])
+        return self
+
+    def left_running(self) -> dict:
+        """The grader's processes still running 30 s after it ended (none, as soon as they are gone)."""
+        import time
+
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(_alive(p) for p in self.seen):
+            time.sleep(0.2)
+        return {p: _cmdline(p) for p in self.seen if _alive(p)}
+
+    def folders(self) -> list[str]:
+        return sorted(p.name for p in self.tmp.iterdir())
+
+    def __exit__(self, *exc):
+        import signal
+
+        for p in _descendants(self.grade.pid) | self.seen:
+            try:
+                os.kill(p, signal.SIGKILL)
+            except OSError:
+                pass
+        if self.grade.poll() is None:
+            self.grade.kill()
+            self.grade.wait()
+        shutil.rmtree(self.tmp, ignore_errors=True)
+        return False
+
+
 def test_a_grader_killed_mid_batch_leaves_no_sandbox_running(tmp_path):
     """`snakekit grade` killed with SIGKILL (the TA's `kill -9`, the out-of-memory killer) while a
     student's cell sleeps for 300 s: its fork server, the sandbox's supervisor, the sandbox and the
     student's kernel all end within seconds, not at the notebook's 600 s deadline that nobody is left
     to enforce. The folders it had in the temporary root (copies of the students' notebooks) are removed by
     the TA's next `snakekit grade`, which leaves none of its own."""
-    need_program("unshare")
     import signal
-    import time
 
-    course = make_course(tmp_path / "course")
-    submit(course, "sleeper", {"ex1_tool_xy": "import time\ntime.sleep(300)\ndef tool_xy(q):\n    return q[:2]"})
-    # a temporary root of the test's own (the sandbox's user passes through it, as through /tmp)
-    tmp = Path(tempfile.mkdtemp(prefix="snakekit-killed-"))
-    os.chmod(tmp, 0o711)
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
-           "TMPDIR": str(tmp)}
-    command = [sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course), "--jobs", "1",
-               "--references", str(REFERENCES)]
-    grade = subprocess.Popen([*command, "--timeout", "600"], env=env, stdout=subprocess.DEVNULL,
-                             stderr=subprocess.PIPE)
-    try:
-        deadline, seen = time.monotonic() + 120, set()
-        while time.monotonic() < deadline and grade.poll() is None:
-            seen |= _descendants(grade.pid)
-            # the server, its helpers, a supervisor, the sandbox's PID 1 and its kernel: the sleeping cell runs
-            if len(seen) >= 5 and any("ipykernel" in _cmdline(p) or _depth(p, grade.pid) >= 4 for p in seen):
-                break
-            time.sleep(0.2)
-        time.sleep(2.0)
-        seen |= _descendants(grade.pid)
-        assert grade.poll() is None and len(seen) >= 4, (grade.poll(), seen, grade.stderr.read().decode()[-2000:])
-        os.kill(grade.pid, signal.SIGKILL)
-        grade.wait()
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and any(_alive(p) for p in seen):
-            time.sleep(0.2)
-        left = {p: _cmdline(p) for p in seen if _alive(p)}
+    with _SleepingBatch(tmp_path, "killed") as batch:
+        os.kill(batch.grade.pid, signal.SIGKILL)
+        batch.grade.wait()
+        left = batch.left_running()
         assert not left, f"still running after the grader was killed: {left}"
-        killed = sorted(p.name for p in tmp.iterdir())
+        killed = batch.folders()
         # the batch's folder and its fork server's: nobody was left to remove them
         assert [n.rsplit("-", 1)[0] for n in killed] == ["snakekit-forkserver", "snakekit-grade"], killed
         # the TA grades again (the sleeper's cell fixed): the killed grader's folders go, and this one's
-        submit(course, "sleeper")
-        again = subprocess.run([*command, "--timeout", "120"], env=env, capture_output=True, text=True, timeout=600)
+        submit(batch.course, "sleeper")
+        again = subprocess.run([*batch.command, "--timeout", "120"], env=batch.env, capture_output=True, text=True,
+                               timeout=600)
         assert again.returncode == 0, again.stderr[-2000:]
-        assert read_csv(course / f"grades-{ASSIGNMENT}.csv")["sleeper"]["status"] == "graded"
-        assert sorted(p.name for p in tmp.iterdir()) == [], (killed, sorted(p.name for p in tmp.iterdir()))
-    finally:
-        for p in _descendants(grade.pid) | seen:
-            try:
-                os.kill(p, signal.SIGKILL)
-            except OSError:
-                pass
-        if grade.poll() is None:
-            grade.kill()
-            grade.wait()
-        shutil.rmtree(tmp, ignore_errors=True)
+        assert read_csv(batch.course / f"grades-{ASSIGNMENT}.csv")["sleeper"]["status"] == "graded"
+        assert batch.folders() == [], (killed, batch.folders())
 
 
 def test_a_grader_stopped_with_sigterm_stops_as_on_ctrl_c_and_leaves_nothing(tmp_path):
     """`kill PID` (SIGTERM: the TA's `kill`, a shutdown, a hub culling the server) stops `snakekit grade` as Ctrl-C
     does: the sandbox and its kernel end, it says who is left and how to grade them, its folders go, exit 143."""
-    need_program("unshare")
     import signal
-    import time
 
-    course = make_course(tmp_path / "course")
-    submit(course, "sleeper", {"ex1_tool_xy": "import time\ntime.sleep(300)\ndef tool_xy(q):\n    return q[:2]"})
-    tmp = Path(tempfile.mkdtemp(prefix="snakekit-terminated-"))
-    os.chmod(tmp, 0o711)
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
-           "TMPDIR": str(tmp)}
-    grade = subprocess.Popen([sys.executable, "-m", "snakekit.cli", "grade", ASSIGNMENT, "--course", str(course),
-                              "--jobs", "1", "--timeout", "600", "--references", str(REFERENCES)],
-                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    seen = set()
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and grade.poll() is None:
-            seen |= _descendants(grade.pid)
-            if any("ipykernel" in _cmdline(p) or _depth(p, grade.pid) >= 4 for p in seen):
-                break
-            time.sleep(0.2)
-        time.sleep(2.0)
-        assert grade.poll() is None, grade.stderr.read()[-2000:]
-        seen |= _descendants(grade.pid)
-        grade.send_signal(signal.SIGTERM)
-        _, err = grade.communicate(timeout=60)
-        assert grade.returncode == 143, err[-2000:]
+    with _SleepingBatch(tmp_path, "terminated") as batch:
+        batch.grade.send_signal(signal.SIGTERM)
+        _, err = batch.grade.communicate(timeout=60)
+        assert batch.grade.returncode == 143, err[-2000:]
         assert "interrupted; 0 submission(s) graded before it are in the gradebook" in err, err[-2000:]
         assert "--student sleeper" in err, err[-2000:]
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and any(_alive(p) for p in seen):
-            time.sleep(0.2)
-        assert not {p: _cmdline(p) for p in seen if _alive(p)}
-        assert sorted(p.name for p in tmp.iterdir()) == []
-    finally:
-        for p in _descendants(grade.pid) | seen:
-            try:
-                os.kill(p, signal.SIGKILL)
-            except OSError:
-                pass
-        if grade.poll() is None:
-            grade.kill()
-            grade.wait()
-        shutil.rmtree(tmp, ignore_errors=True)
+        assert not batch.left_running()
+        assert batch.folders() == []
 
 
 def _cmdline(pid: int) -> str:
