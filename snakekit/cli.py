@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import contextlib
 import gc
 import os
 import signal
@@ -323,51 +324,50 @@ def main(argv: list[str] | None = None, out=None) -> int:
 
         return start(argv[1:], out)
     args = build_parser().parse_args(argv)
-    terminated = []
-
-    def terminate(signum, frame):  # SIGTERM cleans up like Ctrl-C: the robot is closed on the way out
-        terminated.append(signum)
-        raise KeyboardInterrupt
-
-    in_main = threading.current_thread() is threading.main_thread()  # only there can signals be caught
-    previous = signal.signal(signal.SIGTERM, terminate) if in_main else None
-    try:
-        return args.func(args, out)
-    except SnakekitError as e:
-        print(f"snakekit {args.command}: {e}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        why = "terminated (SIGTERM)" if terminated else "interrupted"
-        print(f"snakekit {args.command}: {why}; the robot was closed", file=sys.stderr)
-        return 143 if terminated else 130
-    finally:
-        if in_main:
-            signal.signal(signal.SIGTERM, previous)
+    with _sigterm_as_ctrl_c() as terminated:   # the robot is closed on the way out, as for Ctrl-C
+        try:
+            return args.func(args, out)
+        except SnakekitError as e:
+            print(f"snakekit {args.command}: {e}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt:
+            why = "terminated (SIGTERM)" if terminated else "interrupted"
+            print(f"snakekit {args.command}: {why}; the robot was closed", file=sys.stderr)
+            return 143 if terminated else 130
 
 
 
-def _terminated_as_interrupted(name: str, command) -> int:
-    """``command()`` (a grader's command) with SIGTERM taken as Ctrl-C: the command stops as it does for Ctrl-C
-    (`grade` kills its sandboxes, keeps the students graded before and removes its folders) and exits 143, not
-    130. A command that handles SIGTERM itself (`snakekit lab`) sets its own handler over this one."""
+@contextlib.contextmanager
+def _sigterm_as_ctrl_c():
+    """SIGTERM raised as KeyboardInterrupt while inside (in the main thread, where signals can be caught), so a
+    command cleans up as on Ctrl-C; yields the list that holds the signal once one came."""
     terminated = []
 
     def terminate(signum, frame):
         terminated.append(signum)
         raise KeyboardInterrupt
 
-    in_main = threading.current_thread() is threading.main_thread()  # only there can signals be caught
+    in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, terminate) if in_main else None
     try:
-        code = command()
-    except KeyboardInterrupt:
-        if not terminated:   # Ctrl-C in a command that does not stop on it: as before
-            raise
-        print(f"snakekit {name}: terminated (SIGTERM)", file=sys.stderr)
-        return 143
+        yield terminated
     finally:
         if in_main:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _terminated_as_interrupted(name: str, command) -> int:
+    """``command()`` (a grader's command) with SIGTERM taken as Ctrl-C: the command stops as it does for Ctrl-C
+    (`grade` kills its sandboxes, keeps the students graded before and removes its folders) and exits 143, not
+    130. A command that handles SIGTERM itself (`snakekit lab`) sets its own handler over this one."""
+    with _sigterm_as_ctrl_c() as terminated:
+        try:
+            code = command()
+        except KeyboardInterrupt:
+            if not terminated:   # Ctrl-C in a command that does not stop on it: as before
+                raise
+            print(f"snakekit {name}: terminated (SIGTERM)", file=sys.stderr)
+            return 143
     return 143 if terminated and code == 130 else code
 
 

@@ -6,6 +6,7 @@ with ``CI=true`` it fails, so a missing install step can't hide behind a skip.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import os
 import re
@@ -75,50 +76,50 @@ def notebook_client(nb, **kwargs):
     return client
 
 
+def _silent(ename, evalue) -> bool:
+    """Whether an error is the emulated servos' silence through the driver's tries."""
+    return ename == "CommunicationError" and "did not answer" in str(evalue)
+
+
 def bus_silence(nb) -> str:
     """The first error of ``nb``'s outputs where the emulated servos did not answer a request at any of the driver's
     tries (a CommunicationError that says "did not answer"), or "" when there is none."""
     for cell in nb.cells:
         for o in cell.get("outputs", []):
-            if (o.get("output_type") == "error" and o.get("ename") == "CommunicationError"
-                    and "did not answer" in str(o.get("evalue", ""))):
+            if o.get("output_type") == "error" and _silent(o.get("ename"), o.get("evalue", "")):
                 return str(o["evalue"])
     return ""
 
 
-_CLIENTS: dict = {}
-
-
+@functools.cache
 def _run_again_on_bus_silence(base):
     """``base`` (a NotebookClient class) whose ``execute`` runs the notebook once more, in a new kernel, when the
     emulated servos stayed silent through the driver's tries (:func:`bus_silence`: the machine held the emulator's
     thread up, in the kernel's own process; the grader runs such a submission again too, ``grader.batch``'s
     ``bus_faults``). It says so as a warning, which CI's summary shows; a second silence is the notebook's result."""
-    if base not in _CLIENTS:
-        import warnings
+    import warnings
 
-        from nbclient.exceptions import CellExecutionError
+    from nbclient.exceptions import CellExecutionError
 
-        class Client(base):
-            again = None
+    class Client(base):
+        again = None
 
-            def execute(self, **kw):
-                try:
-                    result = super().execute(**kw)
-                    said = bus_silence(self.nb) if self.again is not None else ""
-                except CellExecutionError as e:
-                    if self.again is None or e.ename != "CommunicationError" or "did not answer" not in str(e.evalue):
-                        raise
-                    said = str(e.evalue)
-                if not said:
-                    return result
-                warnings.warn(f"the emulated servos did not answer, the notebook was run again: {said}", stacklevel=2)
-                second = self.again()
-                second.again = None
-                return second.execute(**kw)
+        def execute(self, **kw):
+            try:
+                result = super().execute(**kw)
+                said = bus_silence(self.nb) if self.again is not None else ""
+            except CellExecutionError as e:
+                if self.again is None or not _silent(e.ename, e.evalue):
+                    raise
+                said = str(e.evalue)
+            if not said:
+                return result
+            warnings.warn(f"the emulated servos did not answer, the notebook was run again: {said}", stacklevel=2)
+            second = self.again()
+            second.again = None
+            return second.execute(**kw)
 
-        _CLIENTS[base] = Client
-    return _CLIENTS[base]
+    return Client
 
 
 #: What a class adds to the course folder (and what a run of an instructor notebook writes beside it).
