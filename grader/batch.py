@@ -312,17 +312,23 @@ class Grader:
         late_replies(work, student)
         if not self.retry_timeouts:
             return work, outcome, 1
+        first = {}
         if stopped_by_clock(work, outcome, student, self.a):
             why = "was stopped by the clock"
         elif student != INSTRUCTOR and (faults := (bus_faults(work, self.draw.cases) if self.draw is not None else [])
                                         or check_faults(work, student, self.a)):
             why = f"had a fault of the arm's bus ({faults[0]}), which a busy machine causes"
+            first = handin_results(work, self.draw.cases) if self.draw is not None else {}
         else:
             return work, outcome, 1
         with self._lock:
             self.first_runs[student] = why
         shutil.rmtree(work, ignore_errors=True)
-        return (*self._sandboxed(student, src, nbs, tampered), 2)
+        work, outcome = self._sandboxed(student, src, nbs, tampered)
+        mended = mend_faults(handin_results(work, first), first)
+        if mended:
+            self.verdicts.mend(work, mended)
+        return work, outcome, 2
 
     def _sandboxed(self, student: str, src: Path, nbs: dict, tampered: dict, tries: int = 3):
         """Stage and run one notebook set: (its folder, how it ended). A sandbox that could not be made (its
@@ -452,16 +458,41 @@ def bus_faults(work: Path, cases: dict) -> list[str]:
     solution raising one is the machine's doing (a late reply of the emulated servos on a busy machine, an
     unplugged port), never what an exercise asks for: as an expected result it would cost every student who
     computed the case right. (An exercise that asks for an error asks for another type: LimitError, ...)"""
-    out = []
+    return [f"{gid} raised {r.strip()[:200]} at hidden case {k}" for gid, results in handin_results(work, cases).items()
+            for k, r in enumerate(results) if is_fault(r)]
+
+
+def is_fault(result) -> bool:
+    """Whether one case's hand-in is a fault of the arm's bus (:data:`REAL_TIME_FAULTS`), as the kit writes a raise."""
+    return isinstance(result, str) and result.split(":", 1)[0].strip() in REAL_TIME_FAULTS
+
+
+def handin_results(work: Path, cases) -> dict[str, list]:
+    """The hand-ins of a run's folder, grade id -> its results per case, for the grade ids ``cases`` names (an
+    unreadable or missing file: left out)."""
+    out = {}
     for gid in cases:
         raw = read_inside(work, f"handin/{gid}.npz")
         try:
-            results = read_handin(raw) if raw is not None else []
+            if raw is not None:
+                out[gid] = read_handin(raw)
         except ValueError:
             continue
+    return out
+
+
+def mend_faults(second: dict[str, list], first: dict[str, list]) -> dict[str, dict[int, object]]:
+    """The cases of a second run (a student's, after a first with a fault of the arm's bus) that faulted again
+    where the first run's same case did not: grade id -> {case: the first run's result}. A fault is the busy
+    machine's (a late reply of the emulated servos), which strikes at a case by chance; the same student's code at
+    the same case gave that result in the first run, so the case is graded on it instead of lost. A case that
+    faulted in both runs stays as it is (the student's code may ask a servo that is not there)."""
+    out = {}
+    for gid, results in second.items():
+        before = first.get(gid, [])
         for k, r in enumerate(results):
-            if isinstance(r, str) and r.split(":", 1)[0].strip() in REAL_TIME_FAULTS:
-                out.append(f"{gid} raised {r.strip()[:200]} at hidden case {k}")
+            if is_fault(r) and k < len(before) and before[k] is not None and not is_fault(before[k]):
+                out.setdefault(gid, {})[k] = before[k]
     return out
 
 

@@ -117,19 +117,12 @@ def serve(backend: str = "sim", *, rate: float = 50.0, topic: str = COMMAND, out
             states = rospy.Publisher(JOINT_STATES, sensor_msgs.JointState, queue_size=50)  # 1 s of a slow reader
             rospy.Subscriber(topic, trajectory_msgs.JointTrajectory, goals.put, queue_size=10)
             names = list(robot.spec.joint_names)
-            # While a goal runs, a state is stamped when the arm was there: the wall clock at the goal's first
-            # state plus the robot's time since. A busy host that holds the node up delays the message, not its
-            # stamp (the run keeps its own pace, catching up after a stall).
-            during: dict = {}
+            stamps = StateStamps(lambda: rospy.Time.now().to_nsec())
 
             def publish(t, positions, velocities):
-                if "running" in during:
-                    wall, t0 = during.setdefault("origin", (rospy.Time.now(), t))
-                    stamp = wall + rospy.Duration.from_sec(t - t0)
-                else:
-                    stamp = rospy.Time.now()
+                ns = stamps(t)
                 states.publish(sensor_msgs.JointState(
-                    header=rospy.Header(stamp=stamp), name=names,
+                    header=rospy.Header(stamp=rospy.Time(ns // 1_000_000_000, ns % 1_000_000_000)), name=names,
                     position=[float(v) for v in positions], velocity=[float(v) for v in velocities]))
 
             robot.on_record = publish
@@ -145,14 +138,64 @@ def serve(backend: str = "sim", *, rate: float = 50.0, topic: str = COMMAND, out
                     s = robot.read()
                     publish(s.time, s.positions, s.velocities)
                     continue
-                during["running"] = True
+                stamps.running = True
                 try:
                     _run_goal(robot, goal, rate, rospy)
                 finally:
-                    during.clear()
+                    stamps.running = False
                 tick = time.monotonic()
         finally:
             rospy.signal_shutdown("snakekit ros stopped")
+
+
+class StateStamps:
+    """The stamps of ``/joint_states`` [ns of ROS time], one per state, given the robot's time ``t`` [s] of each.
+
+    While a goal runs (:attr:`running`), a state is stamped when the arm was there: the wall clock at the
+    goal's first state plus the robot's time since. A busy host that holds the node up delays the message,
+    not its stamp (the run keeps its own pace, catching up after a stall). Otherwise a state is stamped by
+    the wall clock as it goes out. Never back in time, and never closer to the last stamp than the robot's
+    time between the two states: a host stalled as a goal began made that goal's clock run ahead of the
+    wall's, and the states just after it would otherwise be stamped before the goal's last ones (a
+    recording would then hold the home pose at a time within the goal).
+
+    >>> wall = iter([100_000_000_000, 100_010_000_000, 100_020_000_000])
+    >>> stamps = StateStamps(lambda: next(wall))
+    >>> stamps.running = True
+    >>> stamps(2.0), stamps(2.02)   # the goal's first state, then 20 ms of robot time later
+    (100000000000, 100020000000)
+    >>> stamps.running = False
+    >>> stamps(2.04)                # the wall clock says 100.02 s, but the goal was at 100.02 s 20 ms before
+    100040000000
+    """
+
+    def __init__(self, now_ns):
+        self._now = now_ns
+        self._running = False
+        self._origin = None  # (stamp, robot time) of the running goal's first state
+        self._last = None    # (stamp, robot time) of the last state
+
+    @property
+    def running(self) -> bool:
+        """Whether a goal runs; set at each goal's start and end (a goal's clock starts at its first state)."""
+        return self._running
+
+    @running.setter
+    def running(self, value: bool) -> None:
+        self._running, self._origin = bool(value), None
+
+    def __call__(self, t: float) -> int:
+        now = int(self._now())
+        if self._last is not None:  # no earlier than the last stamp plus the robot time since (1 ns at least)
+            now = max(now, self._last[0] + max(1, round((t - self._last[1]) * 1e9)))
+        if not self._running:
+            stamp = now
+        else:
+            if self._origin is None:
+                self._origin = (now, t)
+            stamp = self._origin[0] + round((t - self._origin[1]) * 1e9)
+        self._last = (stamp, t)
+        return stamp
 
 
 def _idle(robot, period: float, tick: float) -> float:
