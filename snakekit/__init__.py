@@ -15,7 +15,7 @@ from .host import choose_mujoco_gl as _choose_mujoco_gl
 _choose_mujoco_gl()
 
 from .errors import (  # noqa: E402
-    BackendError, BridgeError, CheckFailed, CollisionError, CommunicationError, ConfigurationError, FileFormatError,
+    BackendError, BridgeError, BusWatchdogError, CheckFailed, CollisionError, CommunicationError, ConfigurationError, FileFormatError,
     FileWriteError, HardwareError, InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError,
     PacketError, PortLostError,
     ServoMismatchError, ShapeError, ShortcutError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
@@ -39,7 +39,7 @@ __all__ = [
     "SPEC", "SnakeSpec", *_LAZY,
     "SnakekitError", "ConfigurationError", "InputTypeError", "ShapeError", "NotFiniteError",
     "LimitError", "CollisionError", "UnreachableTargetError", "TrajectoryError", "FileFormatError", "FileWriteError",
-    "BackendError", "BridgeError",
+    "BackendError", "BridgeError", "BusWatchdogError",
     "CommunicationError", "HardwareError", "PortLostError", "ServoMismatchError", "InstructionError", "ViewerError",
     "MissingDependencyError", "PacketError", "CheckFailed", "ShortcutError",
 ]

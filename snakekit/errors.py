@@ -99,6 +99,12 @@ class PortLostError(BackendError):
     the arm was last told; every later call on the robot raises it again."""
 
 
+class BusWatchdogError(BackendError):
+    """The servos' Bus Watchdog stopped them: they heard no instruction packet for longer than its
+    period (the program, or the computer it runs on, stalled), so they hold where they stopped and
+    refuse goals until ``robot.torque_on()`` clears it."""
+
+
 class BridgeError(ConfigurationError):
     """``snakekit bridge`` could not start: the serial port or the address to listen on is not
     usable (missing, in use, a bad ``--listen``); the message says why and what to do."""

@@ -245,8 +245,9 @@ class Verdicts:
 
 
 #: The errors a run on the arm's bus emulator raises when a reply comes too late (the emulated servos answer
-#: in real time): on a busy machine the student's code is not their cause.
-REAL_TIME_FAULTS = frozenset({"CommunicationError", "PortLostError"})
+#: in real time), or when the program stalled past the servos' Bus Watchdog (0.5 s without a packet: a stall
+#: of the machine in the middle of a run): on a busy machine the student's code is not their cause.
+REAL_TIME_FAULTS = frozenset({"CommunicationError", "PortLostError", "BusWatchdogError"})
 
 
 def real_time(a) -> bool:

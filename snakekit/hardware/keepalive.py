@@ -16,7 +16,7 @@ import threading
 import time
 import weakref
 
-from ..errors import BackendError, PortLostError
+from ..errors import BackendError, BusWatchdogError, PortLostError
 from ..host import realtime
 from .bus import SILENCE_SHARE, describe, sdk
 from .registers import BUS_WATCHDOG, HARDWARE_ERROR_STATUS, TORQUE_ENABLE, WATCHDOG_UNIT, to_signed
@@ -113,7 +113,7 @@ class WatchdogMixin:
 
     def _check_after_run(self, run):
         """``run``, unless the watchdog stopped servos midway (the program stalled for longer
-        than its period): then a BackendError that says so, with the run as measured on ``.run``."""
+        than its period): then a BusWatchdogError that says so, with the run as measured on ``.run``."""
         try:
             self._check_ready()
         except BackendError as e:
@@ -138,7 +138,7 @@ class WatchdogMixin:
             if bits:
                 raise self._hardware_error(i, bits)   # the arm is stopped, as for a fault a reading saw
         if stopped:
-            raise BackendError(
+            raise BusWatchdogError(
                 f"the Bus Watchdog stopped servo(s) {', '.join(map(str, stopped))} on {self.port_name}: they "
                 f"heard nothing for more than {self.watchdog:g} s, so they hold where they stopped and "
                 "refuse goals. Call robot.torque_on() to clear it and go on.")
