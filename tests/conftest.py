@@ -76,27 +76,29 @@ def notebook_client(nb, **kwargs):
     return client
 
 
-def _silent(ename, evalue) -> bool:
-    """Whether an error is the emulated servos' silence through the driver's tries."""
-    return ename == "CommunicationError" and "did not answer" in str(evalue)
+def _machine_fault(ename, evalue) -> bool:
+    """Whether an error is a busy machine's on the emulated bus: the emulated servos silent through the driver's
+    tries (a CommunicationError that says "did not answer"), or a stall of the kernel's process past the servos'
+    Bus Watchdog (a BusWatchdogError)."""
+    return (ename == "CommunicationError" and "did not answer" in str(evalue)) or ename == "BusWatchdogError"
 
 
 def bus_silence(nb) -> str:
-    """The first error of ``nb``'s outputs where the emulated servos did not answer a request at any of the driver's
-    tries (a CommunicationError that says "did not answer"), or "" when there is none."""
+    """The first error of ``nb``'s outputs that is a busy machine's on the emulated bus (:func:`_machine_fault`), as
+    "<type>: <message>", or "" when there is none."""
     for cell in nb.cells:
         for o in cell.get("outputs", []):
-            if o.get("output_type") == "error" and _silent(o.get("ename"), o.get("evalue", "")):
-                return str(o["evalue"])
+            if o.get("output_type") == "error" and _machine_fault(o.get("ename"), o.get("evalue", "")):
+                return f"{o['ename']}: {o['evalue']}"
     return ""
 
 
 @functools.cache
 def _run_again_on_bus_silence(base):
-    """``base`` (a NotebookClient class) whose ``execute`` runs the notebook once more, in a new kernel, when the
-    emulated servos stayed silent through the driver's tries (:func:`bus_silence`: the machine held the emulator's
-    thread up, in the kernel's own process; the grader runs such a submission again too, ``grader.batch``'s
-    ``bus_faults``). It says so as a warning, which CI's summary shows; a second silence is the notebook's result."""
+    """``base`` (a NotebookClient class) whose ``execute`` runs the notebook once more, in a new kernel, when a cell
+    ended in a busy machine's fault on the emulated bus (:func:`bus_silence`: the machine held the emulator's thread
+    or the kernel up; the grader runs such a submission again too, ``grader.batch``'s ``bus_faults``). It says so as
+    a warning, which CI's summary shows; a second fault is the notebook's result."""
     import warnings
 
     from nbclient.exceptions import CellExecutionError
@@ -109,12 +111,13 @@ def _run_again_on_bus_silence(base):
                 result = super().execute(**kw)
                 said = bus_silence(self.nb) if self.again is not None else ""
             except CellExecutionError as e:
-                if self.again is None or not _silent(e.ename, e.evalue):
+                if self.again is None or not _machine_fault(e.ename, e.evalue):
                     raise
-                said = str(e.evalue)
+                said = f"{e.ename}: {e.evalue}"
             if not said:
                 return result
-            warnings.warn(f"the emulated servos did not answer, the notebook was run again: {said}", stacklevel=2)
+            warnings.warn(f"a busy machine's fault on the emulated bus, the notebook was run again: {said}",
+                          stacklevel=2)
             second = self.again()
             second.again = None
             return second.execute(**kw)

@@ -126,46 +126,56 @@ def test_the_reply_made_from_the_outputs_is_an_error_only_when_the_cell_ended_on
         assert (reply["ename"], reply["evalue"], reply["traceback"]) == ("E", "v", ["t"])
 
 
-SILENT = ("raise snakekit.CommunicationError('servo 1 on /dev/pts/9 did not answer the SyncRead of the joint state "
-          "(timed out, 4 tries); check the cable and power, or the id.')")
+#: what a cell raises: a busy machine's faults on the emulated bus (run again), and another error (the result)
+FAULTS = {
+    "silence": "raise snakekit.CommunicationError('servo 1 on /dev/pts/9 did not answer the SyncRead of the joint "
+               "state (timed out, 4 tries); check the cable and power, or the id.')",
+    "watchdog": "raise snakekit.BusWatchdogError('during the run, the Bus Watchdog stopped servo(s) 1, 2, 3, 4, 5 on "
+                "/dev/pts/9: they heard nothing for more than 0.5 s, so they hold where they stopped and refuse goals. "
+                "Call robot.torque_on() to clear it and go on.')",
+    "overload": "raise snakekit.CommunicationError('servo 2 on /dev/pts/9 reported an overload')",
+}
 
 
 @pytest.mark.parametrize("allow_errors", [False, True])
-@pytest.mark.parametrize("silent_runs, error", [(1, None), (2, "did not answer"), (0, None),
-                                                (2, "reported an overload")])
-def test_the_suites_notebook_runs_run_again_once_when_the_emulated_servos_stayed_silent(
-        tmp_path, allow_errors, silent_runs, error):
+@pytest.mark.parametrize("fault", sorted(FAULTS))
+@pytest.mark.parametrize("faulted_runs", [0, 1, 2])
+def test_the_suites_notebook_runs_run_again_once_on_a_busy_machines_bus_fault(tmp_path, allow_errors, fault,
+                                                                              faulted_runs):
     """The suite's notebook client (tests/conftest.py's ``notebook_client``) runs a notebook once more, in a new
-    kernel, when a cell ended in the emulated servos' silence (a busy machine held the emulator's thread up); it
-    warns; a second silence is the notebook's result. Any other error is the result at once."""
+    kernel, when a cell ended in a busy machine's fault on the emulated bus: the emulated servos' silence (the
+    machine held the emulator's thread up) or a Bus Watchdog stop (it held the kernel up past 0.5 s); it warns; a
+    second fault is the notebook's result. Any other error is the result at once."""
     nbformat = need("nbformat")
     runs = tmp_path / "runs"
-    message = "did not answer the SyncRead" if error != "reported an overload" else "reported an overload"
     cell = (f"import snakekit, pathlib\np = pathlib.Path({str(runs)!r})\np.write_text(p.read_text() + 'x' "
-            f"if p.exists() else 'x')\nif len(p.read_text()) <= {silent_runs}:\n    "
-            + SILENT.replace("did not answer the SyncRead", message))
+            f"if p.exists() else 'x')\nif len(p.read_text()) <= {faulted_runs}:\n    " + FAULTS[fault])
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(cell), nbformat.v4.new_code_cell("print('done')")])
     client = notebook_client(nb, timeout=120, kernel_name="python3", allow_errors=allow_errors)
-    with pytest.warns() if silent_runs and message.startswith("did not") else _no_warning() as seen:
+    machine = fault != "overload"
+    again = faulted_runs > 0 and machine
+    error = (faulted_runs > 1 and machine) or (faulted_runs > 0 and not machine)   # the notebook's result
+    ename = "BusWatchdogError" if fault == "watchdog" else "CommunicationError"
+    with pytest.warns() if again else _no_warning() as seen:
         if error and not allow_errors:
-            with pytest.raises(nbclient.exceptions.CellExecutionError, match=error):
+            with pytest.raises(nbclient.exceptions.CellExecutionError, match=ename):
                 client.execute()
         else:
             client.execute()
     ran = len(runs.read_text())
-    again = silent_runs > 0 and message.startswith("did not")
     assert ran == (2 if again else 1), ran
     if again:
-        assert any("the emulated servos did not answer, the notebook was run again" in str(w.message) for w in seen)
+        assert any(f"a busy machine's fault on the emulated bus, the notebook was run again: {ename}: "
+                   in str(w.message) for w in seen), [str(w.message) for w in seen]
     errors = [o for o in nb.cells[0].outputs if o.output_type == "error"]
     if error and allow_errors:
-        assert [o.ename for o in errors] == ["CommunicationError"] and error in errors[0].evalue
+        assert [o.ename for o in errors] == [ename]
     elif not error:
         assert errors == [] and nb.cells[1].outputs[0].text == "done\n"
 
 
 class _no_warning:
-    """A context like ``pytest.warns``: records warnings and fails on any about the emulated servos."""
+    """A context like ``pytest.warns``: records warnings and fails on any about the emulated bus."""
 
     def __enter__(self):
         import warnings
@@ -177,5 +187,5 @@ class _no_warning:
 
     def __exit__(self, *exc):
         self._ctx.__exit__(*exc)
-        assert not any("emulated servos" in str(w.message) for w in self.list), [str(w.message) for w in self.list]
+        assert not any("emulated bus" in str(w.message) for w in self.list), [str(w.message) for w in self.list]
         return False
