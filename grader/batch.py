@@ -454,10 +454,11 @@ REFERENCE_TRIES = 3
 
 def bus_faults(work: Path, cases: dict) -> list[str]:
     """The hidden cases at which a run's hand-ins hold a fault of the arm's bus (:data:`REAL_TIME_FAULTS`:
-    CommunicationError, PortLostError, BusWatchdogError), each as "<grade id> raised <error> at hidden case <k>". The instructor's
-    solution raising one is the machine's doing (a late reply of the emulated servos on a busy machine, an
-    unplugged port), never what an exercise asks for: as an expected result it would cost every student who
-    computed the case right. (An exercise that asks for an error asks for another type: LimitError, ...)"""
+    CommunicationError, PortLostError, BusWatchdogError), each as "<grade id> raised <error> at hidden case <k>".
+    The instructor's solution raising one is the machine's doing (a late reply of the emulated servos on a busy
+    machine, a stall past the servos' Bus Watchdog, an unplugged port), never what an exercise asks for: as an
+    expected result it would cost every student who computed the case right. (An exercise that asks for an error
+    asks for another type: LimitError, ...)"""
     return [f"{gid} raised {r.strip()[:200]} at hidden case {k}" for gid, results in handin_results(work, cases).items()
             for k, r in enumerate(results) if is_fault(r)]
 

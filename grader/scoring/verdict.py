@@ -198,9 +198,9 @@ class Verdicts:
                                                            "once more from the start")
             mended = self.mended.pop(str(work), {})
             if mended:
-                detail += "; " + ", ".join(f"{gid} at hidden case {k}" for gid, ks in sorted(mended.items())
-                                           for k in sorted(ks)) + (" had a fault of the arm's bus in the second run too, "
-                                                                   "and took the first run's result there")
+                cases = ", ".join(f"{gid} at hidden case {k}" for gid, ks in sorted(mended.items()) for k in sorted(ks))
+                detail += f"; {cases} had a fault of the arm's bus in the second run too, and took the first run's " \
+                          "result there"
         if (status == "timeout" or runs > 1 or errors & REAL_TIME_FAULTS) and real_time(a):
             busy = busy_machine()
             detail = "; ".join(x for x in (detail, busy) if x)

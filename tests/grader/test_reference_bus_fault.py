@@ -22,10 +22,10 @@ WRONG = {"ex1_tool_xy": "def tool_xy(q):\n    return np.array([0.3315, 0.0]) + 0
 GID = "ex1_tool_xy_test"
 FAULTS = {"CommunicationError": "servo 3 did not answer (4 tries): is it powered and plugged in?",
           "PortLostError": "the port /dev/ttyUSB0 went away: was the cable pulled?",
-          "BusWatchdogError": "during the run, the Bus Watchdog stopped servo(s) 1, 2, 3, 4, 5 on /dev/pts/0: they heard "
-                              "nothing for more than 0.5 s, so they hold where they stopped and refuse goals. Call "
-                              "robot.torque_on() to clear it and go on. The run as measured is kept on this error's "
-                              ".run."}
+          "BusWatchdogError": "during the run, the Bus Watchdog stopped servo(s) 1, 2, 3, 4, 5 on /dev/pts/0: they "
+                              "heard nothing for more than 0.5 s, so they hold where they stopped and refuse goals. "
+                              "Call robot.torque_on() to clear it and go on. The run as measured is kept on this "
+                              "error's .run."}
 
 
 def _class(course):
