@@ -42,13 +42,13 @@ from grader.sandbox.inside import worker
 from grader.course.assignment import MAX_FILE, load_assignment, read_inside, tampered_cells, template_gradebook
 from grader.scoring.cases import CaseServer, draw
 from grader.errors import CasesError, GradeInterrupted, GradingError, InstructorReferenceError
-from grader.files import uninterrupted
+from grader.files import fitted, uninterrupted
 from grader.hooks import NO_HOOKS, BatchHooks
 from grader.course.gradebook import NOT_CARRIED, keep_release_files, not_carried, write_grade
 from grader.feedback import scores
 from grader.scoring.references import course_references, expected
 from grader.sandbox.runner import Runner, grader_folder, release
-from grader.scoring.verdict import REAL_TIME_FAULTS, SubmissionResult, Verdicts, busy_machine, real_time
+from grader.scoring.verdict import SubmissionResult, Verdicts, busy_machine, check_faults, is_fault, real_time
 from grader.scoring.score import read_handin
 from grader.scoring.wording import signatures
 from grader.course.restore import release_order, restore
@@ -459,13 +459,8 @@ def bus_faults(work: Path, cases: dict) -> list[str]:
     machine, a stall past the servos' Bus Watchdog, an unplugged port), never what an exercise asks for: as an
     expected result it would cost every student who computed the case right. (An exercise that asks for an error
     asks for another type: LimitError, ...)"""
-    return [f"{gid} raised {r.strip()[:200]} at hidden case {k}" for gid, results in handin_results(work, cases).items()
+    return [f"{gid} raised {fitted(r)} at hidden case {k}" for gid, results in handin_results(work, cases).items()
             for k, r in enumerate(results) if is_fault(r)]
-
-
-def is_fault(result) -> bool:
-    """Whether one case's hand-in is a fault of the arm's bus (:data:`REAL_TIME_FAULTS`), as the kit writes a raise."""
-    return isinstance(result, str) and result.split(":", 1)[0].strip() in REAL_TIME_FAULTS
 
 
 def handin_results(work: Path, cases) -> dict[str, list]:
@@ -494,29 +489,6 @@ def mend_faults(second: dict[str, list], first: dict[str, list]) -> dict[str, di
         for k, r in enumerate(results):
             if is_fault(r) and k < len(before) and before[k] is not None and not is_fault(before[k]):
                 out.setdefault(gid, {})[k] = before[k]
-    return out
-
-
-def check_faults(work: Path, student: str, a) -> list[str]:
-    """The test cells of a run whose check stopped on a fault of the arm's bus (:data:`REAL_TIME_FAULTS`), each as
-    "<grade id>'s check raised <error>": the student's page would show "servo 1 did not answer" where the check's
-    own words belong (a late reply of the emulated servos on a busy machine, whatever the answer)."""
-    out = []
-    for name in a.notebooks:
-        raw = read_inside(work, f"course/autograded/{student}/{a.name}/{name}.ipynb")
-        if not raw or not any(f'"ename": "{e}"'.encode() in raw for e in REAL_TIME_FAULTS):
-            continue
-        try:
-            cells = json.loads(raw).get("cells", [])
-        except (ValueError, AttributeError):
-            continue
-        for cell in cells:
-            meta = (cell.get("metadata") or {}).get("nbgrader") or {}
-            if not meta.get("grade") or meta.get("solution"):
-                continue
-            for o in cell.get("outputs") or []:
-                if o.get("output_type") == "error" and o.get("ename") in REAL_TIME_FAULTS:
-                    out.append(f"{meta.get('grade_id')}'s check raised {o['ename']}: {str(o.get('evalue', ''))[:200]}")
     return out
 
 

@@ -73,6 +73,25 @@ def one_line(message, limit: int = MESSAGE) -> str:
     return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
+def fitted(message, limit: int = 200) -> str:
+    """A message for a line that quotes it: whole, or the sentences of it that fit in ``limit`` characters, or cut at
+    a word; " …" where it was cut, never mid-word.
+
+    >>> fitted("BusWatchdogError: they stopped. Call robot.torque_on() to clear it.", 40)
+    'BusWatchdogError: they stopped. …'
+    >>> fitted("CommunicationError: servo 1 did not answer the SyncRead", 40)
+    'CommunicationError: servo 1 did not …'
+    """
+    text = " ".join(str(message).split())
+    if len(text) <= limit:
+        return text
+    cut = text[:limit - 2]
+    end = cut.rfind(". ")
+    if end > len(text.split(":", 1)[0]) + 2:  # a sentence of the message, not its error type alone
+        return cut[:end + 1] + " …"
+    return cut.rsplit(" ", 1)[0] + " …"
+
+
 def size_text(n: int) -> str:
     """``n`` bytes as a message says it (MB or GB)."""
     if n >= 1 << 30:

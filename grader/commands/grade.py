@@ -203,8 +203,15 @@ def main(argv: list[str] | None = None, out=None) -> int:
     if args.student:
         missing = [s for s in args.student if s not in students]
         if missing:
+            import difflib
+
+            lower = {s.lower(): s for s in students}
+            near = {m: difflib.get_close_matches(m.lower(), list(lower), n=1, cutoff=0.6) for m in missing}
+            meant = "; ".join(f"did you mean {lower[near[m][0]]} for {m}?" for m in missing if near[m])
             print(f"snakekit grade: no submission of {args.assignment} by {', '.join(missing)} in "
-                  f"{course}/submitted", file=sys.stderr)
+                  f"{course}/submitted" + (f" ({meant})" if meant else "")
+                  + (f"; {len(students)} student(s) have one: {excerpt(', '.join(students), quote=False)}" if students
+                     else "; no student has one yet"), file=sys.stderr)
             return 2
         students = list(dict.fromkeys(args.student))   # a name given twice is graded once
         if len(students) < len(args.student):
@@ -277,6 +284,13 @@ def main(argv: list[str] | None = None, out=None) -> int:
               f"attempts/); give them theirs: `snakekit collect {args.assignment}{course_opt} --from ZIP --times "
               f"TIMES.csv`, then `snakekit grade {args.assignment}{course_opt} "
               f"{excerpt(' '.join(f'--student {s}' for s in no_time), 300, quote=False)}`", file=out)
+    again = [r.student for r in results if r.status == "graded" and "graded on its second run" in r.detail]
+    noted = [r.student for r in results if r.status == "graded" and "the grading machine's load was" in r.detail]
+    if again or noted:
+        print(f"{len(again)} graded on a second run" + (f" ({excerpt(', '.join(again), quote=False)})" if again else "")
+              + (f", {len(noted)} with a note of the machine's load to grade again on a quiet machine "
+                 f"({excerpt(', '.join(noted), quote=False)})" if noted else "") + ": the CSV's detail says why",
+              file=out)
     print(f"graded {len(results)} submission(s) of {args.assignment}, {len(failed)} with problems; "
           f"CSV ({len(rows)} student(s)): {csv_path}; feedback: {course / 'feedback'}/<student>/{args.assignment}/"
           + (f"; gradebook backed up to {backup}" if backup else ""), file=out)

@@ -23,6 +23,15 @@ from grader.markup import visible_part
 from grader.scoring.rerun import rows_note
 from grader.scoring.wording import points, title
 
+#: The TA's note on the grading machine's load (:func:`grader.scoring.verdict.busy_machine`) in a result's detail: it
+#: tells the TA to grade again, so a student's page leaves it out
+LOAD_NOTE = re.compile(r"(?:; )?the grading machine's load was .*?\(`--student` for this one\)")
+
+
+def for_student(detail: str) -> str:
+    """A result's detail as the student's page shows it: without the TA's note on the machine's load."""
+    return LOAD_NOTE.sub("", detail or "").strip("; ")
+
 
 def _verdict_cell(ex, label: str, png: bytes | None = None):
     """The grader's box under a test cell: its points, its message, and (with a plot) a row per check, each
@@ -116,7 +125,7 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
             cells.append(_verdict_cell(ex, name, plots.get(gid)))
     head = head or (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{points(result.score)} / {result.max_score:g}**"
             + (f" ({result.status})" if result.status != "graded" else "") + "\n\n"
-            + (f"{result.detail}\n\n" if result.detail else "")
+            + (f"{for_student(result.detail)}\n\n" if for_student(result.detail) else "")
             + "| exercise | points | |\n|---|---|---|\n"
             + "".join(f"| {title(e.grade_id, test_sources.get(e.grade_id, ''))} | {points(e.score)} / {e.max_score:g} | "
                       f"{'ok' if e.score >= e.max_score else 'see below'} |\n" for e in result.exercises))
@@ -165,7 +174,7 @@ def annotate_notebook(nb, result, *, stopped: int | None = None, timeout: float 
             shown = _verdict_cell(ex, gid, verdict_plot(ex)).outputs[0]
             if result.status != "graded":
                 shown["data"]["text/html"] += (f"<div><b>Submission: {html.escape(result.status)}</b>"
-                                               f" ({html.escape(result.detail)})</div>")
+                                               f" ({html.escape(for_student(result.detail))})</div>")
             shown["metadata"] = {RECORD: True}
             cell.outputs.append(shown)
     return nb

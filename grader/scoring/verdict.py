@@ -23,6 +23,7 @@ from grader.feedback import scrub
 from grader.feedback import notebook as feedback
 from grader.scoring import rerun
 from grader.course.assignment import read_inside
+from grader.files import fitted
 from grader.hooks import NO_HOOKS, BatchHooks
 from grader.scoring.compare import GUESSES
 from grader.scoring.score import ExerciseScore, read_handin, score_exercise
@@ -196,12 +197,20 @@ class Verdicts:
             detail = (detail + "; " if detail else "") + (f"graded on its second run: the first "
                                                            f"{first_run or 'was stopped by the clock'}, so it ran "
                                                            "once more from the start")
-            mended = self.mended.pop(str(work), {})
-            if mended:
-                cases = ", ".join(f"{gid} at hidden case {k}" for gid, ks in sorted(mended.items()) for k in sorted(ks))
-                detail += f"; {cases} had a fault of the arm's bus in the second run too, and took the first run's " \
-                          "result there"
-        if (status == "timeout" or runs > 1 or errors & REAL_TIME_FAULTS) and real_time(a):
+        mended = self.mended.pop(str(work), {})
+        if mended:
+            cases = ", ".join(f"{gid} at hidden case {k}" for gid, ks in sorted(mended.items()) for k in sorted(ks))
+            detail += f"; {cases} had a fault of the arm's bus in the second run too, and took the first run's " \
+                      "result there"
+        # the graded run's own cells that stopped on a fault of the arm's bus (a first run's made it run again)
+        faults = check_faults(work, student, a) if errors & REAL_TIME_FAULTS else []
+        if faults:
+            more = f" (and {len(faults) - 1} more cell(s))" if len(faults) > 1 else ""
+            detail = "; ".join(x for x in (detail, f"{faults[0]}{more}" + (" in the second run too" if runs > 1 else
+                                                                           " in the run graded")) if x)
+        # a note of the load only where the graded run itself shows a busy machine's marks: a second run that
+        # ran clean is a sound grade
+        if (status == "timeout" or faults or mended) and real_time(a):
             busy = busy_machine()
             detail = "; ".join(x for x in (detail, busy) if x)
         score = round(sum(s.score for s in scores), 4)
@@ -248,6 +257,37 @@ class Verdicts:
 #: in real time), or when the program stalled past the servos' Bus Watchdog (0.5 s without a packet: a stall
 #: of the machine in the middle of a run): on a busy machine the student's code is not their cause.
 REAL_TIME_FAULTS = frozenset({"CommunicationError", "PortLostError", "BusWatchdogError"})
+
+
+def is_fault(result) -> bool:
+    """Whether one case's hand-in is a fault of the arm's bus (:data:`REAL_TIME_FAULTS`), as the kit writes a raise."""
+    return isinstance(result, str) and result.split(":", 1)[0].strip() in REAL_TIME_FAULTS
+
+
+def check_faults(work: Path, student: str, a) -> list[str]:
+    """The cells of a run that stopped on a fault of the arm's bus (:data:`REAL_TIME_FAULTS`), each as "<grade id>'s
+    check raised <error>" (a test cell) or "cell <n> raised <error>" (any other, counted from 1 in its notebook):
+    the student's page would show "servo 1 did not answer" where the check's own words belong, or a Bus Watchdog
+    stop in one of the lesson's demonstrations and the errors it leaves in the cells after it (a late reply of the
+    emulated servos, a stall of a busy machine, whatever the answer)."""
+    out = []
+    for name in a.notebooks:
+        raw = read_inside(work, f"course/autograded/{student}/{a.name}/{name}.ipynb")
+        if not raw or not any(f'"ename": "{e}"'.encode() in raw for e in REAL_TIME_FAULTS):
+            continue
+        try:
+            cells = json.loads(raw).get("cells", [])
+        except (ValueError, AttributeError):
+            continue
+        where = f" of {name}.ipynb" if len(a.notebooks) > 1 else ""
+        for n, cell in enumerate(cells, 1):
+            meta = (cell.get("metadata") or {}).get("nbgrader") or {}
+            for o in cell.get("outputs") or [] if cell.get("cell_type") == "code" else []:
+                if o.get("output_type") == "error" and o.get("ename") in REAL_TIME_FAULTS:
+                    what = f"{meta['grade_id']}'s check" if meta.get("grade") and not meta.get("solution") \
+                        and meta.get("grade_id") else f"cell {n}{where}"
+                    out.append(f"{what} raised {fitted(o['ename'] + ': ' + str(o.get('evalue', '')))}")
+    return out
 
 
 def real_time(a) -> bool:

@@ -363,7 +363,8 @@ def test_grader_depends_only_on_trajectory_model_and_run():
 
 
 @pytest.mark.parametrize("name", ["grader.scoring.compare", "grader.feedback.scrub", "grader.feedback.mathml",
-                                  "grader.markup", "grader.scoring.score", "grader.feedback.scores"])
+                                  "grader.markup", "grader.scoring.score", "grader.feedback.scores", "grader.scoring.verdict",
+                                  "grader.files"])
 def test_docstring_examples(name):
     import doctest
     import importlib

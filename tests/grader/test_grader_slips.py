@@ -546,6 +546,22 @@ def test_files_a_run_of_the_instructor_notebook_writes_do_not_block_grading(cour
     assert csv_path.read_bytes() == before
 
 
+@pytest.mark.parametrize("given, meant", [("Ann", "ann"), ("bem", "ben"), ("dave", None)])
+def test_a_student_without_a_submission_is_refused_naming_who_has_one(course, capsys, given, meant):
+    """``--student`` with a name that has no submission (another case, a typo, a student not in the class): nothing
+    is graded, exit 2, and the TA reads the students who do have one, and the one meant when it is near."""
+    from grader_helpers import REFERENCES, submit
+
+    for student in ("ann", "ben"):
+        submit(course, student)
+    r = run(capsys, "grade", A, "--course", course, "--references", REFERENCES, "--student", "ann", "--student", given)
+    assert r.returncode == 2
+    assert r.stderr.startswith(f"snakekit grade: no submission of {A} by {given} in {course}/submitted"), r.stderr
+    assert (f"did you mean {meant} for {given}?" in r.stderr) == (meant is not None), r.stderr
+    assert "; 2 student(s) have one: ann, ben" in r.stderr, r.stderr
+    assert not (course / f"grades-{A}.csv").exists() and not (course / "autograded").exists()
+
+
 # --- export before the due date ---------------------------------------------------------------------
 
 #: Each export format: its header, and (for the roster's ann, ben, cat) the cells before the scores.

@@ -79,7 +79,10 @@ def test_a_reference_run_with_a_bus_fault_is_made_again_and_grades_as_without(fa
     assert len(runs) == faulted_runs + 1
     said = [line for line in capfd.readouterr().err.splitlines() if "running it again" in line]
     assert len(said) == faulted_runs, said
-    said_of = f"{error}: {FAULTS[error]}"[:200]   # the grader's line keeps the first 200 characters of the raise
+    from grader.files import fitted
+
+    said_of = fitted(f"{error}: {FAULTS[error]}")   # the grader's line keeps the raise's whole sentences that fit
+    assert said_of.endswith("refuse goals. …") if error == "BusWatchdogError" else said_of == f"{error}: {FAULTS[error]}"
     assert all(f"{GID} raised {said_of} at hidden case 1" in line
                and "a fault of the arm's bus, not of the solution" in line for line in said), said
 
@@ -126,18 +129,20 @@ def test_a_students_run_with_a_bus_fault_runs_once_more_and_the_second_is_graded
         assert "took the first run's result" not in alice.detail, alice.detail
 
 
-def test_a_students_check_stopped_by_a_bus_fault_runs_once_more_and_the_second_is_graded(unfaulted, tmp_path,
+@pytest.mark.parametrize("where", ["check", "demonstration"])
+def test_a_students_check_stopped_by_a_bus_fault_runs_once_more_and_the_second_is_graded(where, unfaulted, tmp_path,
                                                                                         monkeypatch):
     """The check cell of an exercise stopped on a fault of the arm's bus (lesson 07's 7.2 in a run of the suite: "servo
     1 ... did not answer the SyncRead of the joint state (timed out, 4 tries)"): the student's page would show that
-    where the check's own hint belongs, whatever the answer. The run is made once more from scratch, as one whose
-    hand-ins hold such a fault, and the second one is graded. The fault is put into the first run's graded notebook,
-    as the kernel writes an error."""
+    where the check's own hint belongs, whatever the answer. So does any other cell (a Bus Watchdog stop in one of
+    lesson 07's demonstrations, and the errors it left in the cells after it, on the page of a student graded 8 of
+    8). The run is made once more from scratch, as one whose hand-ins hold such a fault, and the second one is
+    graded. The fault is put into the first run's graded notebook, as the kernel writes an error."""
     import nbformat
 
     from grader import batch
 
-    real_run, runs = batch.Grader._sandboxed, []
+    real_run, runs, said = batch.Grader._sandboxed, [], []
 
     def run(self, student, src, nbs, tampered, **kw):
         work, outcome = real_run(self, student, src, nbs, tampered, **kw)
@@ -146,9 +151,12 @@ def test_a_students_check_stopped_by_a_bus_fault_runs_once_more_and_the_second_i
             if len(runs) == 1:
                 path = work / "course" / "autograded" / "alice" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb"
                 nb = nbformat.read(path, as_version=4)
-                cell = next(c for c in nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == GID)
+                n, cell = next((n, c) for n, c in enumerate(nb.cells, 1) if c.cell_type == "code" and (
+                    c.metadata.get("nbgrader", {}).get("grade_id") == GID if where == "check"
+                    else not c.metadata.get("nbgrader", {}).get("grade")))
                 cell.outputs.append(nbformat.v4.new_output("error", ename="CommunicationError",
                                                            evalue=FAULTS["CommunicationError"], traceback=[]))
+                said.append(f"{GID}'s check" if where == "check" else f"cell {n}")
                 nbformat.write(nb, path)
         return work, outcome
 
@@ -158,9 +166,41 @@ def test_a_students_check_stopped_by_a_bus_fault_runs_once_more_and_the_second_i
     got = {r.student: r for r in results}
     assert len(runs) == 2
     assert got["alice"].detail.startswith(
-        f"graded on its second run: the first had a fault of the arm's bus ({GID}'s check raised CommunicationError: "
+        f"graded on its second run: the first had a fault of the arm's bus ({said[0]} raised CommunicationError: "
         f"{FAULTS['CommunicationError']}), which a busy machine causes, so it ran once more from the start"), \
         got["alice"].detail
     assert (got["alice"].status, got["alice"].score) == ("graded", 7.0)
     assert [(e.grade_id, e.score) for e in got["alice"].exercises] == unfaulted["alice"][2]
     assert (got["bob"].status, got["bob"].score) == unfaulted["bob"][:2] and "second run" not in got["bob"].detail
+
+
+def test_the_tas_terminal_names_who_was_graded_on_a_second_run(tmp_path, monkeypatch, capsys):
+    """`snakekit grade` run as a TA runs it: a student graded on a second run is "graded" in the list, and the line
+    after it names them and points at the CSV's detail (the terminal said nothing of it before)."""
+    from grader import batch
+    from snakekit import errors
+    from snakekit.cli import main
+    from snakekit.handin import decode_results, encode_results
+
+    course = _class(make_course(tmp_path))
+    real_run, runs = batch.Grader._sandboxed, []
+
+    def run(self, student, src, nbs, tampered, **kw):
+        work, outcome = real_run(self, student, src, nbs, tampered, **kw)
+        if student == "alice":
+            runs.append(work)
+            if len(runs) == 1:
+                path = work / "handin" / f"{GID}.npz"
+                results = decode_results(path.read_bytes())
+                results[1] = errors.BusWatchdogError(FAULTS["BusWatchdogError"])
+                path.write_bytes(encode_results(results))
+        return work, outcome
+
+    monkeypatch.setattr(batch.Grader, "_sandboxed", run)
+    capsys.readouterr()
+    code = main(["grade", ASSIGNMENT, "--course", str(course), "--references", str(REFERENCES), "--jobs", "1",
+                 "--seed", "5"])
+    out = capsys.readouterr().out
+    assert code == 0 and len(runs) == 2, out
+    assert "1 graded on a second run (alice): the CSV's detail says why" in out, out
+    assert "graded 2 submission(s) of" in out and "0 with problems" in out, out
