@@ -221,11 +221,21 @@ def collect(course: Path, assignment: str, source: Path, *, roster: Roster | Non
     for r in rows:
         print(f"{r['student']:<{width}}  {r['notebook'] or 'missing notebook':<24} "
               f"{r['submitted_at'] or '-':<27} {'late' if r['late'] == 'yes' else '':<4} {r['note']}".rstrip(), file=out)
-    untimed = [r["student"] for r in rows if r.pop("untimed")]
-    if untimed:
-        print(f"no submission time for the new file(s) of {len(untimed)} student(s): "
-              f"{excerpt(', '.join(untimed), quote=False)} (the download has none; times collected before stay with "
+    untimed = []
+    for r in rows:
+        same = r.pop("unchanged", False)
+        if r.pop("untimed"):
+            untimed.append((r["student"], same))
+    new = [student for student, same in untimed if not same]
+    again = [student for student, same in untimed if same]
+    if new:
+        print(f"no submission time for the new file(s) of {len(new)} student(s): "
+              f"{excerpt(', '.join(new), quote=False)} (the download has none; times collected before stay with "
               "the files they belong to); for their real times collect again with --times TIMES.csv", file=out)
+    if again:
+        print(f"still no submission time for the file(s) of {len(again)} student(s), the same as collected before: "
+              f"{excerpt(', '.join(again), quote=False)} (neither download gave one); for their real times collect "
+              "again with --times TIMES.csv", file=out)
     if known:
         print(f"no notebook of {assignment} in this download for {len(known)} student(s): "
               f"{excerpt(', '.join(known), quote=False)}; their files are kept in attempts/, and the notebook "
@@ -299,6 +309,7 @@ def _place(course, assignment, student, ups, cells, due, when) -> dict:
             "file": file_name(u0.entry),
             "notebook": ", ".join(f"{nb}.ipynb" for nb in newest), "submitted_at": _stamp(stamp) if stamp else "",
             "late": "yes" if is_late else "", "attempts": str(len(older)), "untimed": bool(newest) and when is None and known is None,
+            "unchanged": same,
             "note": "; ".join(notes) if newest else "missing notebook: no notebook of the assignment (kept in attempts/)"}
 
 

@@ -173,7 +173,9 @@ def test_a_second_collect_without_times_keeps_the_times_it_had(course, tmp_path,
     assert (sub / "ben" / A / "timestamp.txt").read_text() == f"{ben_again:%Y-%m-%d %H:%M:%S}.000000 UTC"
     assert (sub / "ann" / A / "timestamp.txt").read_bytes() == ann_stamp
     assert manifest(course)["ann"] == rows["ann"]
-    assert "no submission time for the new file(s) of 1 student(s): cat" in r.stdout
+    # cat's file is the one collected on Wednesday: not new, and still without its time
+    assert "still no submission time for the file(s) of 1 student(s), the same as collected before: cat (neither " \
+        "download gave one)" in r.stdout and "new file(s)" not in r.stdout, r.stdout
 
 
 def test_a_resubmission_without_a_time_is_graded_marked_never_with_the_earlier_time(course, tmp_path, capsys):
