@@ -277,6 +277,59 @@ def test_stamps_keep_a_goals_clock_and_never_go_back_whatever_the_host_stalls():
     assert 0.3 < before_broke / 2000 < 0.7, before_broke    # the generated lives do reach the case
 
 
+class _Clock:
+    """A monotonic clock the test moves: what the node's idle loop reads and waits by."""
+
+    def __init__(self):
+        self.now = 1000.0
+
+    def monotonic(self):
+        return self.now
+
+
+class _PacedSim:
+    """A simulator as the idle loop meets it: a step of ``d`` s advances the robot by ``d`` rounded up to its 2 ms
+    time step; in real time (``realtime``) it takes that long on the clock, paced from the call."""
+
+    backend, realtime = "sim", True
+
+    def __init__(self, clock):
+        self.clock, self.time = clock, 0.0
+
+    def step(self, d):
+        d = np.ceil(d / 0.002 - 1e-6) * 0.002
+        self.time += d
+        if self.realtime:
+            self.clock.now += d
+
+
+@pytest.mark.parametrize("work_ms", [0.0, 1.1, 7.0])
+def test_idle_states_go_out_at_the_rate_asked_however_long_each_publish_takes(monkeypatch, work_ms):
+    """Between two idle states the node reads and publishes (``work_ms`` of the clock each time: a walk-through saw
+    47.3 Hz where 50 were asked, 1.1 ms a state). The idle loop (snakekit.ros._idle) keeps the ticks: a state every
+    20 ms of the clock and of the robot's time, before and after a stall of 0.5 s, which is not caught up with a
+    burst (one state goes out at once after it, the next at its tick). The robot is left paced as it was."""
+    from snakekit import ros
+
+    clock = _Clock()
+    monkeypatch.setattr(ros.time, "monotonic", clock.monotonic)
+    monkeypatch.setattr(ros.time, "sleep", lambda d: setattr(clock, "now", clock.now + max(0.0, d)))
+    robot, period = _PacedSim(clock), 0.02
+    tick, seen = clock.now, []
+    for k in range(500):
+        tick = ros._idle(robot, period, tick)
+        seen.append((clock.now, robot.time))    # a state goes out
+        clock.now += work_ms / 1000              # robot.read() and the publish
+        if k == 249:
+            clock.now += 0.5                     # a stall of the host
+    wall, robot_time = np.array(seen).T
+    for a, b in ((0, 249), (252, 499)):          # before the stall, and after it: a state every 20 ms
+        assert abs((wall[b] - wall[a]) - (b - a) * period) <= 0.002, (a, b, wall[b] - wall[a])
+        assert abs((robot_time[b] - robot_time[a]) - (b - a) * period) <= 0.002, (a, b, robot_time[b] - robot_time[a])
+    assert robot_time[250] - robot_time[249] <= period + 0.002    # the stall is not simulated in a burst
+    assert (np.diff(robot_time) >= 0).all() and (np.diff(wall) >= 0).all() and robot.realtime   # as it was
+
+
 def test_sigterm_stops_the_node_closing_the_robot(session):
     _, returncode, out, err = session
     assert "goals (trajectory_msgs/JointTrajectory) on /arm/command" in out
