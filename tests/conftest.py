@@ -93,6 +93,19 @@ def bus_silence(nb) -> str:
     return ""
 
 
+def handin_faults(folder) -> list[str]:
+    """The hand-ins in ``folder`` (``<grade id>.npz``) that hold a busy machine's fault on the emulated bus at a case
+    (``grader.scoring.verdict.is_fault``: CommunicationError, PortLostError, BusWatchdogError), each as
+    "<grade id> at case <k>: <error>". A run of lesson 07's hidden cases with one is run again, as the grader does."""
+    from pathlib import Path
+
+    from grader.scoring.verdict import is_fault
+    from snakekit.handin import decode_results
+
+    return [f"{p.stem} at case {k}: {r}" for p in sorted(Path(folder).glob("*.npz"))
+            for k, r in enumerate(decode_results(p.read_bytes())) if is_fault(r)]
+
+
 @functools.cache
 def _run_again_on_bus_silence(base):
     """``base`` (a NotebookClient class) whose ``execute`` runs the notebook once more, in a new kernel, when a cell

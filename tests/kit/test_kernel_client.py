@@ -189,3 +189,23 @@ class _no_warning:
         self._ctx.__exit__(*exc)
         assert not any("emulated bus" in str(w.message) for w in self.list), [str(w.message) for w in self.list]
         return False
+
+
+def test_the_suites_runs_of_hidden_cases_find_a_busy_machines_fault_in_a_hand_in(tmp_path):
+    """tests/conftest.py's ``handin_faults``, by which the suite's own runs of lesson 07's hidden cases (outside the
+    grader) are made once more: every fault of the arm's bus at any case of any hand-in, and nothing else (an error
+    an exercise asks for, a result)."""
+    np = need("numpy")
+    from snakekit import errors
+    from snakekit.handin import encode_results
+    from tests.conftest import handin_faults
+
+    (tmp_path / "ex07_2_safe_move_test.npz").write_bytes(encode_results([
+        {"duration": np.array(0.5)}, errors.LimitError("joint 1 is within 0.05 rad of its limit"),
+        errors.BusWatchdogError("the Bus Watchdog stopped servo(s) 1")]))
+    (tmp_path / "ex07_3_fault_test.npz").write_bytes(encode_results([
+        errors.CommunicationError("servo 2 did not answer"), {"recovered": np.array([1, 2])}]))
+    (tmp_path / "ex07_1_ticks_test.npz").write_bytes(encode_results([{"ticks": np.array([2048])}]))
+    assert handin_faults(tmp_path) == [
+        "ex07_2_safe_move_test at case 2: BusWatchdogError: the Bus Watchdog stopped servo(s) 1",
+        "ex07_3_fault_test at case 0: CommunicationError: servo 2 did not answer"]

@@ -10,11 +10,12 @@ import re
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import copy_course, need
+from tests.conftest import bus_silence, copy_course, handin_faults, need
 
 ROOT = Path(__file__).resolve().parents[2]
 COURSE = ROOT / "course"
@@ -146,8 +147,17 @@ def autograded(request, tmp_path_factory):
     sub = course / "submitted" / "instructor" / name
     sub.mkdir(parents=True)
     shutil.copy(course / "source" / name / f"{name}.ipynb", sub)
-    proc = subprocess.run(nbgrader + ["autograde", name, "--student", "instructor", "--force"], cwd=course,
-                          env=env, capture_output=True, text=True)
+    for attempt in (1, 2):  # once more after a busy machine's fault on the emulated bus (lesson 07), as the grader does
+        proc = subprocess.run(nbgrader + ["autograde", name, "--student", "instructor", "--force"], cwd=course,
+                              env=env, capture_output=True, text=True)
+        ran = course / "autograded" / "instructor" / name / f"{name}.ipynb"
+        faults = (handin_faults(handin) if handin.is_dir() else []) + \
+            ([bus_silence(read(ran))] if proc.returncode == 0 and ran.is_file() and bus_silence(read(ran)) else [])
+        if not faults or attempt == 2:
+            break
+        warnings.warn(f"a busy machine's fault on the emulated bus, the notebook was graded again: {faults[0]}",
+                      stacklevel=1)
+        shutil.rmtree(handin, ignore_errors=True)
     if server:
         server.close()
     assert proc.returncode == 0, proc.stdout + proc.stderr

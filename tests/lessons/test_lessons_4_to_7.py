@@ -22,12 +22,13 @@ import struct
 import sys
 import tempfile
 import threading
+import warnings
 import zlib
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import need, notebook_client
+from tests.conftest import handin_faults, need, notebook_client
 
 ROOT = Path(__file__).resolve().parents[2]
 LESSONS = ["04_trajectories", "05_simulation", "06_coded_sweep", "07_real_robot"]
@@ -109,9 +110,18 @@ def graded(request):
         old = {k: os.environ.get(k) for k in env}
         os.environ.update(env)
         try:
-            nb = nbformat.read(work / f"{lesson}.ipynb", as_version=4)
-            notebook_client(nb, timeout=300, kernel_name="python3",
-                            resources={"metadata": {"path": str(work)}}).execute()
+            for attempt in (1, 2):  # once more after a busy machine's fault on the emulated bus, as the grader does
+                nb = nbformat.read(work / f"{lesson}.ipynb", as_version=4)
+                notebook_client(nb, timeout=300, kernel_name="python3",
+                                resources={"metadata": {"path": str(work)}}).execute()
+                faults = handin_faults(handin)
+                if not faults or attempt == 2:
+                    break
+                warnings.warn(f"a busy machine's fault on the emulated bus in a hand-in, the notebook was run again: "
+                              f"{faults[0]}", stacklevel=1)
+                for p in handin.glob("*.npz"):
+                    p.unlink()
+                server.asked.clear()   # what the run graded asked for
         finally:
             for k, v in old.items():
                 os.environ.pop(k) if v is None else os.environ.__setitem__(k, v)
