@@ -15,9 +15,9 @@ from .host import choose_mujoco_gl as _choose_mujoco_gl
 _choose_mujoco_gl()
 
 from .errors import (  # noqa: E402
-    BackendError, BridgeError, BusWatchdogError, CheckFailed, CollisionError, CommunicationError, ConfigurationError, FileFormatError,
-    FileWriteError, HardwareError, InputTypeError, InstructionError, LimitError, MissingDependencyError, NotFiniteError,
-    PacketError, PortLostError,
+    BackendError, BridgeError, BusWatchdogError, CheckFailed, CollisionError, CommunicationError, ConfigurationError,
+    FileFormatError, FileWriteError, HardwareError, InputTypeError, InstructionError, LimitError, MissingDependencyError,
+    NotFiniteError, PacketError, PortLostError,
     ServoMismatchError, ShapeError, ShortcutError, SnakekitError, TrajectoryError, UnreachableTargetError, ViewerError,
 )
 from .model import SPEC, SnakeSpec  # noqa: E402

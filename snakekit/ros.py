@@ -165,7 +165,7 @@ class StateStamps:
     >>> stamps(2.0), stamps(2.02)   # the goal's first state, then 20 ms of robot time later
     (100000000000, 100020000000)
     >>> stamps.running = False
-    >>> stamps(2.04)                # the wall clock says 100.02 s, but the goal was at 100.02 s 20 ms before
+    >>> stamps(2.04)                # the wall clock says 100.02 s, as the goal's last stamp: 20 ms after that
     100040000000
     """
 

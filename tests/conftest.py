@@ -97,13 +97,11 @@ def handin_faults(folder) -> list[str]:
     """The hand-ins in ``folder`` (``<grade id>.npz``) that hold a busy machine's fault on the emulated bus at a case
     (``grader.scoring.verdict.is_fault``: CommunicationError, PortLostError, BusWatchdogError), each as
     "<grade id> at case <k>: <error>". A run of lesson 07's hidden cases with one is run again, as the grader does."""
-    from pathlib import Path
-
+    from grader.scoring.cases import read_handins
     from grader.scoring.verdict import is_fault
-    from snakekit.handin import decode_results
 
-    return [f"{p.stem} at case {k}: {r}" for p in sorted(Path(folder).glob("*.npz"))
-            for k, r in enumerate(decode_results(p.read_bytes())) if is_fault(r)]
+    return [f"{gid} at case {k}: {r}" for gid, results in read_handins(folder).items()
+            for k, r in enumerate(results) if is_fault(r)]
 
 
 @functools.cache

@@ -196,6 +196,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
     from grader.batch import Grader
     from grader.course.gradebook import NO_TIME, class_rows, read_class_csv, write_csv
     from grader.course.folder import backup_gradebook
+    from grader.feedback.notebook import LOAD_NOTE
+    from grader.scoring.verdict import SECOND_RUN
 
     grader = Grader(course, args.assignment, jobs=args.jobs, timeout=args.timeout, references=args.references,
                     memory=args.memory << 20, cell_timeout=args.cell_timeout, seed=args.seed, hooks=HOOKS)
@@ -284,8 +286,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
               f"attempts/); give them theirs: `snakekit collect {args.assignment}{course_opt} --from ZIP --times "
               f"TIMES.csv`, then `snakekit grade {args.assignment}{course_opt} "
               f"{excerpt(' '.join(f'--student {s}' for s in no_time), 300, quote=False)}`", file=out)
-    again = [r.student for r in results if r.status == "graded" and "graded on its second run" in r.detail]
-    noted = [r.student for r in results if r.status == "graded" and "the grading machine's load was" in r.detail]
+    again = [r.student for r in results if r.status == "graded" and SECOND_RUN in r.detail]
+    noted = [r.student for r in results if r.status == "graded" and LOAD_NOTE.search(r.detail)]
     if again or noted:
         print(f"{len(again)} graded on a second run" + (f" ({excerpt(', '.join(again), quote=False)})" if again else "")
               + (f", {len(noted)} with a note of the machine's load to grade again on a quiet machine "

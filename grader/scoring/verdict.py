@@ -194,7 +194,7 @@ class Verdicts:
         if status == "timeout" and runs > 1:
             detail += " (run twice, so that a busy grading machine is not the cause, and stopped both times)"
         elif runs > 1:
-            detail = (detail + "; " if detail else "") + (f"graded on its second run: the first "
+            detail = (detail + "; " if detail else "") + (f"{SECOND_RUN}: the first "
                                                            f"{first_run or 'was stopped by the clock'}, so it ran "
                                                            "once more from the start")
         mended = self.mended.pop(str(work), {})
@@ -252,6 +252,9 @@ class Verdicts:
         self.pending[result.student] = bases
         return result
 
+
+#: How a result's detail begins when its second run was graded (the TA's terminal counts them).
+SECOND_RUN = "graded on its second run"
 
 #: The errors a run on the arm's bus emulator raises when a reply comes too late (the emulated servos answer
 #: in real time), or when the program stalled past the servos' Bus Watchdog (0.5 s without a packet: a stall
