@@ -21,8 +21,9 @@ import snakekit
 from grader.commands import lab as lab_cli
 from grader.arm import session as lab
 from grader.arm.jobs import Queue, settings
+from grader_helpers import lab_as_a_ta
 from snakekit.emulator import Faults
-from snakekit.hardware.registers import GOAL_POSITION, TORQUE_ENABLE
+from snakekit.hardware.registers import GOAL_POSITION
 
 A = "06_coded_sweep"
 CASE = {"points": 30, "rate": 10.0, "sweeps": 2, "amplitude": 0.2}  # 2.9 s, peak 0.87 rad/s
@@ -368,8 +369,7 @@ def test_the_command_calibrates_runs_and_on_sigterm_stops_the_arm_and_keeps_the_
     course = make_course(tmp_path)
     env = dict(os.environ, MUJOCO_GL="egl")
     cmd = [sys.executable, "-m", "snakekit.cli", "lab"]
-    r = subprocess.run(cmd + ["calibrate", A, "--course", str(course), "--emulator", "--runs", "2"],
-                       capture_output=True, text=True, timeout=120, env=env)
+    r = lab_as_a_ta("calibrate", A, "--course", course, "--emulator", "--runs", "2", env=env, timeout=120)
     assert r.returncode == 0, r.stderr
     assert "lab calibrate: reference run 2 of 2" in r.stdout and "lab calibrate: bands j1 " in r.stdout
     assert json.loads((course / "lab" / A / "calibration.json").read_text())["runs"] == 2
