@@ -48,7 +48,8 @@ from grader.course.gradebook import NOT_CARRIED, keep_release_files, not_carried
 from grader.feedback import scores
 from grader.scoring.references import course_references, expected
 from grader.sandbox.runner import Runner, grader_folder, release
-from grader.scoring.verdict import SubmissionResult, Verdicts, busy_machine, check_faults, is_fault, real_time
+from grader.scoring.verdict import (SubmissionResult, Verdicts, busy_machine, check_faults, first_run_fault,
+                                    is_fault, real_time)
 from grader.scoring.score import read_handin
 from grader.scoring.wording import signatures
 from grader.course.restore import release_order, restore
@@ -317,7 +318,7 @@ class Grader:
             why = "was stopped by the clock"
         elif student != INSTRUCTOR and (faults := (bus_faults(work, self.draw.cases) if self.draw is not None else [])
                                         or check_faults(work, student, self.a)):
-            why = f"had a fault of the arm's bus ({faults[0]}), which a busy machine causes"
+            why = first_run_fault(faults[0])
             first = handin_results(work, self.draw.cases) if self.draw is not None else {}
         else:
             return work, outcome, 1

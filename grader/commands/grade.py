@@ -209,7 +209,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
 
             lower = {s.lower(): s for s in students}
             near = {m: difflib.get_close_matches(m.lower(), list(lower), n=1, cutoff=0.6) for m in missing}
-            meant = "; ".join(f"did you mean {lower[near[m][0]]} for {m}?" for m in missing if near[m])
+            meant = "; ".join((f"{m}: " if len(missing) > 1 else "") + f"did you mean {lower[near[m][0]]}?"
+                              for m in missing if near[m])
             print(f"snakekit grade: no submission of {args.assignment} by {', '.join(missing)} in "
                   f"{course}/submitted" + (f" ({meant})" if meant else "")
                   + (f"; {len(students)} student(s) have one: {excerpt(', '.join(students), quote=False)}" if students

@@ -28,9 +28,28 @@ from grader.scoring.wording import points, title
 LOAD_NOTE = re.compile(r"(?:; )?the grading machine's load was .*?\(`--student` for this one\)")
 
 
-def for_student(detail: str) -> str:
-    """A result's detail as the student's page shows it: without the TA's note on the machine's load."""
-    return LOAD_NOTE.sub("", detail or "").strip("; ")
+#: An error the grader quotes in a result's detail, "raised <type>: <its message>", up to where the grader's own words go
+#: on: after a first run's fault (:mod:`grader.batch`), after the graded run's (``check_faults``), or at the detail's end.
+#: The message is the TA's (the emulated arm's port, the servos' registers); a student's page names the type
+QUOTED_ERROR = re.compile(r"\braised (\w+): .*?(?=(?: at hidden case \d+)?(?: \(and \d+ more cell\(s\)\))?"
+                          r"(?:\), which a busy machine causes| in the second run too| in the run graded)|$)")
+#: A test cell's id in a result's detail ("ex07_2_recover_test"): a student's page names the exercise as the lesson does
+GRADE_ID = re.compile(r"\bex\d+(?:_\d+)?_\w+?_test\b")
+
+
+def for_student(detail: str, tests: dict[str, str] | None = None) -> str:
+    """A result's detail as the student's page shows it: without the TA's note on the machine's load, each error the
+    grader quotes by its type alone (its message holds the grading machine's port and registers), and each exercise
+    by the name its lesson gives it (``tests``: the test cells' sources by grade id, :func:`title`).
+
+    >>> for_student("graded on its second run: the first had a fault of the arm's bus (ex07_2_recover_test raised "
+    ...             "CommunicationError: servo 3 did not answer on /dev/pts/4 (SyncRead). … at hidden case 2), which a "
+    ...             "busy machine causes, so it ran once more from the start")
+    "graded on its second run: the first had a fault of the arm's bus (exercise 7.2 recover raised CommunicationError at hidden case 2), which a busy machine causes, so it ran once more from the start"
+    """
+    text = LOAD_NOTE.sub("", detail or "")
+    text = QUOTED_ERROR.sub(lambda m: f"raised {m[1]}", text)
+    return GRADE_ID.sub(lambda m: f"exercise {title(m[0], (tests or {}).get(m[0], ''))}", text).strip("; ")
 
 
 def _verdict_cell(ex, label: str, png: bytes | None = None):
@@ -125,7 +144,7 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
             cells.append(_verdict_cell(ex, name, plots.get(gid)))
     head = head or (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{points(result.score)} / {result.max_score:g}**"
             + (f" ({result.status})" if result.status != "graded" else "") + "\n\n"
-            + (f"{for_student(result.detail)}\n\n" if for_student(result.detail) else "")
+            + (f"{for_student(result.detail, test_sources)}\n\n" if for_student(result.detail) else "")
             + "| exercise | points | |\n|---|---|---|\n"
             + "".join(f"| {title(e.grade_id, test_sources.get(e.grade_id, ''))} | {points(e.score)} / {e.max_score:g} | "
                       f"{'ok' if e.score >= e.max_score else 'see below'} |\n" for e in result.exercises))

@@ -24,7 +24,7 @@ from pathlib import Path
 import nbformat
 
 from grader.course.gradebook import SubmissionScores, class_rows, read_class_csv, scores_of, write_csv
-from grader.feedback.notebook import build, recorded
+from grader.feedback.notebook import build, for_student, recorded
 from grader.feedback.exporter import page_exporter
 from grader.scoring.wording import points, title
 
@@ -84,7 +84,7 @@ def head(numbers: SubmissionScores, status: str, detail: str, tests: dict | None
     return (f"# Feedback: {numbers.assignment}\n\nStudent: `{numbers.student}`. "
             f"Score: **{points(numbers.score)} / {numbers.max_score:g}**"
             + (f" ({status})" if status != "graded" else "") + "\n\n" + late
-            + (f"{detail}\n\n" if detail else "")
+            + (f"{for_student(detail, tests)}\n\n" if for_student(detail) else "")
             + "| exercise | points | |\n|---|---|---|\n" + "".join(rows))
 
 

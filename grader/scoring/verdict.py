@@ -256,6 +256,12 @@ class Verdicts:
 #: How a result's detail begins when its second run was graded (the TA's terminal counts them).
 SECOND_RUN = "graded on its second run"
 
+
+def first_run_fault(fault: str) -> str:
+    """Why a first run was not the one graded, when it had a fault of the arm's bus (``fault``: the first of
+    :func:`check_faults` or :func:`grader.batch.bus_faults`), as the TA's line and the detail say it."""
+    return f"had a fault of the arm's bus ({fault}), which a busy machine causes"
+
 #: The errors a run on the arm's bus emulator raises when a reply comes too late (the emulated servos answer
 #: in real time), or when the program stalled past the servos' Bus Watchdog (0.5 s without a packet: a stall
 #: of the machine in the middle of a run): on a busy machine the student's code is not their cause.

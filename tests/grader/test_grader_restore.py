@@ -151,13 +151,14 @@ def test_an_edited_and_a_stripped_submission_score_as_the_good_one_and_the_ta_is
     assert r.returncode == 0, r.stderr[-3000:]
     rows = read_csv(course / f"grades-{ASSIGNMENT}.csv")
     assert (rows["good"]["status"], float(rows["good"]["score"])) == ("graded", 7.0)
-    for student, said in (("eegger", "ex2_sweep_test: edited: run as released"),
-                          ("iito", "its nbgrader metadata was lost")):
+    for student, said, shown in (("eegger", "ex2_sweep_test: edited: run as released",
+                                  "exercise 2 my_sweep: edited: run as released"),  # as the page's table names it
+                                 ("iito", "its nbgrader metadata was lost", "its nbgrader metadata was lost")):
         row = rows[student]
         assert (row["status"], float(row["score"])) == ("tests restored", 7.0), row
         assert said in row["detail"]
         page = (course / "feedback" / student / ASSIGNMENT / f"{ASSIGNMENT}.html").read_text()
-        assert "(tests restored)" in page and said in page
+        assert "(tests restored)" in page and shown in page and "<td>2 my_sweep</td>" in page, page[-3000:]
     ran = nbformat.read(course / "autograded" / "eegger" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", as_version=4)
     assert "print(sweep)" not in next(c for c in ran.cells if _gid(c) == "ex2_sweep_test").source  # as released
     assert set(GOOD) <= {_gid(c) for c in ran.cells}

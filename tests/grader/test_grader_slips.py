@@ -559,7 +559,13 @@ def test_a_student_without_a_submission_is_refused_naming_who_has_one(course, ca
     r = run(capsys, "grade", A, "--course", course, "--references", REFERENCES, "--student", "ann", "--student", given)
     assert r.returncode == 2
     assert r.stderr.startswith(f"snakekit grade: no submission of {A} by {given} in {course}/submitted"), r.stderr
-    assert (f"did you mean {meant} for {given}?" in r.stderr) == (meant is not None), r.stderr
+    assert (f"by {given} in {course}/submitted (did you mean {meant}?); " in r.stderr) == (meant is not None), \
+        r.stderr
+    assert ("did you mean" in r.stderr) == (meant is not None), r.stderr
+    # two such names: each one's own
+    r = run(capsys, "grade", A, "--course", course, "--references", REFERENCES, "--student", "Ben", "--student", given)
+    assert f"by Ben, {given} in {course}/submitted (Ben: did you mean ben?" + (
+        f"; {given}: did you mean {meant}?); " if meant else "); ") in r.stderr, r.stderr
     assert "; 2 student(s) have one: ann, ben" in r.stderr, r.stderr
     assert not (course / f"grades-{A}.csv").exists() and not (course / "autograded").exists()
 

@@ -13,6 +13,8 @@ the arm's bus), as the kit writes a raise: ``"<type>: <message>"`` at that case.
 
 from __future__ import annotations
 
+import html
+
 import pytest
 
 from conftest import need_program
@@ -171,6 +173,11 @@ def test_a_students_check_stopped_by_a_bus_fault_runs_once_more_and_the_second_i
         got["alice"].detail
     assert (got["alice"].status, got["alice"].score) == ("graded", 7.0)
     assert [(e.grade_id, e.score) for e in got["alice"].exercises] == unfaulted["alice"][2]
+    # her page says it in the grader's words: the fault by its type, its message (the machine's port) the TA's
+    (page,) = (tmp_path / "course" / "feedback" / "alice").rglob("*.html")
+    text = html.unescape(page.read_text())
+    assert "raised CommunicationError), which a busy machine causes, so it ran once more from the start" in text
+    assert FAULTS["CommunicationError"][:30] not in text and "/dev/" not in text
     assert (got["bob"].status, got["bob"].score) == unfaulted["bob"][:2] and "second run" not in got["bob"].detail
 
 
