@@ -166,7 +166,7 @@ class Grader:
         """Sandboxes run ``jobs`` at a time, the instructor notebook's first; scoring and feedback
         run beside them, in this process, once the instructor's results are in."""
         results, waiting = [], []
-        bar = Progress(len(students), self.progress, self.jobs)
+        bar = Progress(len(students), self.progress, min(self.jobs, max(len(students), 1)))  # those that run
         sandbox.STOP.clear()
         pending = {}
         try:
@@ -532,7 +532,14 @@ class Again:
 
 class Progress:
     """``grading: [#####.....] 12/60 done, 48 left, 3 with problems`` on stderr (or a given stream): a
-    submission whose status is not ``graded`` (tests restored, a timeout...), the summary's count."""
+    submission whose status is not ``graded`` (tests restored, a timeout...), the summary's count.
+
+    >>> import io
+    >>> bar = Progress(2, io.StringIO(), jobs=1)
+    >>> bar.done = 1
+    >>> bar._line()[-10:]
+    ' 1 worker)'
+    """
 
     def __init__(self, total: int, stream=None, jobs: int = 1):
         self.total, self.done, self.failed = total, 0, 0
@@ -548,7 +555,8 @@ class Progress:
         rate = (time.monotonic() - self.t0) / self.done if self.done else 0
         return (f"grading [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total}: done {self.done}, "
                 f"left {self.total - self.done}, {self.failed} with problems"
-                + (f" ({rate:.1f} s per student, {self.jobs} workers)" if self.done else ""))
+                + (f" ({rate:.1f} s per student, {self.jobs} worker{'s' if self.jobs != 1 else ''})" if self.done
+                   else ""))
 
     def _show(self):
         if self.tty:

@@ -42,7 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cell-timeout", type=float, default=None,
                    help="wall-clock limit of one cell [s]: that cell is interrupted (the kernel lives on), it "
                         "costs only its exercise, and the cells after it still run and hand in (default: a third "
-                        "of --timeout, 40 s at the default 120: the slowest cell of the course takes about 15 s)")
+                        "of --timeout, 40 s at the default 120: the slowest cells of the course, on a loaded machine and "
+                        "with their hidden cases, take about 15 s)")
     p.add_argument("--memory", type=int, default=4096, help="memory limit per process [MB] (default: 4096)")
     p.add_argument("--csv", type=Path, default=None, help="write the grades here (default: <course>/grades-<assignment>.csv)")
     p.add_argument("--references", type=Path, default=None,
@@ -214,7 +215,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
             print(f"snakekit grade: no submission of {args.assignment} by {', '.join(missing)} in "
                   f"{course}/submitted" + (f" ({meant})" if meant else "")
                   + (f"; {len(students)} student(s) have one: {excerpt(', '.join(students), quote=False)}" if students
-                     else "; no student has one yet"), file=sys.stderr)
+                     else "; no student has one yet") + "; nothing was graded: give each --student as its folder "
+                  "in submitted/ names it", file=sys.stderr)
             return 2
         students = list(dict.fromkeys(args.student))   # a name given twice is graded once
         if len(students) < len(args.student):
