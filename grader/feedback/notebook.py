@@ -28,9 +28,10 @@ from grader.scoring.wording import points, title
 LOAD_NOTE = re.compile(r"(?:; )?the grading machine's load was .*?\(`--student` for this one\)")
 
 
-#: An error the grader quotes in a result's detail, "raised <type>: <its message>", up to where the grader's own words go
-#: on: after a first run's fault (:mod:`grader.batch`), after the graded run's (``check_faults``), or at the detail's end.
-#: The message is the TA's (the emulated arm's port, the servos' registers); a student's page names the type
+#: An error the grader quotes in a result's detail, "raised <type>: <its message>", up to where the grader's own
+#: words go on: after a first run's fault (:mod:`grader.batch`), after the graded run's (``check_faults``), or at the
+#: detail's end. The message is the TA's (the emulated arm's port, the servos' registers); a student's page names the
+#: type
 QUOTED_ERROR = re.compile(r"\braised (\w+): .*?(?=(?: at hidden case \d+)?(?: \(and \d+ more cell\(s\)\))?"
                           r"(?:\), which a busy machine causes| in the second run too| in the run graded)|$)")
 #: A test cell's id in a result's detail ("ex07_2_recover_test"): a student's page names the exercise as the lesson does

@@ -159,10 +159,15 @@ CLAIMS = {
          1e-12),
         # the bus runs in real time: on a loaded machine a goal may leave a cycle late, and the peak moves a little
         ("it peaks at about 0.5 N m on every joint", "np.abs(home_run.efforts).max(axis=0)", [0.5] * 5, 0.1),
-        # mid-move, where the joints turn fastest: the load's peak and the speed's are at most a few samples apart
-        ("on every joint mid-move, where the joints turn fastest",
-         "np.abs(home_run.measured.times[np.abs(home_run.efforts).argmax(axis=0)]"
-         " - home_run.measured.times[np.abs(home_run.measured.velocities).argmax(axis=0)]).max()", (0.0, 0.1), None),
+        # mid-move: each joint's load peaks in the middle half of the 1 s move (0.50 to 0.57 s after its start)
+        ("on every joint mid-move",
+         "np.abs(home_run.measured.times[np.abs(home_run.efforts).argmax(axis=0)] - 0.5).max()", (0.0, 0.25), None),
+        # where the joints turn fastest: there each joint's load is within 20 % of its peak (0.98 to 1 quiet and beside
+        # stress-ng). The load is flat there: 0.87 to 0.97 of its peak 0.1 s either side, so on a loaded machine the
+        # peak sample can lie 0.1 s from the speed's (a CI run: 0.102 s), the load where the speed peaks cannot
+        ("where the joints turn fastest",
+         "(np.abs(home_run.efforts)[np.abs(home_run.measured.velocities).argmax(axis=0), np.arange(5)]"
+         " / np.abs(home_run.efforts).max(axis=0)).min()", (0.8, 1.0), None),
         ("is almost 0 once the arm holds still at home", "np.abs(home_run.efforts[-10:]).max()", (0.0, 0.06), None),
         # 12 runs on a busy machine: 0.90 to 1.04, larger than the simulator's in 5 of them
         ("About the same: within about 10 % of the simulator's",
