@@ -53,6 +53,19 @@ def for_student(detail: str, tests: dict[str, str] | None = None) -> str:
     return GRADE_ID.sub(lambda m: f"exercise {title(m[0], (tests or {}).get(m[0], ''))}", text).strip("; ")
 
 
+def page_head(assignment: str, student: str, score: float, max_score: float, status: str, detail: str, rows,
+              tests: dict[str, str] | None = None, late: str = "") -> str:
+    """A page's first cell: the score, the status unless ``graded``, ``late`` (what a late penalty took), the detail
+    as the student reads it (:func:`for_student`), then a row per exercise, ``rows``: (its name, points, maximum,
+    note)."""
+    shown = for_student(detail, tests)
+    return (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{points(score)} / {max_score:g}**"
+            + (f" ({status})" if status != "graded" else "") + "\n\n" + late
+            + (f"{shown}\n\n" if shown else "")
+            + "| exercise | points | |\n|---|---|---|\n"
+            + "".join(f"| {name} | {points(got)} / {most:g} | {note} |\n" for name, got, most, note in rows))
+
+
 def _verdict_cell(ex, label: str, png: bytes | None = None):
     """The grader's box under a test cell: its points, its message, and (with a plot) a row per check, each
     detail said once: in its row, not again in the message above."""
@@ -143,12 +156,10 @@ def build(nb, *, student: str, assignment: str, result, test_sources: dict[str, 
             cells.append(nbformat.v4.new_markdown_cell(f"**The test cell of exercise {name} was missing from your "
                                                        "notebook.**"))
             cells.append(_verdict_cell(ex, name, plots.get(gid)))
-    head = head or (f"# Feedback: {assignment}\n\nStudent: `{student}`. Score: **{points(result.score)} / {result.max_score:g}**"
-            + (f" ({result.status})" if result.status != "graded" else "") + "\n\n"
-            + (f"{for_student(result.detail, test_sources)}\n\n" if for_student(result.detail) else "")
-            + "| exercise | points | |\n|---|---|---|\n"
-            + "".join(f"| {title(e.grade_id, test_sources.get(e.grade_id, ''))} | {points(e.score)} / {e.max_score:g} | "
-                      f"{'ok' if e.score >= e.max_score else 'see below'} |\n" for e in result.exercises))
+    head = head or page_head(assignment, student, result.score, result.max_score, result.status, result.detail,
+                             [(title(e.grade_id, test_sources.get(e.grade_id, "")), e.score, e.max_score,
+                               "ok" if e.score >= e.max_score else "see below") for e in result.exercises],
+                             test_sources)
     out = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(head)] + cells)
     for i, cell in enumerate(out.cells):  # the same page whenever it is written again
         cell["id"] = f"cell-{i}"

@@ -24,7 +24,7 @@ from pathlib import Path
 import nbformat
 
 from grader.course.gradebook import SubmissionScores, class_rows, read_class_csv, scores_of, write_csv
-from grader.feedback.notebook import build, for_student, recorded
+from grader.feedback.notebook import build, page_head, recorded
 from grader.feedback.exporter import page_exporter
 from grader.scoring.wording import points, title
 
@@ -74,18 +74,15 @@ def head(numbers: SubmissionScores, status: str, detail: str, tests: dict | None
         if g.extra:
             note += f"; {g.extra:+g} extra from your teacher"
         name = title(g.grade_id, (tests or {}).get(g.grade_id, ""))
-        rows.append(f"| {name} | {points(g.score)} / {g.max_score:g} | {note} |\n")
+        rows.append((name, g.score, g.max_score, note))
     late = ""
     if numbers.late_penalty:
         when = f" ({_duration(numbers.seconds_late)} after the due date)" if numbers.seconds_late > 0 else ""
         late = (f"Handed in late{when}: the late penalty took "
                 f"{numbers.late_penalty:g} point(s) off the {round(numbers.raw, 4):g} your exercises scored, "
                 f"so your score is {numbers.score:g}.\n\n")
-    return (f"# Feedback: {numbers.assignment}\n\nStudent: `{numbers.student}`. "
-            f"Score: **{points(numbers.score)} / {numbers.max_score:g}**"
-            + (f" ({status})" if status != "graded" else "") + "\n\n" + late
-            + (f"{for_student(detail, tests)}\n\n" if for_student(detail) else "")
-            + "| exercise | points | |\n|---|---|---|\n" + "".join(rows))
+    return page_head(numbers.assignment, numbers.student, numbers.score, numbers.max_score, status, detail, rows,
+                     tests, late)
 
 
 def test_sources(gb, assignment: str, notebook: str) -> dict[str, str]:
