@@ -31,6 +31,33 @@ def test_plot_run_draws_degrees(run):
     assert measured.get_ydata() == pytest.approx(np.degrees(run.measured.positions[:, 0]))
 
 
+def test_plot_runs_texts_all_lie_in_the_figure_and_none_overlaps_another():
+    """The figure's margins are fixed (no layout engine measures them at each draw): each label, tick label, title
+    and the legend must still have room, for a short run and a long one (its zoom panel), with angles near the
+    limits (tick labels of three digits and a sign) and with the largest values a summary prints."""
+    near = np.zeros(5)
+    near[0] = np.broadcast_to(np.asarray(snakekit.SPEC.upper, float), (5,))[0] - 0.05  # joint 1 near its limit
+    for duration, goal in ((1.0, [0.5, -0.3, 0.2, 0.0, 0.1]), (12.0, near), (12.0, -near), (1.0, np.zeros(5))):
+        move = snakekit.joint_trajectory(np.zeros(5), goal, duration)
+        with snakekit.make_robot("sim") as robot:
+            fig = plot_run(robot.run(move), title=None)
+        renderer = _drawn(fig)
+        page = fig.bbox
+        shown = [fig._suptitle] + [t for ax in fig.axes for t in (ax.title, ax.xaxis.label, ax.yaxis.label, *ax.texts)]
+        texts = [(t, t.get_window_extent(renderer)) for t in shown if t is not None and t.get_visible() and t.get_text()]
+        texts += [(t, t.get_window_extent(renderer)) for ax in fig.axes for axis in (ax.xaxis, ax.yaxis)
+                  for tick, t in zip(axis.get_major_ticks(), axis.get_ticklabels())
+                  if t.get_visible() and t.get_text() and min(axis.get_view_interval()) - 1e-9 <= tick.get_loc()
+                  <= max(axis.get_view_interval()) + 1e-9]
+        texts += [(ax.get_legend(), ax.get_legend().get_window_extent(renderer)) for ax in fig.axes if ax.get_legend()]
+        assert len(texts) > 40, len(texts)
+        out = [str(t) for t, b in texts if b.x0 < page.x0 - 0.5 or b.y0 < page.y0 - 0.5 or b.x1 > page.x1 + 0.5
+               or b.y1 > page.y1 + 0.5]
+        assert not out, f"{duration} s run: outside the figure: {out}"
+        crowded = [(str(p), str(q)) for i, (p, a) in enumerate(texts) for q, b in texts[i + 1:] if _overlap(a, b)]
+        assert not crowded, f"{duration} s run: texts overlap: {crowded[:5]}"
+
+
 def test_plot_move_draws_degrees(run):
     ax = plot_move(run).axes[0]
     assert ax.get_ylabel() == "joint angle [deg]"
