@@ -131,7 +131,13 @@ def _become_kernel(pipe: int) -> int:
     close_gate()  # the worker's line to the grader stays the worker's
     if not chunks:
         return 0  # not needed
-    req = json.loads(b"".join(chunks))
+    return become(json.loads(b"".join(chunks)))
+
+
+def become(req: dict) -> int:
+    """Become the kernel ``req`` asks for (``cmd``, ``env``, ``cwd``: what jupyter_client would launch) in this
+    freshly forked process: its own session, that environment and folder, then ipykernel's ``IPKernelApp`` as
+    ``ipykernel_launcher`` runs it (any other command is exec'd). Returns the kernel's exit code."""
     os.setsid()  # as jupyter_client's launcher: the kernel leads its own process group
     null = os.open(os.devnull, os.O_RDONLY)
     os.dup2(null, 0)
@@ -147,7 +153,9 @@ def _become_kernel(pipe: int) -> int:
     # ipykernel read JPY_PARENT_PID when this process imported it, before there was a parent to name
     sys.argv = [importlib.util.find_spec("ipykernel_launcher").origin, *cmd[3:],
                 f"--IPKernelApp.parent_handle={req['env'].get('JPY_PARENT_PID', 0)}"]
-    sys.path[0] = os.getcwd()  # what `python -m` puts first: the notebook's folder
+    # `python -m` put the server's folder first; ipykernel_launcher takes it out, and the kernel's shell puts the
+    # notebook's folder ('') back after the standard library: a student's random.py does not hide the library's
+    del sys.path[0]
     from ipykernel import kernelapp
 
     try:

@@ -1,0 +1,227 @@
+"""The suite's lesson kernels, forked from a warm process instead of started as ``python -m ipykernel_launcher``.
+
+A fresh lesson kernel spends 1.1 to 1.5 CPU-s starting Python and importing ipykernel, numpy, matplotlib,
+Pinocchio and MuJoCo before its notebook's first line does anything; the suite starts about 160 of them
+(``conftest.notebook_client``). Each test process starts one server (this file, ``python -m
+tests.kernel_zygote SOCKET``) that imports those once, then forks a kernel per request; the child becomes the
+kernel exactly as the grader's warm kernels do (:func:`grader.sandbox.inside.warmkernel.become`): its own
+session, the environment and folder jupyter_client gives it, ipykernel's ``IPKernelApp`` on the connection file.
+
+:class:`ZygoteKernelManager` is the ``AsyncKernelManager`` of the suite's notebook runs. It forks only a
+Python kernel whose environment is the session's own (a test that changed the environment, another Python,
+another kernel: the usual subprocess), so a kernel forked here and one started fresh run the same code on the
+same settings. The kernel is the server's child, not the test's: :class:`ForkedKernel` gives jupyter_client the
+``Popen`` methods it calls, by process id (and start time, so a reused id is never taken for the kernel). The
+server ends when the test process that started it ends; a kernel ends when its server does (ipykernel's
+parent poller).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from jupyter_client.manager import AsyncKernelManager
+
+from grader.sandbox.inside.warmkernel import ForkedProcess
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: imported once by the server: what a lesson kernel imports as it starts and in its first cells
+PRELOAD = (
+    "ipykernel.kernelapp", "ipykernel.ipkernel", "ipykernel.debugger", "IPython", "IPython.core.magics",
+    "IPython.core.debugger", "IPython.core.oinspect", "IPython.extensions.storemagic", "pdb", "psutil",
+    # (the kernel's part ends here)
+    "numpy", "matplotlib.pyplot", "snakekit", "snakekit.kinematics",
+    "snakekit.trajectory", "snakekit.sim", "snakekit.plots", "snakekit.checks", "snakekit.profile_planner",
+    "grader.sandbox.inside.warmkernel",
+)
+
+#: the last module of :data:`PRELOAD` that a fresh kernel imports as it starts
+KERNEL_PART = "psutil"
+
+#: what jupyter_client sets for each kernel it launches, and pytest for each test: not a setting of the kernel
+PER_KERNEL = ("JPY_PARENT_PID", "JPY_SESSION_NAME", "PYTEST_CURRENT_TEST")
+
+#: the session's environment, as the suite started (a test's own changes make its kernels fresh ones)
+SESSION_ENV = dict(os.environ)
+
+
+def _start_time(pid: int) -> str | None:
+    """The process's start time (clock ticks after boot), or None when it is gone or a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except (FileNotFoundError, ProcessLookupError):
+        return None
+    return None if fields[0] in ("Z", "X") else fields[19]
+
+
+# --- the server ------------------------------------------------------------------------------------------------
+
+
+def serve(path: str) -> None:
+    import gc
+    import importlib
+    import io
+
+    # what ipykernel sets as it starts, before a lesson imports matplotlib: set here before the server does, so
+    # matplotlib reads the same backend as in a fresh kernel (the kernel sets it again in its own environment)
+    before = dict(os.environ)
+    os.environ.setdefault("MPLBACKEND", "module://matplotlib_inline.backend_inline")
+    for name in PRELOAD:
+        importlib.import_module(name)
+        if name == KERNEL_PART:
+            # what ipykernel's imports set in the environment (PYDEVD_USE_FRAME_EVAL), as a fresh kernel's have by its
+            # first cell: given again to each kernel, whose environment is the one it is asked for (what the kit's
+            # imports set, as MuJoCo's PYOPENGL_PLATFORM, a fresh kernel sets only when a lesson uses the simulator)
+            imported_env = {k: v for k, v in os.environ.items() if before.get(k) != v}
+    # what all the imports set (the kit's too, as MuJoCo's PYOPENGL_PLATFORM): the same values in the test's
+    # environment leave a kernel forkable, as the test process sets them when it imports the same modules
+    Path(path + ".env").write_text(json.dumps({k: v for k, v in os.environ.items() if before.get(k) != v}))
+    from matplotlib.figure import Figure
+
+    fig = Figure()  # the fonts and the PNG writer, loaded once (not through pyplot: no backend chosen here)
+    fig.subplots().plot([0, 1])
+    fig.savefig(io.BytesIO(), format="png")
+    # matplotlib_inline's backend module sets up the inline figures of the shell that imports it, at its import:
+    # the kernel's shell imports it at its first figure, as a fresh kernel does
+    assert "matplotlib_inline.backend_inline" not in sys.modules, "the inline backend would not show a figure"
+    if threading.active_count() != 1:
+        raise RuntimeError(f"a preloaded module started threads ({threading.enumerate()}); forking would be unsafe")
+    gc.freeze()
+    from grader.sandbox.inside.warmkernel import become, exit_child
+
+    parent = os.getppid()
+    server = socket.socket(socket.AF_UNIX)
+    server.bind(path)
+    server.listen(64)
+    server.settimeout(1.0)
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the kernels are reaped by the system
+    while os.getppid() == parent:  # until the test process is gone
+        try:
+            conn, _ = server.accept()
+        except socket.timeout:
+            continue
+        with conn:
+            conn.settimeout(30)
+            data = b""
+            while chunk := conn.recv(1 << 16):
+                data += chunk
+            req = json.loads(data)
+            pid = os.fork()
+            if pid == 0:
+                signal.signal(signal.SIGCHLD, signal.SIG_DFL)  # the kernel waits for its own subprocesses
+                server.close()
+                conn.close()
+                req["env"] = {**imported_env, **req["env"], "JPY_PARENT_PID": str(os.getppid())}  # ends with the server
+                for name in [m for m in sys.modules if m.split(".")[0] in ("tests", "grader")]:
+                    del sys.modules[name]  # the suite's and the grader's code: not importable in a fresh kernel either
+                exit_child(lambda: become(req))
+            conn.sendall(json.dumps({"pid": pid, "start": _start_time(pid)}).encode())
+
+
+# --- the test process's side -------------------------------------------------------------------------------------
+
+
+class ForkedKernel(ForkedProcess):
+    """The ``Popen`` methods jupyter_client's local provisioner calls, for a kernel forked by the server: known
+    by its id and start time, not waited for (the server's system reaps it, so its exit code is not known here)."""
+
+    def __init__(self, pid: int, start: str | None):
+        super().__init__(pid)
+        self._start = start
+        if start is None:
+            self.returncode = 0  # gone before it was looked at
+
+    def poll(self) -> int | None:
+        if self.returncode is None and _start_time(self.pid) != self._start:
+            self.returncode = 0
+        return self.returncode
+
+    def send_signal(self, signum: int) -> None:
+        try:
+            super().send_signal(signum)
+        except ProcessLookupError:
+            pass  # it ended between the look and the signal
+
+
+class _Server:
+    """This test process's server, started at its first kernel."""
+
+    lock = threading.Lock()
+    path: str | None = None
+    imported: dict = {}
+    proc: subprocess.Popen | None = None
+    failed = ""
+
+    @classmethod
+    def address(cls) -> str | None:
+        with cls.lock:
+            if cls.path is None and not cls.failed:
+                folder = tempfile.mkdtemp(prefix="snakekit-zygote-")
+                path = os.path.join(folder, "s")
+                cls.proc = subprocess.Popen([sys.executable, "-m", "tests.kernel_zygote", path], cwd=ROOT,
+                                            env=SESSION_ENV, stdin=subprocess.DEVNULL, start_new_session=True)
+                deadline = time.monotonic() + 120
+                while not os.path.exists(path):
+                    if cls.proc.poll() is not None or time.monotonic() > deadline:
+                        cls.failed = f"the kernel server did not start (exit code {cls.proc.poll()})"
+                        cls.proc.kill()
+                        print(f"tests/kernel_zygote.py: {cls.failed}; fresh kernels from here on", file=sys.stderr)
+                        return None
+                    time.sleep(0.05)
+                cls.imported = json.loads(Path(path + ".env").read_text())
+                cls.path = path
+            return cls.path
+
+
+def _forkable(cmd: list[str], env: dict, imported: dict) -> bool:
+    """A Python kernel of this interpreter, in the session's environment (``imported``: what the server's imports
+    set, which the test process may have set too by importing the same modules)."""
+    if cmd[1:3] != ["-m", "ipykernel_launcher"] or os.path.realpath(cmd[0]) != os.path.realpath(sys.executable):
+        return False
+    keys = (set(env) | set(SESSION_ENV)) - set(PER_KERNEL)
+    return all(env.get(k) == SESSION_ENV.get(k) or (k in imported and env.get(k) in (None, imported[k])
+                                                    and SESSION_ENV.get(k) in (None, imported[k])) for k in keys)
+
+
+def _fork(path: str, cmd: list[str], env: dict, cwd: str) -> ForkedKernel:
+    with socket.socket(socket.AF_UNIX) as s:
+        s.settimeout(60)
+        s.connect(path)
+        s.sendall(json.dumps({"cmd": cmd, "env": env, "cwd": cwd}).encode())
+        s.shutdown(socket.SHUT_WR)
+        data = b""
+        while chunk := s.recv(1 << 16):
+            data += chunk
+    reply = json.loads(data)
+    return ForkedKernel(reply["pid"], reply["start"])
+
+
+class ZygoteKernelManager(AsyncKernelManager):
+    """``AsyncKernelManager`` that forks its kernel from this test process's warm server when it can."""
+
+    async def _async_launch_kernel(self, kernel_cmd: list[str], **kw) -> None:
+        prov = self.provisioner
+        cmd = [os.path.expanduser(s) for s in kernel_cmd]
+        env = dict(kw.get("env") or os.environ)
+        if type(prov).__name__ != "LocalProvisioner" or not (path := _Server.address()) \
+                or not _forkable(cmd, env, _Server.imported):
+            return await super()._async_launch_kernel(kernel_cmd, **kw)
+        cwd = str(kw.get("cwd") or os.getcwd())
+        process = _fork(path, cmd, env, cwd)
+        prov.process, prov.pid, prov.pgid, prov.cwd = process, process.pid, process.pid, cwd
+        self._reconcile_connection_info(prov.connection_info)
+
+
+if __name__ == "__main__":
+    serve(sys.argv[1])
