@@ -68,17 +68,29 @@ def _start_time(pid: int) -> str | None:
 # --- the server ------------------------------------------------------------------------------------------------
 
 
-def serve(path: str) -> None:
+def serve(path: str, owner: int) -> None:
+    """Preload, then fork a kernel per request on the socket ``path`` until the process ``owner`` (the test
+    process that started this server) is gone."""
     import gc
     import importlib
     import io
+    import shutil
 
+    try:
+        _serve(path, owner, gc, importlib, io)
+    finally:
+        shutil.rmtree(os.path.dirname(path), ignore_errors=True)
+
+
+def _serve(path, owner, gc, importlib, io) -> None:
     # what ipykernel sets as it starts, before a lesson imports matplotlib: set here before the server does, so
     # matplotlib reads the same backend as in a fresh kernel (the kernel sets it again in its own environment)
     before = dict(os.environ)
     os.environ.setdefault("MPLBACKEND", "module://matplotlib_inline.backend_inline")
     for name in PRELOAD:
         importlib.import_module(name)
+        if name == "numpy":  # its BLAS's pool of threads, which the BLAS stops and starts again around a fork
+            blas_tasks = len(os.listdir("/proc/self/task"))
         if name == KERNEL_PART:
             # what ipykernel's imports set in the environment (PYDEVD_USE_FRAME_EVAL), as a fresh kernel's have by its
             # first cell: given again to each kernel, whose environment is the one it is asked for (what the kit's
@@ -95,38 +107,63 @@ def serve(path: str) -> None:
     # matplotlib_inline's backend module sets up the inline figures of the shell that imports it, at its import:
     # the kernel's shell imports it at its first figure, as a fresh kernel does
     assert "matplotlib_inline.backend_inline" not in sys.modules, "the inline backend would not show a figure"
-    if threading.active_count() != 1:
-        raise RuntimeError(f"a preloaded module started threads ({threading.enumerate()}); forking would be unsafe")
+    tasks = len(os.listdir("/proc/self/task"))  # threads of C libraries too, which threading does not see
+    if threading.active_count() != 1 or tasks != blas_tasks:
+        raise RuntimeError(f"a preloaded module started threads ({threading.enumerate()}; {tasks} tasks, "
+                           f"{blas_tasks} with numpy's BLAS); forking would be unsafe")
     gc.freeze()
-    from grader.sandbox.inside.warmkernel import become, exit_child
-
-    parent = os.getppid()
     server = socket.socket(socket.AF_UNIX)
-    server.bind(path)
+    server.bind(path + ".tmp")
     server.listen(64)
+    os.rename(path + ".tmp", path)  # the address appears once it takes connections
     server.settimeout(1.0)
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the kernels are reaped by the system
-    while os.getppid() == parent:  # until the test process is gone
+    while os.getppid() == owner:  # until the test process is gone (also when it went during the imports)
         try:
             conn, _ = server.accept()
         except socket.timeout:
             continue
-        with conn:
-            conn.settimeout(30)
-            data = b""
-            while chunk := conn.recv(1 << 16):
-                data += chunk
-            req = json.loads(data)
-            pid = os.fork()
-            if pid == 0:
-                signal.signal(signal.SIGCHLD, signal.SIG_DFL)  # the kernel waits for its own subprocesses
-                server.close()
-                conn.close()
-                req["env"] = {**imported_env, **req["env"], "JPY_PARENT_PID": str(os.getppid())}  # ends with the server
-                for name in [m for m in sys.modules if m.split(".")[0] in ("tests", "grader")]:
-                    del sys.modules[name]  # the suite's and the grader's code: not importable in a fresh kernel either
-                exit_child(lambda: become(req))
-            conn.sendall(json.dumps({"pid": pid, "start": _start_time(pid)}).encode())
+        try:
+            with conn:
+                conn.settimeout(30)
+                data = b""
+                while chunk := conn.recv(1 << 16):
+                    data += chunk
+                pid = _fork_kernel(json.loads(data), imported_env, server, conn)
+                conn.sendall(json.dumps({"pid": pid, "start": _start_time(pid)}).encode())
+        except Exception as e:  # noqa: BLE001 - a request that failed (a client gone, no fork) ends only itself
+            print(f"tests/kernel_zygote.py: a request failed: {e!r}", file=sys.stderr)
+
+
+def _fork_kernel(req: dict, imported_env: dict, server, conn) -> int:
+    from grader.sandbox.inside.warmkernel import become, exit_child
+
+    me = os.getpid()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid:
+        return pid
+    signal.signal(signal.SIGCHLD, signal.SIG_DFL)  # the kernel waits for its own subprocesses
+    server.close()
+    conn.close()
+    req["env"] = {**imported_env, **req["env"], "JPY_PARENT_PID": str(me)}  # the kernel ends when the server does
+    for name in [m for m in sys.modules if m.split(".")[0] in ("tests", "grader")]:
+        del sys.modules[name]  # the suite's and the grader's code are no modules of a lesson's
+    import numpy as np
+
+    np.random.seed()  # the legacy global generator, seeded at numpy's import: each kernel its own, as a fresh one
+
+    def kernel() -> int:
+        import atexit
+
+        try:
+            return become(req)
+        finally:  # what a fresh kernel's interpreter does as it exits: wait for its threads, run the atexit functions
+            threading._shutdown()  # type: ignore[attr-defined]
+            atexit._run_exitfuncs()
+
+    exit_child(kernel)
 
 
 # --- the test process's side -------------------------------------------------------------------------------------
@@ -148,10 +185,13 @@ class ForkedKernel(ForkedProcess):
         return self.returncode
 
     def send_signal(self, signum: int) -> None:
-        try:
-            super().send_signal(signum)
-        except ProcessLookupError:
-            pass  # it ended between the look and the signal
+        """The signal to the kernel's process group (it leads its own session, as jupyter_client's launcher makes
+        it), once it is known to be this kernel."""
+        if self.poll() is None:
+            try:
+                os.killpg(self.pid, signum)
+            except ProcessLookupError:
+                pass  # it ended between the look and the signal
 
 
 class _Server:
@@ -166,11 +206,11 @@ class _Server:
     @classmethod
     def address(cls) -> str | None:
         with cls.lock:
-            if cls.path is None and not cls.failed:
+            if cls.path is None and not cls.failed:  # (once failed, fresh kernels for the rest of the process)
                 folder = tempfile.mkdtemp(prefix="snakekit-zygote-")
                 path = os.path.join(folder, "s")
-                cls.proc = subprocess.Popen([sys.executable, "-m", "tests.kernel_zygote", path], cwd=ROOT,
-                                            env=SESSION_ENV, stdin=subprocess.DEVNULL, start_new_session=True)
+                cls.proc = subprocess.Popen([sys.executable, "-m", "tests.kernel_zygote", path, str(os.getpid())],
+                                            cwd=ROOT, env=SESSION_ENV, stdin=subprocess.DEVNULL, start_new_session=True)
                 deadline = time.monotonic() + 120
                 while not os.path.exists(path):
                     if cls.proc.poll() is not None or time.monotonic() > deadline:
@@ -181,13 +221,13 @@ class _Server:
                     time.sleep(0.05)
                 cls.imported = json.loads(Path(path + ".env").read_text())
                 cls.path = path
-            return cls.path
+            return None if cls.failed else cls.path
 
 
 def _forkable(cmd: list[str], env: dict, imported: dict) -> bool:
     """A Python kernel of this interpreter, in the session's environment (``imported``: what the server's imports
     set, which the test process may have set too by importing the same modules)."""
-    if cmd[1:3] != ["-m", "ipykernel_launcher"] or os.path.realpath(cmd[0]) != os.path.realpath(sys.executable):
+    if cmd[1:3] != ["-m", "ipykernel_launcher"] or os.path.abspath(cmd[0]) != os.path.abspath(sys.executable):
         return False
     keys = (set(env) | set(SESSION_ENV)) - set(PER_KERNEL)
     return all(env.get(k) == SESSION_ENV.get(k) or (k in imported and env.get(k) in (None, imported[k])
@@ -218,10 +258,17 @@ class ZygoteKernelManager(AsyncKernelManager):
                 or not _forkable(cmd, env, _Server.imported):
             return await super()._async_launch_kernel(kernel_cmd, **kw)
         cwd = str(kw.get("cwd") or os.getcwd())
-        process = _fork(path, cmd, env, cwd)
-        prov.process, prov.pid, prov.pgid, prov.cwd = process, process.pid, process.pid, cwd
+        try:
+            process = _fork(path, cmd, env, cwd)
+        except (OSError, ValueError) as e:  # the server is gone or said nothing: fresh kernels from here on
+            _Server.failed = f"the kernel server did not answer ({e!r})"
+            print(f"tests/kernel_zygote.py: {_Server.failed}; fresh kernels from here on", file=sys.stderr)
+            return await super()._async_launch_kernel(kernel_cmd, **kw)
+        # no process group for the provisioner: it would signal the group by its id alone (os.killpg), which the
+        # system may have given to another process once the kernel ended; ForkedKernel looks first
+        prov.process, prov.pid, prov.pgid, prov.cwd = process, process.pid, None, cwd
         self._reconcile_connection_info(prov.connection_info)
 
 
 if __name__ == "__main__":
-    serve(sys.argv[1])
+    serve(sys.argv[1], int(sys.argv[2]))
