@@ -48,8 +48,11 @@ PRELOAD = (
 #: the last module of :data:`PRELOAD` that a fresh kernel imports as it starts
 KERNEL_PART = "psutil"
 
-#: what jupyter_client sets for each kernel it launches, and pytest for each test: not a setting of the kernel
-PER_KERNEL = ("JPY_PARENT_PID", "JPY_SESSION_NAME", "PYTEST_CURRENT_TEST")
+#: the variables the server's imports may have read as they ran (the kit's, MuJoCo's, matplotlib's, Python's,
+#: the BLAS's, the locale): a test's own value of one makes its kernel a fresh one. Any other (PATH, a grader's
+#: variable, JUPYTER_CONFIG_PATH) the forked kernel has as it is asked, as the environment it runs in is that one
+READ_AT_IMPORT = ("SNAKEKIT_", "MUJOCO_", "MPL", "PYTHON", "PYOPENGL_", "PYDEVD", "OMP_", "OPENBLAS_", "MKL_",
+                  "NUMPY_", "LD_", "IPYTHON", "HOME", "XDG_", "LANG", "LC_", "TZ", "TMPDIR")
 
 #: the session's environment, as the suite started (a test's own changes make its kernels fresh ones)
 SESSION_ENV = dict(os.environ)
@@ -200,6 +203,7 @@ class _Server:
     lock = threading.Lock()
     path: str | None = None
     imported: dict = {}
+    last_fresh = ""  # why the last kernel that was not forked was not
     proc: subprocess.Popen | None = None
     failed = ""
 
@@ -224,14 +228,16 @@ class _Server:
             return None if cls.failed else cls.path
 
 
-def _forkable(cmd: list[str], env: dict, imported: dict) -> bool:
-    """A Python kernel of this interpreter, in the session's environment (``imported``: what the server's imports
-    set, which the test process may have set too by importing the same modules)."""
+def why_fresh(cmd: list[str], env: dict, imported: dict) -> str:
+    """Why this kernel cannot be forked ("" when it can): it must be a Python kernel of this interpreter, in the
+    session's environment as far as an import reads it (``imported``: what the server's imports set, which the
+    test process may have set too by importing the same modules)."""
     if cmd[1:3] != ["-m", "ipykernel_launcher"] or os.path.abspath(cmd[0]) != os.path.abspath(sys.executable):
-        return False
-    keys = (set(env) | set(SESSION_ENV)) - set(PER_KERNEL)
-    return all(env.get(k) == SESSION_ENV.get(k) or (k in imported and env.get(k) in (None, imported[k])
-                                                    and SESSION_ENV.get(k) in (None, imported[k])) for k in keys)
+        return f"not this Python's ipykernel: {cmd[:3]}"
+    keys = {k for k in set(env) | set(SESSION_ENV) if k.startswith(READ_AT_IMPORT)}
+    other = sorted(k for k in keys if env.get(k) != SESSION_ENV.get(k) and not (
+        k in imported and env.get(k) in (None, imported[k]) and SESSION_ENV.get(k) in (None, imported[k])))
+    return f"the environment differs from the session's in {', '.join(other)}" if other else ""
 
 
 def _fork(path: str, cmd: list[str], env: dict, cwd: str) -> ForkedKernel:
@@ -254,8 +260,10 @@ class ZygoteKernelManager(AsyncKernelManager):
         prov = self.provisioner
         cmd = [os.path.expanduser(s) for s in kernel_cmd]
         env = dict(kw.get("env") or os.environ)
-        if type(prov).__name__ != "LocalProvisioner" or not (path := _Server.address()) \
-                or not _forkable(cmd, env, _Server.imported):
+        path = _Server.address() if type(prov).__name__ == "LocalProvisioner" else None
+        why = why_fresh(cmd, env, _Server.imported) if path else (_Server.failed or "another provisioner")
+        if why:
+            _Server.last_fresh = why
             return await super()._async_launch_kernel(kernel_cmd, **kw)
         cwd = str(kw.get("cwd") or os.getcwd())
         try:

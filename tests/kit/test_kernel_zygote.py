@@ -7,7 +7,7 @@ import time
 import nbformat
 
 from tests.conftest import notebook_client
-from tests.kernel_zygote import ForkedKernel, _start_time
+from tests.kernel_zygote import ForkedKernel, _Server, _start_time, why_fresh
 
 # after the kit's import, as in a lesson (MuJoCo's sets PYOPENGL_PLATFORM, which the server has imported already)
 FACTS = """
@@ -54,7 +54,7 @@ def _shape(nb):
 
 def test_a_forked_kernel_shows_what_a_fresh_one_shows(tmp_path):
     forked, fresh = _run(tmp_path, False), _run(tmp_path, True)
-    assert [_shape(nb)[-1][0][2] for nb in (forked, fresh)] == ["True\n", "False\n"]
+    assert [_shape(nb)[-1][0][2] for nb in (forked, fresh)] == ["True\n", "False\n"], _Server.last_fresh
     assert _shape(forked)[:-1] == _shape(fresh)[:-1]
     assert "image/png" in forked.cells[1].outputs[0]["data"]                     # the figure is a picture
     assert "application/vnd.jupyter.widget-view+json" in forked.cells[2].outputs[0]["data"]
@@ -92,3 +92,25 @@ def test_the_kernels_process_object_never_takes_a_reused_id_for_the_kernel():
     assert other.poll() == 0
     other.kill()                                    # never signals the process that has the id now
     assert me.poll() is None
+
+
+def test_a_kernel_is_forked_only_in_the_environment_the_server_imported_in():
+    """A variable an import may read (the kit's, MuJoCo's, Python's, the BLAS's) set otherwise by a test: a fresh
+    kernel; any other (PATH, a grader's variable), or one the server's imports set to the same value: forked, with
+    the environment it is asked for."""
+    import sys
+
+    from tests.kernel_zygote import SESSION_ENV
+
+    cmd = [sys.executable, "-m", "ipykernel_launcher", "-f", "k.json"]
+    imported = {"PYOPENGL_PLATFORM": "egl"}
+    assert why_fresh(cmd, dict(SESSION_ENV), imported) == ""
+    for key, value in (("PATH", "/x"), ("JPY_PARENT_PID", "1"), ("JUPYTER_CONFIG_PATH", "/c"),
+                       ("PYOPENGL_PLATFORM", "egl")):
+        assert why_fresh(cmd, {**SESSION_ENV, key: value}, imported) == "", key
+    for key in ("SNAKEKIT_CASES", "MUJOCO_GL", "MPLBACKEND", "PYTHONPATH", "OPENBLAS_NUM_THREADS", "HOME",
+                "PYOPENGL_PLATFORM"):
+        why = why_fresh(cmd, {**SESSION_ENV, key: "another"}, imported)
+        assert why == f"the environment differs from the session's in {key}", why
+    assert why_fresh(["/usr/bin/python3", *cmd[1:]], dict(SESSION_ENV), imported).startswith("not this Python")
+    assert why_fresh([sys.executable, "-m", "other_kernel"], dict(SESSION_ENV), imported).startswith("not this")
