@@ -41,9 +41,12 @@ PRELOAD = (
     "IPython.core.debugger", "IPython.core.oinspect", "IPython.extensions.storemagic", "pdb", "psutil",
     # (the kernel's part ends here)
     "numpy", "matplotlib.pyplot", "snakekit", "snakekit.kinematics",
-    "snakekit.trajectory", "snakekit.sim", "snakekit.plots", "snakekit.checks", "snakekit.profile_planner",
+    "snakekit.trajectory", "snakekit.sim", "snakekit.plots", "snakekit.profile_planner",
     "grader.sandbox.inside.warmkernel",
 )
+
+#: modules that set up the IPython shell that imports them, at their import: never imported by the server
+SET_UP_AT_IMPORT = ("matplotlib_inline.backend_inline", "ipywidgets", "snakekit.checks", "snakekit.widgets")
 
 #: the last module of :data:`PRELOAD` that a fresh kernel imports as it starts
 KERNEL_PART = "psutil"
@@ -107,9 +110,11 @@ def _serve(path, owner, gc, importlib, io) -> None:
     fig = Figure()  # the fonts and the PNG writer, loaded once (not through pyplot: no backend chosen here)
     fig.subplots().plot([0, 1])
     fig.savefig(io.BytesIO(), format="png")
-    # matplotlib_inline's backend module sets up the inline figures of the shell that imports it, at its import:
-    # the kernel's shell imports it at its first figure, as a fresh kernel does
-    assert "matplotlib_inline.backend_inline" not in sys.modules, "the inline backend would not show a figure"
+    # modules that set themselves up for the shell that imports them, at their import: the kernel's shell imports
+    # them, as a fresh kernel's does (the server would set up no shell: no figure as a picture, no widget's comm
+    # target, no note on a NameError of an answer that did not run)
+    preloaded = sorted(m for m in SET_UP_AT_IMPORT if m in sys.modules)
+    assert not preloaded, f"{preloaded} would set up no kernel's shell"
     tasks = len(os.listdir("/proc/self/task"))  # threads of C libraries too, which threading does not see
     if threading.active_count() != 1 or tasks != blas_tasks:
         raise RuntimeError(f"a preloaded module started threads ({threading.enumerate()}; {tasks} tasks, "
