@@ -11,7 +11,8 @@ session, the environment and folder jupyter_client gives it, ipykernel's ``IPKer
 Python kernel of this interpreter whose environment is the session's in every variable an import may read
 (:data:`READ_AT_IMPORT`; otherwise, or for another kernel: the usual subprocess), and the server leaves the
 modules that set up their shell at import to the kernel (:data:`SET_UP_AT_IMPORT`), so a kernel forked here and
-one started fresh run the same code on the same settings (tests/kit/test_kernel_zygote.py runs a notebook both ways). The kernel is the server's child, not the test's: :class:`ForkedKernel` gives jupyter_client the
+one started fresh run the same code on the same settings (tests/kit/test_kernel_zygote.py runs a notebook
+both ways). The kernel is the server's child, not the test's: :class:`ForkedKernel` gives jupyter_client the
 ``Popen`` methods it calls, by process id (and start time, so a reused id is never taken for the kernel). The
 server ends when the test process that started it ends; a kernel ends when its server does (ipykernel's
 parent poller).
