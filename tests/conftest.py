@@ -20,7 +20,7 @@ import pytest
 from snakekit.host import choose_mujoco_gl
 
 choose_mujoco_gl()  # before anything imports MuJoCo: EGL on Linux
-import tests.kernel_zygote  # noqa: E402,F401 - its SESSION_ENV: the environment as the session starts, before any test
+import tests.kernel_zygote  # noqa: E402 - its SESSION_ENV: the environment as the session starts, before any test
 IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
 
 # A runner that starts the suite in the background (`make test &` in a script) starts it with
@@ -60,7 +60,7 @@ def notebook_client(nb, **kwargs):
     TCP ports: kernels started at once by the parallel workers never race for a port. It is the kit's
     client (snakekit.kernel_client): a reply the kernel never sends after a cell's idle costs
     LATE_REPLY s, not the cell's timeout. Its kernel is forked from this test process's warm server
-    (tests/kernel_zygote.py) when it is a Python kernel in the session's environment."""
+    (tests/kernel_zygote.py) when it is this Python's kernel and the variables an import reads are the session's."""
     import atexit
     import tempfile
 
@@ -75,9 +75,7 @@ def notebook_client(nb, **kwargs):
     folder = tempfile.mkdtemp(dir=_KERNEL_SOCKETS[0])
     if "kernel_manager_class" not in kwargs and os.environ.get("SNAKEKIT_FRESH_KERNELS") != "1":
         # forked from a warm process when it can (tests/kernel_zygote.py; SNAKEKIT_FRESH_KERNELS=1: never)
-        from tests.kernel_zygote import ZygoteKernelManager
-
-        kwargs = {**kwargs, "kernel_manager_class": ZygoteKernelManager}
+        kwargs = {**kwargs, "kernel_manager_class": tests.kernel_zygote.ZygoteKernelManager}
     client = _run_again_on_bus_silence(NotebookClient)(nb, config=Config(kernel_sockets(folder)), **kwargs)
     client.again = lambda: notebook_client(nb, **kwargs)
     return client

@@ -20,8 +20,12 @@ parent poller).
 
 from __future__ import annotations
 
+import gc
+import importlib
+import io
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -73,24 +77,27 @@ def _start_time(pid: int) -> str | None:
     return None if fields[0] in ("Z", "X") else fields[19]
 
 
+def _read_all(sock: socket.socket) -> bytes:
+    """What the other end sent until it closed its side."""
+    data = b""
+    while chunk := sock.recv(1 << 16):
+        data += chunk
+    return data
+
+
 # --- the server ------------------------------------------------------------------------------------------------
 
 
 def serve(path: str, owner: int) -> None:
     """Preload, then fork a kernel per request on the socket ``path`` until the process ``owner`` (the test
     process that started this server) is gone."""
-    import gc
-    import importlib
-    import io
-    import shutil
-
     try:
-        _serve(path, owner, gc, importlib, io)
+        _serve(path, owner)
     finally:
         shutil.rmtree(os.path.dirname(path), ignore_errors=True)
 
 
-def _serve(path, owner, gc, importlib, io) -> None:
+def _serve(path: str, owner: int) -> None:
     # what ipykernel sets as it starts, before a lesson imports matplotlib: set here before the server does, so
     # matplotlib reads the same backend as in a fresh kernel (the kernel sets it again in its own environment)
     before = dict(os.environ)
@@ -136,10 +143,7 @@ def _serve(path, owner, gc, importlib, io) -> None:
         try:
             with conn:
                 conn.settimeout(30)
-                data = b""
-                while chunk := conn.recv(1 << 16):
-                    data += chunk
-                pid = _fork_kernel(json.loads(data), imported_env, server, conn)
+                pid = _fork_kernel(json.loads(_read_all(conn)), imported_env, server, conn)
                 conn.sendall(json.dumps({"pid": pid, "start": _start_time(pid)}).encode())
         except Exception as e:  # noqa: BLE001 - a request that failed (a client gone, no fork) ends only itself
             print(f"tests/kernel_zygote.py: a request failed: {e!r}", file=sys.stderr)
@@ -253,10 +257,7 @@ def _fork(path: str, cmd: list[str], env: dict, cwd: str) -> ForkedKernel:
         s.connect(path)
         s.sendall(json.dumps({"cmd": cmd, "env": env, "cwd": cwd}).encode())
         s.shutdown(socket.SHUT_WR)
-        data = b""
-        while chunk := s.recv(1 << 16):
-            data += chunk
-    reply = json.loads(data)
+        reply = json.loads(_read_all(s))
     return ForkedKernel(reply["pid"], reply["start"])
 
 
