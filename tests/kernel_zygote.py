@@ -10,7 +10,7 @@ session, the environment and folder jupyter_client gives it, ipykernel's ``IPKer
 :class:`ZygoteKernelManager` is the ``AsyncKernelManager`` of the suite's notebook runs. It forks only a
 Python kernel of this interpreter whose environment is the session's in every variable an import may read
 (:data:`READ_AT_IMPORT`; otherwise, or for another kernel: the usual subprocess), and the server leaves the
-modules that set up their shell at import to the kernel (:data:`SET_UP_AT_IMPORT`), so a kernel forked here and
+modules that set up their shell at import to the kernel (``grader.sandbox.inside.warmkernel.SET_UP_AT_IMPORT``, as the grader's fork server does), so a kernel forked here and
 one started fresh run the same code on the same settings (tests/kit/test_kernel_zygote.py runs a notebook
 both ways). The kernel is the server's child, not the test's: :class:`ForkedKernel` gives jupyter_client the
 ``Popen`` methods it calls, by process id (and start time, so a reused id is never taken for the kernel). The
@@ -37,7 +37,7 @@ from pathlib import Path
 
 from jupyter_client.manager import AsyncKernelManager
 
-from grader.sandbox.inside.warmkernel import ForkedProcess
+from grader.sandbox.inside.warmkernel import INLINE_BACKEND, ForkedProcess, shell_modules_loaded
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -50,9 +50,6 @@ PRELOAD = (
     "snakekit.trajectory", "snakekit.sim", "snakekit.plots", "snakekit.profile_planner",
     "grader.sandbox.inside.warmkernel",
 )
-
-#: modules that set up the IPython shell that imports them, at their import: never imported by the server
-SET_UP_AT_IMPORT = ("matplotlib_inline.backend_inline", "ipywidgets", "snakekit.checks", "snakekit.widgets")
 
 #: the last module of :data:`PRELOAD` that a fresh kernel imports as it starts
 KERNEL_PART = "psutil"
@@ -101,7 +98,7 @@ def _serve(path: str, owner: int) -> None:
     # what ipykernel sets as it starts, before a lesson imports matplotlib: set here before the server does, so
     # matplotlib reads the same backend as in a fresh kernel (the kernel sets it again in its own environment)
     before = dict(os.environ)
-    os.environ.setdefault("MPLBACKEND", "module://matplotlib_inline.backend_inline")
+    os.environ.setdefault("MPLBACKEND", INLINE_BACKEND)
     for name in PRELOAD:
         importlib.import_module(name)
         if name == "numpy":  # its BLAS's pool of threads, which the BLAS stops and starts again around a fork
@@ -122,7 +119,7 @@ def _serve(path: str, owner: int) -> None:
     # modules that set themselves up for the shell that imports them, at their import: the kernel's shell imports
     # them, as a fresh kernel's does (the server would set up no shell: no figure as a picture, no widget's comm
     # target, no note on a NameError of an answer that did not run)
-    preloaded = sorted(m for m in SET_UP_AT_IMPORT if m in sys.modules)
+    preloaded = shell_modules_loaded()
     assert not preloaded, f"{preloaded} would set up no kernel's shell"
     tasks = len(os.listdir("/proc/self/task"))  # threads of C libraries too, which threading does not see
     if threading.active_count() != 1 or tasks != blas_tasks:

@@ -49,9 +49,10 @@ PR_SET_PDEATHSIG = 1
 PRELOAD = (
     "nbgrader.apps", "nbgrader.coursedir", "nbgrader.converters", "nbgrader.preprocessors",
     "jupyter_client.manager", "ipykernel.kernelapp", "ipykernel.ipkernel", "IPython",
-    "ipykernel.debugger", "numpy", "matplotlib.pyplot", "matplotlib_inline.backend_inline",
+    "ipykernel.debugger", "numpy", "matplotlib.pyplot",
+    # not the modules that set up their importer's shell (warmkernel.SET_UP_AT_IMPORT): each kernel imports those
     "snakekit", "snakekit.kinematics", "snakekit.trajectory", "snakekit.sim", "snakekit.plots",
-    "snakekit.checks", "snakekit.profile_planner", "snakekit.widgets", "snakekit.viewer",
+    "snakekit.profile_planner", "snakekit.viewer",
     "grader.sandbox.inside.worker", "grader.sandbox.inside.warmkernel", "grader.sandbox.inside.enter",
     # what each sandbox imported after the fork, about 50 ms of every run: the worker's SQLite gradebook and the
     # kit's kernel client, jupyter_client's and ipykernel's psutil, and what a kernel's shell loads as it starts
@@ -67,16 +68,22 @@ def _preload() -> None:
     import importlib
     import io
 
+    from grader.sandbox.inside.warmkernel import INLINE_BACKEND, shell_modules_loaded
+
     sys.modules.setdefault("rfc3987_syntax", None)  # see grader.sandbox.inside.worker
+    os.environ.setdefault("MPLBACKEND", INLINE_BACKEND)  # matplotlib reads the backend a fresh kernel's reads
     extra = [m for m in os.environ.get("SNAKEKIT_FORKSERVER_PRELOAD", "").split(",") if m]
     for name in (*PRELOAD, *extra):
         importlib.import_module(name)
-    import matplotlib.pyplot as plt
+    if shell_modules_loaded():
+        raise RuntimeError(f"preloading imported {', '.join(shell_modules_loaded())}, which set up the shell that "
+                           "imports them: a kernel forked from here would have no figures as pictures, no widgets' "
+                           "comm target or no note on a missing name. Leave them to the kernels.")
+    from matplotlib.figure import Figure
 
-    fig, ax = plt.subplots()  # load the fonts and the PNG writer once
-    ax.plot([0, 1])
+    fig = Figure()  # load the fonts and the PNG writer once (not through pyplot: no backend is chosen here)
+    fig.subplots().plot([0, 1])
     fig.savefig(io.BytesIO(), format="png")
-    plt.close(fig)
     from sqlalchemy.orm import configure_mappers
 
     configure_mappers()  # nbgrader's gradebook models, set up at their first query: about 30 ms of every run

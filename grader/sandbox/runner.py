@@ -101,7 +101,8 @@ class Runner:
         venv_bin = str(Path(os.path.abspath(sys.executable)).parent)
         return {"PATH": f"{venv_bin}:/usr/local/bin:/usr/bin:/bin", "HOME": str(work / "home"),
                 "SNAKEKIT_HANDIN_DIR": str(work / "handin"), "SNAKEKIT_CASES": str(work / "cases.sock"),
-                "MPLBACKEND": "Agg",
+                # no MPLBACKEND: ipykernel gives the kernel matplotlib's inline backend, as in the student's lab (a
+                # figure shown without %matplotlib inline is a picture on the page too)
                 "MPLCONFIGDIR": str(work / "home" / ".mpl"), "JUPYTER_RUNTIME_DIR": str(work / "home" / ".jupyter-runtime"),
                 "IPYTHONDIR": str(work / "home" / ".ipython"), "TMPDIR": "/tmp", "LANG": "C.UTF-8",
                 "MUJOCO_GL": mujoco_gl("linux"), "PYTHONDONTWRITEBYTECODE": "1", "OMP_NUM_THREADS": "1",  # sandbox: Linux

@@ -9,6 +9,7 @@ and Generate Feedback buttons pressed in Chromium on a tampered submission.
 from __future__ import annotations
 
 import copy
+import json
 import os
 import re
 import subprocess
@@ -30,8 +31,20 @@ TIMEOUT = 20  # each notebook's wall clock [s]: a bound for a hang, 5x what one 
 #: core until it is stopped, is tests/grader/test_grader_adversarial.py's; the clock stops both alike)
 LOOP = {"ex1_tool_xy": 'print("before the loop")\n' + GOOD["ex1_tool_xy"],
         "ex2_sweep": "import time\nwhile True:\n    time.sleep(0.05)"}
-EXTRAS = {"ex1_tool_xy": "import ipywidgets\ndisplay(ipywidgets.VBox([ipywidgets.IntSlider(description='q1')]))\n"
-                         + GOOD["ex1_tool_xy"],
+#: what a kernel's shell sets up as it imports a module (matplotlib's inline backend, the widgets' comm target, the
+#: kit's note on a missing name), printed where nothing has imported a widget yet and again after one was shown
+KERNEL_FACTS = """import json as _json, sys as _sys, matplotlib as _mpl
+_ip = get_ipython()
+def _facts():
+    return {"backend": _mpl.get_backend(), "png_formatter": bool(_ip.display_formatter.formatters["image/png"].type_printers),
+            "ipywidgets_loaded": "ipywidgets" in _sys.modules, "name_error_note": NameError in _ip.custom_exceptions,
+            "widget_target": "jupyter.widget" in _ip.kernel.comm_manager.targets, "cwd_on_path": "" in _sys.path}
+print("facts", _json.dumps(_facts()))
+"""
+EXTRAS = {"ex1_tool_xy": KERNEL_FACTS + "import ipywidgets\n"
+                         "display(ipywidgets.VBox([ipywidgets.IntSlider(description='q1')]))\n"
+                         'print("facts", _json.dumps(_facts()))\n' + GOOD["ex1_tool_xy"],
+          # an answer that stops with an error, so its check cell meets a NameError
           "ex3_peak_speed": "import numpy\nnumpy.linalg.inv(numpy.zeros((2, 2)))"}
 
 
@@ -158,6 +171,35 @@ def test_a_widget_is_one_line_and_no_machine_path_is_shown(graded):
     assert "LinAlgError" in page and "&lt;site-packages&gt;/numpy/linalg/" in page  # the traceback, neutral paths
     for path in (sys.prefix, str(REPO), "/tmp/snakekit-grade-", str(course), os.path.expanduser("~") + "/"):
         assert path not in page, path
+
+
+def test_a_graded_kernel_sets_up_its_shell_as_a_students_kernel_does(graded, tmp_path):
+    """The grader forks its kernels from a process that imported the libraries already. A module that sets up the
+    shell that imports it (matplotlib's inline backend, the widgets' comm target, the kit's note on a missing name)
+    must still do so in a graded kernel, as in the student's own: the same facts in both, and the note on the page."""
+    from jupyter_client.manager import AsyncKernelManager
+
+    from tests.conftest import notebook_client
+
+    course, _ = graded
+    graded_nb = nbformat.read(course / "autograded" / "extras" / ASSIGNMENT / f"{ASSIGNMENT}.ipynb", 4)
+    cell = next(c for c in graded_nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "ex1_tool_xy")
+    printed = "".join(o.get("text", "") for o in cell.outputs if o["output_type"] == "stream")
+    in_grader = [json.loads(line[6:]) for line in printed.splitlines() if line.startswith("facts ")]
+
+    # the same cells in a student's kernel (a fresh one, as JupyterLab starts it)
+    setup = next(c.source for c in graded_nb.cells if c.metadata.get("nbgrader", {}).get("grade_id") == "setup")
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(setup), nbformat.v4.new_code_cell(cell.source)])
+    notebook_client(nb, timeout=120, kernel_name="python3", kernel_manager_class=AsyncKernelManager,
+                    resources={"metadata": {"path": str(tmp_path)}}).execute()
+    printed = "".join(o.get("text", "") for o in nb.cells[1].outputs if o["output_type"] == "stream")
+    in_lab = [json.loads(line[6:]) for line in printed.splitlines() if line.startswith("facts ")]
+
+    assert len(in_lab) == 2 and in_lab[0]["ipywidgets_loaded"] is False and in_lab[1]["widget_target"] is True
+    assert in_lab[0]["backend"].endswith("backend_inline") and in_lab[0]["name_error_note"] is True
+    assert in_grader == in_lab
+    page = _page(course, "extras")
+    assert "is not defined: the cell that defines `peak_speed` has not run yet" in page, re.findall(r"NameError.{300}", page)
 
 
 def test_the_live_3d_view_is_one_line_on_the_page():

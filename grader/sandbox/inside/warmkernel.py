@@ -29,6 +29,20 @@ from jupyter_client.manager import AsyncKernelManager
 
 _waiting: list["_WaitingKernel"] = []
 
+#: Modules that set up, as they are imported, the IPython shell that imports them: matplotlib_inline's backend (a
+#: figure becomes a picture), ipywidgets (the widgets' comm target), the kit's checks (its note on a NameError of an
+#: answer cell that did not run) and widgets. A process that kernels are forked from must not have imported them, or
+#: no kernel's shell is set up: each kernel imports them itself, as a fresh kernel does.
+SET_UP_AT_IMPORT = ("matplotlib_inline.backend_inline", "ipywidgets", "snakekit.checks", "snakekit.widgets")
+#: the backend ipykernel puts in a kernel's environment as it starts (MPLBACKEND), before a lesson imports
+#: matplotlib: a process that kernels are forked from sets it before its imports, so matplotlib reads the same
+INLINE_BACKEND = "module://matplotlib_inline.backend_inline"
+
+
+def shell_modules_loaded() -> list[str]:
+    """The modules of :data:`SET_UP_AT_IMPORT` this process has imported (none, to fork kernels from it)."""
+    return sorted(m for m in SET_UP_AT_IMPORT if m in sys.modules)
+
 
 def exit_child(body) -> NoReturn:
     """End a forked child with ``body()``'s exit code, never unwinding into the parent's stack.
@@ -166,8 +180,10 @@ def become(req: dict) -> int:
 
 
 def prefork(n: int) -> None:
-    """Fork ``n`` waiting kernels now, while this process has no event loop or ZeroMQ threads."""
-    _waiting.extend(_WaitingKernel() for _ in range(n))
+    """Fork ``n`` waiting kernels now, while this process has no event loop or ZeroMQ threads; none when it has
+    imported a module that sets up its importer's shell (:data:`SET_UP_AT_IMPORT`): kernels then start fresh."""
+    if not shell_modules_loaded():
+        _waiting.extend(_WaitingKernel() for _ in range(n))
 
 
 def discard() -> None:
