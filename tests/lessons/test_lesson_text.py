@@ -159,9 +159,12 @@ CLAIMS = {
          1e-12),
         # the bus runs in real time: on a loaded machine a goal may leave a cycle late, and the peak moves a little
         ("it peaks at about 0.5 N m on every joint", "np.abs(home_run.efforts).max(axis=0)", [0.5] * 5, 0.1),
-        # mid-move: each joint's load peaks in the middle half of the 1 s move (0.50 to 0.57 s after its start)
+        # mid-move: each joint's load peaks in the middle half of the 1 s move (0.50 to 0.57 s after its start). Read
+        # as a student reads the plot, over 5 samples (their median): on a loaded machine a goal that left a cycle late
+        # makes one sample's load jump (a suite run beside other work: a peak 0.31 s from the middle)
         ("on every joint mid-move",
-         "np.abs(home_run.measured.times[np.abs(home_run.efforts).argmax(axis=0)] - 0.5).max()", (0.0, 0.25), None),
+         "np.abs(home_run.measured.times[2:-2][np.median(np.lib.stride_tricks.sliding_window_view("
+         "np.abs(home_run.efforts), 5, axis=0), axis=-1).argmax(axis=0)] - 0.5).max()", (0.0, 0.25), None),
         # where the joints turn fastest: there each joint's load is within 20 % of its peak (0.98 to 1 quiet and beside
         # stress-ng). The load is flat there: 0.87 to 0.97 of its peak 0.1 s either side, so on a loaded machine the
         # peak sample can lie 0.1 s from the speed's (a CI run: 0.102 s), the load where the speed peaks cannot
