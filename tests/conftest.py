@@ -13,6 +13,7 @@ import re
 import shutil
 import signal
 import socket
+import threading
 import time
 
 import pytest
@@ -236,6 +237,23 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def once_goals_arrive(bus, action, goals: int = 5) -> threading.Thread:
+    """Call ``action()`` (cut the line, stop the bridge, lose every packet) once a run's first ``goals`` goals reached
+    every servo of the emulated ``bus``: a loaded machine can start a run later than any fixed delay (beside other
+    work, 0.4 s was before its first goal, and the message then rightly said no goal had been sent)."""
+    before = len(bus.writes(116, 4))
+
+    def wait_then_act():
+        end = time.perf_counter() + 120   # a bound for a hang
+        while len(bus.writes(116, 4)) < before + goals * len(bus.ids) and time.perf_counter() < end:
+            time.sleep(0.005)
+        action()
+
+    thread = threading.Thread(target=wait_then_act, daemon=True)
+    thread.start()
+    return thread
 
 
 #: how often a raw-SDK read that got no answer in time is sent again (see :func:`sdk_read`)

@@ -8,7 +8,6 @@ import socket
 import subprocess
 import sys
 import textwrap
-import threading
 import time
 from pathlib import Path
 
@@ -19,7 +18,7 @@ import snakekit
 from snakekit import CommunicationError, PortLostError
 from snakekit.emulator import BusEmulator, Faults, make_emulated_robot
 from snakekit.emulator import protocol as p
-from tests.conftest import need
+from tests.conftest import need, once_goals_arrive
 
 need("serial")
 sdk = need("dynamixel_sdk")
@@ -129,7 +128,7 @@ def test_faults_through_the_bridge_are_retried_or_named(emulator, bridge):
 def test_the_emulator_gone_behind_the_bridge_mid_run_is_a_port_lost_error(emulator, bridge):
     robot = quiet_robot(bridge.url)
     move = snakekit.joint_trajectory(np.zeros(5), TARGET, duration=1.0)
-    threading.Timer(0.4, emulator.stop).start()
+    once_goals_arrive(emulator, emulator.stop)
     with pytest.raises(PortLostError) as e:
         robot.run(move)
     message = str(e.value)
@@ -147,7 +146,7 @@ def test_the_emulator_gone_behind_the_bridge_mid_run_is_a_port_lost_error(emulat
 def test_the_bridge_stopped_mid_run_is_a_port_lost_error(emulator, bridge):
     robot = quiet_robot(bridge.url, on_close="hold")
     move = snakekit.joint_trajectory(np.zeros(5), TARGET, duration=1.0)
-    threading.Timer(0.4, bridge.stop).start()
+    once_goals_arrive(emulator, bridge.stop)
     with pytest.raises(PortLostError) as e:
         robot.run(move)
     assert_told_the_last_goal(str(e.value), emulator, socket_between=True)
@@ -270,7 +269,7 @@ def test_the_driver_runs_on_the_tcp_emulator_with_faults():
 def test_the_tcp_emulator_stopped_mid_run_is_a_port_lost_error():
     robot = make_emulated_robot(motion="profile", tcp="0")
     bus = robot.emulator
-    threading.Timer(0.4, bus.stop).start()
+    once_goals_arrive(bus, bus.stop)
     with pytest.raises(PortLostError) as e:
         robot.run(snakekit.joint_trajectory(np.zeros(5), TARGET, duration=1.0))
     assert "was lost" in str(e.value)
@@ -278,24 +277,10 @@ def test_the_tcp_emulator_stopped_mid_run_is_a_port_lost_error():
     robot.close()
 
 
-def stop_once_goals_arrive(bus, goals: int = 5) -> None:
-    """Stop the emulated bus (the line cut) once the run's first ``goals`` goals reached every servo: a loaded
-    machine can start the run later than any fixed delay (beside stress-ng, 0.4 s was before its first goal)."""
-    before = len(bus.writes(116, 4))
-
-    def cut():
-        end = time.perf_counter() + 120   # a bound for a hang
-        while len(bus.writes(116, 4)) < before + goals * len(bus.ids) and time.perf_counter() < end:
-            time.sleep(0.005)
-        bus.stop()
-
-    threading.Thread(target=cut, daemon=True).start()
-
-
 def test_the_pty_closed_mid_run_is_a_port_lost_error_not_a_serial_exception():
     robot = make_emulated_robot(motion="profile")
     bus = robot.emulator
-    stop_once_goals_arrive(bus)
+    once_goals_arrive(bus, bus.stop)
     move = snakekit.joint_trajectory(np.zeros(5), TARGET, duration=1.0)
     with pytest.raises(PortLostError) as e:
         robot.run(move)

@@ -1,7 +1,6 @@
 """The hardware backend (DynamixelSnake over the real dynamixel-sdk), against the bus emulator."""
 
 import math
-import threading
 import time
 
 import numpy as np
@@ -11,7 +10,7 @@ import snakekit
 from snakekit import CommunicationError, HardwareError, LimitError
 from snakekit.emulator import BusEmulator, Faults, make_emulated_robot
 from snakekit.emulator.motion import ProfileMotion
-from tests.conftest import need
+from tests.conftest import need, once_goals_arrive
 
 sdk = need("dynamixel_sdk")
 from snakekit import hardware as hw  # noqa: E402
@@ -257,8 +256,7 @@ def test_a_dead_bus_mid_run_never_claims_torque_off(robot):
     # every packet lost: the torque-off broadcast too, so the servos keep their torque
     bus = robot.emulator
     move = snakekit.joint_trajectory(np.zeros(5), np.full(5, 0.3), duration=1.0)
-    timer = threading.Timer(0.3, lambda: setattr(bus, "faults", Faults(drop=1.0)))
-    timer.start()
+    timer = once_goals_arrive(bus, lambda: setattr(bus, "faults", Faults(drop=1.0)))
     with pytest.raises(CommunicationError) as e:
         robot.run(move)
     timer.join()
