@@ -809,6 +809,23 @@ def test_fork_server_that_cannot_start_says_why(tmp_path):
     assert server.proc.poll() is not None  # not left running
 
 
+@pytest.mark.parametrize("module", ["snakekit.checks", "ipywidgets", "snakekit.widgets", "matplotlib_inline.backend_inline"])
+def test_a_fork_server_told_to_preload_a_module_that_sets_up_its_importers_shell_refuses(tmp_path, module):
+    """Such a module (warmkernel.SET_UP_AT_IMPORT) would set up no graded kernel's shell: no note on a missing name,
+    no widgets' comm target, no figure as a picture. The server says so and does not start (the grader then starts
+    each sandbox afresh: same grades)."""
+    from grader.sandbox.forkserver import ForkServer
+    from grader.sandbox.inside.warmkernel import SET_UP_AT_IMPORT
+
+    assert module in SET_UP_AT_IMPORT
+    server = ForkServer({"PATH": f"{Path(sys.executable).parent}:/usr/bin:/bin", "SNAKEKIT_FORKSERVER_PRELOAD": module,
+                         "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "HOME": str(tmp_path)})
+    with pytest.raises(RuntimeError, match=rf"the grader's fork server did not start: RuntimeError: preloading imported "
+                                           rf".*{re.escape(module)}.*which set up the shell that imports them"):
+        server.wait_ready()
+    assert server.proc.poll() is not None  # not left running
+
+
 def test_a_fork_server_that_ends_mid_batch_is_started_again_and_every_student_is_graded(tmp_path, monkeypatch, capfd):
     """The batch's fork server killed (as the system's out-of-memory killer would) after the reference
     run and after each student's sandbox: the next sandbox starts it again and says so; every student gets
