@@ -470,8 +470,12 @@ def why_missing(cell, message: str, *, cell_timeout: float | None = None, timeou
     if stopped:
         return stopped
     ename, evalue, _ = err
+    evalue = str(evalue).strip()
     hint = ""
-    if ename == "NameError":
-        hint = (" The function is not defined: the answer cell above raised an error (a syntax error?), or it "
+    # the kit's own note on a missing name (snakekit.checks, in the student's kernel and the graded one) says why
+    if ename == "NameError" and "has not run yet" not in evalue:
+        hint = (" The function is not defined: the answer cell above stopped with an error (see its output), or it "
                 "was not run.")
-    return f"nothing was handed in: the test cell stopped before it handed in your results, with {ename}: {evalue}.{hint}"
+    end = "" if evalue.endswith((".", "!", "?")) else "."
+    return (f"nothing was handed in: the test cell stopped before it handed in your results, with {ename}: "
+            f"{evalue}{end}{hint}")

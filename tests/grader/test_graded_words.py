@@ -189,3 +189,28 @@ def test_a_wrong_value_graded_is_called_what_its_own_check_calls_it(lesson, gid,
     names = list(Reference.load(REFERENCES / f"{lesson}.npz").exercises[gid]["outputs"])
     mine = said[names.index(name) * len(said) // len(names)]   # the message with this value alone wrong
     assert re.search(rf": {re.escape(what)}(\[| is | has )", mine), (name, mine)
+
+
+@pytest.mark.parametrize("ename, evalue, says, hint", [
+    # the kit's note (snakekit.checks) already says why the name is missing: said once, not guessed at again
+    ("NameError", "name 'planar_fk' is not defined: the cell that defines `planar_fk` has not run yet, or it stopped "
+                  "with an error (a SyntaxError in your answer, say), so nothing was defined. Run that cell, fix the "
+                  "error it shows, then run this cell again.", "then run this cell again.", False),
+    # a bare NameError (a kernel without the kit's note): the grader says why, without guessing the error's kind
+    ("NameError", "name 'planar_fk' is not defined", "is not defined.", True),
+    ("AttributeError", "module 'numpy' has no attribute 'cumsun'.", "has no attribute 'cumsun'.", False),
+])
+def test_a_test_cell_that_handed_nothing_in_says_why_once_in_whole_sentences(ename, evalue, says, hint):
+    from nbformat.v4 import new_code_cell, new_output
+
+    from grader.scoring.verdict import why_missing
+
+    cell = new_code_cell("ex.hand_in('ex01_1_planar_fk_test', planar_fk)", execution_count=3)
+    cell.outputs = [new_output("error", ename=ename, evalue=evalue, traceback=["Cell In[3], line 1", "..."])]
+    message = why_missing(cell, "unused")
+    assert message.startswith(f"nothing was handed in: the test cell stopped before it handed in your results, with "
+                              f"{ename}: {evalue}")
+    assert says in message and ".." not in message and message.count("not run") <= 1
+    assert ("The function is not defined: the answer cell above stopped with an error (see its output), or it was "
+            "not run." in message) == hint
+    assert "syntax error?" not in message
