@@ -45,6 +45,7 @@ import sys
 import zipfile
 from pathlib import Path
 
+from grader.files import STUDENT_ID
 from grader.lms.collect import read_manifest
 from grader.lms.roster import Roster
 from snakekit.errors import SnakekitError
@@ -249,6 +250,8 @@ def lms_name(row: dict, page: Path) -> str | None:
         folder = f"{row['lms_name']}_{row['lms_id']}_assignfeedback_file_"
         return None if re.search(r"[/\\\x00-\x1f]", folder) or folder.startswith(".") else \
             f"{folder}/{page.stem}-feedback.html"
+    if row.get("lms") == "folder":  # a folder of hand-ins: a folder per student (a student id is a safe name)
+        return f"{row['student']}/{page.stem}-feedback.html" if STUDENT_ID.fullmatch(row.get("student", "")) else None
     return None
 
 
@@ -272,7 +275,7 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
         for student, files in pages.items():
             row = manifest.get(student)
             src = course / "submitted" / student / assignment
-            if row and row.get("lms") in ("canvas", "moodle"):
+            if row and row.get("lms") in ("canvas", "moodle", "folder"):
                 names = {lms_name(row, p): p for p in files}
                 if None in names:
                     problems.append(f"{student}: the collected file name {excerpt(row.get('file'))} does not carry the "
@@ -288,8 +291,10 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
                 except CourseError as e:
                     problems.append(str(e))
             else:
-                problems.append(f"{student}: neither collected from an LMS (no row in {course}/collected/{assignment}.csv) "
-                                f"nor from the exchange (no submission_secret.txt): the page stays in {course}/feedback/")
+                problems.append(f"{student}: neither collected (no row in {course}/collected/{assignment}.csv) "
+                                f"nor from the exchange (no submission_secret.txt): the page stays in "
+                                f"{course}/feedback/{student}/{assignment}/ for you to hand out (`snakekit collect` the "
+                                "notebooks, and `return` bundles their pages)")
         for lms, names in sorted(entries.items()):
             path = zip_path or course / f"feedback-{assignment}-{lms}.zip"
             if len(entries) > 1 and zip_path is not None:
@@ -306,6 +311,10 @@ def return_feedback(course: Path, assignment: str, *, exchange: Path | None, zip
             except KeyboardInterrupt:
                 tmp.unlink(missing_ok=True)
                 raise
+            if lms == "folder":
+                print(f"wrote {path}: {len(names)} page(s) of students collected from a folder, one folder per student "
+                      "(<student>/<notebook>-feedback.html): hand each its own as their notebooks came in", file=out)
+                continue
             how = {"canvas": "Canvas: the assignment's page > Re-Upload Submissions",
                    "moodle": "Moodle: View all submissions > Upload multiple feedback files in a zip"}[lms]
             print(f"wrote {path}: {len(names)} page(s) for the {lms} bulk upload ({how})", file=out)
@@ -323,7 +332,8 @@ def return_main(argv: list[str] | None = None, out=None, *, before=None) -> int:
     """``snakekit return``; ``before`` as :func:`return_feedback`'s."""
     out = out or sys.stdout
     p = CommandParser(prog="snakekit return", description="Hand each student's safe feedback page back: to the hub's "
-                "exchange (nbgrader fetch_feedback) or as one zip for the LMS's bulk feedback upload.")
+                "exchange (nbgrader fetch_feedback), as one zip for the LMS's bulk feedback upload, or (collected from "
+                "a folder) as one zip with a folder per student.")
     p.add_argument("assignment", help="assignment name, e.g. 06_coded_sweep")
     p.add_argument("--course", type=Path, default=default_course(),
                    help="the nbgrader course folder (default: the current folder when it holds "

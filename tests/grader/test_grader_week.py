@@ -210,7 +210,9 @@ def test_regrade_of_one_student_keeps_the_others_and_shows_a_hand_set_score(week
 def test_return_releases_to_the_exchange_and_zips_for_canvas(week):
     course, r = week["course"], week["return"]
     assert r.returncode == 1, r.stdout + r.stderr  # frank's page: neither from the LMS nor from the exchange
-    assert "not returned: frank: neither collected from an LMS" in r.stdout
+    assert (f"not returned: frank: neither collected (no row in {course}/collected/{ASSIGNMENT}.csv) nor from the "
+            f"exchange (no submission_secret.txt): the page stays in {course}/feedback/frank/{ASSIGNMENT}/ for you to "
+            "hand out (`snakekit collect` the notebooks, and `return` bundles their pages)") in r.stdout
     with zipfile.ZipFile(course / f"feedback-{ASSIGNMENT}-canvas.zip") as z:
         names = sorted(z.namelist())
         # Canvas's Re-Upload matches <name>_<user id>_<file id>_ to the submission
@@ -404,3 +406,17 @@ def test_plain_folder_of_student_notebooks_and_a_second_download(released, tmp_p
     assert (folder / "attempts" / f"previously-collected-1-{ASSIGNMENT}.ipynb").read_bytes() == first
     r = run(capsys, "collect", "t9_none", "--course", course, "--from", dl)
     assert r.returncode == 2 and f"the course has: {ASSIGNMENT}" in r.stderr
+    # graded and returned: a zip with a folder per student, each page the one grade wrote
+    need_program("unshare")
+    r = run(capsys, "grade", ASSIGNMENT, "--course", course, "--references", REFERENCES, "--jobs", "2")
+    assert r.returncode == 0, r.stdout + r.stderr
+    r = run(capsys, "return", ASSIGNMENT, "--course", course)
+    assert r.returncode == 0, r.stdout + r.stderr
+    path = course / f"feedback-{ASSIGNMENT}-folder.zip"
+    assert (f"wrote {path}: 2 page(s) of students collected from a folder, one folder per student "
+            "(<student>/<notebook>-feedback.html): hand each its own as their notebooks came in") in r.stdout
+    with zipfile.ZipFile(path) as z:
+        assert sorted(z.namelist()) == [f"ann/{ASSIGNMENT}-feedback.html", f"ben/{ASSIGNMENT}-feedback.html"]
+        for student in ("ann", "ben"):
+            assert z.read(f"{student}/{ASSIGNMENT}-feedback.html") == \
+                (course / "feedback" / student / ASSIGNMENT / f"{ASSIGNMENT}.html").read_bytes()
