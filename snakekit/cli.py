@@ -221,13 +221,38 @@ _seconds = _positive("--timeout", "s", 86400, "It is how long one cell may run (
 _rate = _positive("--rate", "Hz", 1000, "It is how often /joint_states is published (default: 50)", "Hz")
 
 
+def _typos(a: str, b: str) -> int:
+    """How many typos turn ``a`` into ``b``: letters left out, added, changed, or two side by side swapped (the
+    optimal string alignment distance)."""
+    d = [[i + j if i * j == 0 else 0 for j in range(len(b) + 1)] for i in range(len(a) + 1)]
+    for i in range(1, len(a) + 1):
+        for j in range(1, len(b) + 1):
+            d[i][j] = min(d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] != b[j - 1]))
+            if i > 1 and j > 1 and a[i - 1] == b[j - 2] and a[i - 2] == b[j - 1]:
+                d[i][j] = min(d[i][j], d[i - 2][j - 2] + 1)
+    return d[len(a)][len(b)]
+
+
 class OneLineParser(argparse.ArgumentParser):
     """argparse, saying a usage error in one line: what was wrong (a short excerpt of a long
     argument) and where the help is; exit 2."""
 
     def error(self, message: str):
+        import re
+
         from .validate import excerpt
 
+        # a mistyped command or choice: the typed word cut short, the nearest choice, and all of them (our own words)
+        m = re.fullmatch(r"(?s)(argument [^:]+: )?invalid choice: (.*) \(choose from (.*)\)", message)
+        if m:
+            typed = m.group(2).strip("'")
+            choices = [c.strip().strip("'") for c in m.group(3).split(",")]
+            close = [c for c in choices if _typos(typed, c) <= max(1, len(c) // 3)]
+            near = [c for c in close if _typos(typed, c) == min(_typos(typed, c) for c in close)]  # ties: each
+            hint = f"; did you mean {' or '.join(near)}?" if near else ""
+            self.exit(2, f"{self.prog}: {m.group(1) or ''}invalid choice: '{excerpt(typed, 60)}'"
+                         f"{hint} (the choices: {', '.join(choices)}); "
+                         f"see {self.prog} --help\n")
         self.exit(2, f"{self.prog}: {excerpt(message, 160)}; see {self.prog} --help\n")
 
 

@@ -40,7 +40,40 @@ def test_sweep_prints_a_summary_and_writes_run_and_plot(tmp_path):
 def test_unknown_backend_is_a_usage_error(tmp_path):
     r = sweep("--backend", "gazebo", cwd=tmp_path)
     assert r.returncode == 2
-    assert "invalid choice: 'gazebo' (choose from 'sim', 'emulator', 'hardware')" in r.stderr
+    assert "invalid choice: 'gazebo' (the choices: sim, emulator, hardware)" in r.stderr
+
+
+def test_every_mistyped_command_or_choice_is_named_with_the_nearest_one(capsys):
+    """Each choice of the `snakekit` command line (its commands, each command's options with choices), typed with
+    one letter dropped or two swapped: one line that names the nearest choice (each, when two are as near) and lists
+    them all."""
+    import argparse
+
+    from snakekit.cli import build_parser
+
+    def choices(parser, words):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                yield words, None, list(action.choices)
+                for name, sub in action.choices.items():
+                    yield from choices(sub, [*words, name])
+            elif action.choices and action.option_strings:
+                yield words, action.option_strings[0], list(action.choices)
+
+    tried = 0
+    for words, option, options in choices(build_parser(), []):
+        for choice in options:
+            for typo in {choice[:-1], choice[1:2] + choice[:1] + choice[2:]} - set(options):
+                args = [*words, *([option, typo] if option else [typo])]
+                with pytest.raises(SystemExit) as e:   # the parser alone, as `snakekit` runs it first
+                    build_parser().parse_args(args)
+                err = capsys.readouterr().err
+                assert e.value.code == 2 and len(err.splitlines()) == 1, (args, err)
+                said = re.search(rf"invalid choice: '{re.escape(typo)}'; did you mean (.+)\? \(the choices: "
+                                 rf"{re.escape(', '.join(options))}\)", err)
+                assert said and choice in said.group(1).split(" or "), (args, err)
+                tried += 1
+    assert tried >= 40, tried  # 14 commands and the backends, two typos each
 
 
 def test_unwritable_output_fails_before_the_run(tmp_path):
