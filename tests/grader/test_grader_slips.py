@@ -548,7 +548,9 @@ def test_files_a_run_of_the_instructor_notebook_writes_do_not_block_grading(cour
     assert csv_path.read_bytes() == before
 
 
-@pytest.mark.parametrize("given, meant", [("Ann", "ann"), ("bem", "ben"), ("dave", None)])
+@pytest.mark.parametrize("given, meant", [("Ann", "ann"), ("bem", "ben"), ("dave", None), ("ben ", "ben"),
+                                          ("ann,ben", "--student ann --student ben? (one --student per student)"),
+                                          ("ann, ben", "--student ann --student ben? (one --student per student)")])
 def test_a_student_without_a_submission_is_refused_naming_who_has_one(course, capsys, given, meant):
     """``--student`` with a name that has no submission (another case, a typo, a student not in the class): nothing
     is graded, exit 2, and the TA reads the students who do have one, and the one meant when it is near."""
@@ -558,14 +560,16 @@ def test_a_student_without_a_submission_is_refused_naming_who_has_one(course, ca
         submit(course, student)
     r = run(capsys, "grade", A, "--course", course, "--references", REFERENCES, "--student", "ann", "--student", given)
     assert r.returncode == 2
-    assert r.stderr.startswith(f"snakekit grade: no submission of {A} by {given} in {course}/submitted"), r.stderr
-    assert (f"by {given} in {course}/submitted (did you mean {meant}?); " in r.stderr) == (meant is not None), \
+    shown = repr(given) if given != given.strip() else given   # a space at an end, seen
+    meant = meant if meant is None or meant.endswith(")") else f"{meant}?"
+    assert r.stderr.startswith(f"snakekit grade: no submission of {A} by {shown} in {course}/submitted"), r.stderr
+    assert (f"by {shown} in {course}/submitted (did you mean {meant}); " in r.stderr) == (meant is not None), \
         r.stderr
     assert ("did you mean" in r.stderr) == (meant is not None), r.stderr
     # two such names: each one's own
     r = run(capsys, "grade", A, "--course", course, "--references", REFERENCES, "--student", "Ben", "--student", given)
-    assert f"by Ben, {given} in {course}/submitted (Ben: did you mean ben?" + (
-        f"; {given}: did you mean {meant}?); " if meant else "); ") in r.stderr, r.stderr
+    assert f"by Ben, {shown} in {course}/submitted (Ben: did you mean ben?" + (
+        f"; {shown}: did you mean {meant}); " if meant else "); ") in r.stderr, r.stderr
     assert r.stderr.rstrip().endswith("; 2 student(s) have one: ann, ben; nothing was graded: give each --student as "
                                       "its folder in submitted/ names it"), r.stderr  # ann too: none of them
     assert not (course / f"grades-{A}.csv").exists() and not (course / "autograded").exists()
