@@ -247,8 +247,8 @@ class OneLineParser(argparse.ArgumentParser):
         if m:
             typed = m.group(2).strip("'")
             choices = [c.strip().strip("'") for c in m.group(3).split(",")]
-            close = [c for c in choices if _typos(typed, c) <= max(1, len(c) // 3)]
-            near = [c for c in close if _typos(typed, c) == min(_typos(typed, c) for c in close)]  # ties: each
+            close = {c: n for c in choices if (n := _typos(typed, c)) <= max(1, len(c) // 3)}
+            near = [c for c, n in close.items() if n == min(close.values())]  # ties: each
             hint = f"; did you mean {' or '.join(near)}?" if near else ""
             self.exit(2, f"{self.prog}: {m.group(1) or ''}invalid choice: '{excerpt(typed, 60)}'"
                          f"{hint} (the choices: {', '.join(choices)}); "

@@ -209,18 +209,18 @@ def main(argv: list[str] | None = None, out=None) -> int:
             import difflib
 
             lower = {s.lower(): s for s in students}
-            near = {m: difflib.get_close_matches(m.strip().lower(), list(lower), n=1, cutoff=0.6) for m in missing}
-            # names run together ("carol,bob"): each its own --student
-            together = {m: [p.strip() for p in m.replace(";", ",").split(",") if p.strip()] for m in missing if "," in m
-                        or ";" in m}
             def shown(name):  # quoted when a space at either end would not be seen
                 return excerpt(name, quote=name != name.strip())
 
-            meant = "; ".join((f"{shown(m)}: " if len(missing) > 1 else "")
-                              + (f"did you mean {' '.join(f'--student {p}' for p in together[m])}? (one --student "
-                                 "per student)" if m in together and all(p in students for p in together[m]) else
-                                 f"did you mean {lower[near[m][0]]}?")
-                              for m in missing if near[m] or (m in together and all(p in students for p in together[m])))
+            def suggestion(name):
+                parts = [p.strip() for p in name.replace(";", ",").split(",") if p.strip()]
+                if len(parts) > 1 and all(p in students for p in parts):   # names run together: one --student each
+                    return f"did you mean {' '.join(f'--student {p}' for p in parts)}? (one --student per student)"
+                near = difflib.get_close_matches(name.strip().lower(), list(lower), n=1, cutoff=0.6)
+                return f"did you mean {lower[near[0]]}?" if near else None
+
+            said = {m: suggestion(m) for m in missing}
+            meant = "; ".join((f"{shown(m)}: " if len(missing) > 1 else "") + said[m] for m in missing if said[m])
             print(f"snakekit grade: no submission of {args.assignment} by {', '.join(shown(m) for m in missing)} in "
                   f"{course}/submitted" + (f" ({meant})" if meant else "")
                   + (f"; {len(students)} student(s) have one: {excerpt(', '.join(students), quote=False)}" if students

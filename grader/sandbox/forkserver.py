@@ -75,8 +75,8 @@ def _preload() -> None:
     extra = [m for m in os.environ.get("SNAKEKIT_FORKSERVER_PRELOAD", "").split(",") if m]
     for name in (*PRELOAD, *extra):
         importlib.import_module(name)
-    if shell_modules_loaded():
-        raise RuntimeError(f"preloading imported {', '.join(shell_modules_loaded())}, which set up the shell that "
+    if loaded := shell_modules_loaded():
+        raise RuntimeError(f"preloading imported {', '.join(loaded)}, which set up the shell that "
                            "imports them: a kernel forked from here would have no figures as pictures, no widgets' "
                            "comm target or no note on a missing name. Leave them to the kernels.")
     from matplotlib.figure import Figure
